@@ -1,0 +1,178 @@
+"""The one interface every method implements, and the registry.
+
+A method is a subclass of :class:`Method` with a ``name``, the light shapes it supports, its
+parameters (:class:`Param`, with the paper's defaults) and ``run(ctx, **params)``, which returns a
+:class:`MethodOutput` with V per eye pixel. :func:`softshadows.render` builds the eye G-buffer,
+calls the method, shades, and times every phase.
+"""
+from __future__ import annotations
+
+import time
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ..errors import SoftShadowsError
+
+
+@dataclass(frozen=True)
+class Param:
+    name: str
+    default: Any
+    help: str = ""
+    choices: tuple | None = None
+    min: float | None = None
+    max: float | None = None
+
+    @property
+    def type(self) -> type:
+        return type(self.default)
+
+    def coerce(self, value, method: str):
+        """Convert a value (possibly a string from the CLI) and validate it."""
+        t = self.type
+        try:
+            if isinstance(value, str) and t is bool:
+                low = value.strip().lower()
+                if low in ("1", "true", "yes", "on"):
+                    v = True
+                elif low in ("0", "false", "no", "off"):
+                    v = False
+                else:
+                    raise ValueError(value)
+            elif t is bool:
+                if not isinstance(value, (bool, np.bool_, int)):
+                    raise ValueError(value)
+                v = bool(value)
+            elif t is int:
+                fv = float(value)
+                if fv != int(fv):
+                    raise ValueError(value)
+                v = int(fv)
+            elif t is float:
+                v = float(value)
+                if not np.isfinite(v):
+                    raise ValueError(value)
+            else:
+                v = t(value)
+        except (TypeError, ValueError):
+            raise SoftShadowsError(
+                f"method '{method}': parameter '{self.name}' expects {t.__name__}, got {value!r}") from None
+        if self.choices is not None and v not in self.choices:
+            raise SoftShadowsError(
+                f"method '{method}': parameter '{self.name}' must be one of {', '.join(map(str, self.choices))}, got {v!r}")
+        if self.min is not None and v < self.min:
+            raise SoftShadowsError(f"method '{method}': parameter '{self.name}' must be >= {self.min}, got {v!r}")
+        if self.max is not None and v > self.max:
+            raise SoftShadowsError(f"method '{method}': parameter '{self.name}' must be <= {self.max}, got {v!r}")
+        return v
+
+    def describe(self) -> str:
+        s = f"{self.name}={self.default!r}"
+        if self.choices:
+            s += f" ({'|'.join(map(str, self.choices))})"
+        return s
+
+
+class Timer:
+    """Accumulates named phase times (seconds)."""
+
+    def __init__(self):
+        self.times: dict[str, float] = {}
+
+    @contextmanager
+    def phase(self, name: str):
+        t0 = time.perf_counter()
+        try:
+            yield
+        finally:
+            self.times[name] = self.times.get(name, 0.0) + time.perf_counter() - t0
+
+
+@dataclass
+class FrameContext:
+    """What a method receives: the scene, its flattened geometry, the eye G-buffer, a timer."""
+
+    scene: Any
+    eye: Any  # raster.GBuffer of the eye view
+    eye_view: Any  # raster.View
+    timer: Timer
+    seed: int = 0
+    progress: bool = False
+    cache: dict = field(default_factory=dict)
+
+    @property
+    def light(self):
+        return self.scene.light
+
+    @property
+    def flat(self):
+        return self.scene.flat
+
+    def points(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(positions (K,3), normals (K,3), flat pixel indices (K,)) of eye pixels with a surface."""
+        idx = np.flatnonzero(self.eye.mask.ravel())
+        return (self.eye.position.reshape(-1, 3)[idx].astype(np.float64),
+                self.eye.normal.reshape(-1, 3)[idx].astype(np.float64), idx)
+
+
+@dataclass
+class MethodOutput:
+    visibility: np.ndarray  # (H,W) float32; values on masked pixels only (others ignored)
+    stats: dict = field(default_factory=dict)
+
+
+class Method:
+    name: str = ""
+    light_shapes: tuple = ("rect", "sphere")
+    params: tuple = ()
+    summary: str = ""
+    paper: str = ""
+
+    def run(self, ctx: FrameContext, **params) -> MethodOutput:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def resolve_params(self, given: dict) -> dict:
+        known = {p.name: p for p in self.params}
+        out = {p.name: p.default for p in self.params}
+        for k, v in given.items():
+            if k not in known:
+                valid = ", ".join(sorted(known)) or "(none)"
+                raise SoftShadowsError(f"method '{self.name}': unknown parameter '{k}'; valid: {valid}")
+            out[k] = known[k].coerce(v, self.name)
+        return out
+
+    def check_light(self, light) -> None:
+        if light.shape not in self.light_shapes:
+            raise SoftShadowsError(
+                f"method '{self.name}' supports {' and '.join(self.light_shapes)} lights, not '{light.shape}'")
+
+
+_REGISTRY: dict[str, Method] = {}
+
+
+def register(cls):
+    """Class decorator: instantiate and register a method under ``cls.name``."""
+    inst = cls()
+    if not inst.name:
+        raise RuntimeError(f"{cls.__name__} has no name")
+    _REGISTRY[inst.name] = inst
+    return cls
+
+
+def get_method(name: str) -> Method:
+    from . import _load_all  # noqa: F401  (registers built-in methods)
+
+    _load_all()
+    if name not in _REGISTRY:
+        raise SoftShadowsError(f"unknown method '{name}'; valid: {', '.join(_REGISTRY)}")
+    return _REGISTRY[name]
+
+
+def methods() -> dict[str, Method]:
+    from . import _load_all
+
+    _load_all()
+    return dict(_REGISTRY)

@@ -1,0 +1,238 @@
+"""``ground-truth``: distribution ray tracing on the exact geometry with Embree (``embreex``).
+
+For every eye pixel with a surface point p (eye G-buffer), shoot occlusion rays from
+``p + eps * n`` (n: the geometric normal turned toward the eye; eps = ``offset`` x scene diagonal,
+which avoids self-intersection) to ``samples = N x N`` stratified, jittered points of the light:
+
+* rect light: one jittered point per cell of an N x N grid over the rectangle (uniform in area);
+* sphere light: the disk of the sphere's radius through its center facing p, sampled by the
+  concentric (Shirley-Chiu) map of the same jittered N x N grid, so strata stay equal-area.
+
+V(p) = unoccluded rays / N^2 (DESIGN.md). Occluders are the faces of role both|occluder.
+With ``physical=true`` the image is the full area-light integral per sample instead of
+"unshadowed point light x V": E(p) = sum_s vis_s * L cos(theta_p) cos(theta_l) / r^2 * A / N^2,
+with radiance L = intensity / area (cos(theta_l) on the facing disk for sphere lights); V is the same.
+
+Random numbers: numpy PCG64 seeded with (seed, chunk index), so results do not depend on chunk
+scheduling; the same seed gives the same image.
+"""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, prange
+
+from ..errors import SoftShadowsError
+from ..shading import exposure, facing_normals
+from .base import Method, MethodOutput, Param, register
+
+CHUNK_RAYS = 1 << 20
+
+
+def build_embree_scene(vertices: np.ndarray, faces: np.ndarray):
+    """An Embree scene of the given triangles (float32)."""
+    from embreex import rtcore_scene, mesh_construction
+
+    sc = rtcore_scene.EmbreeScene()
+    tris = np.ascontiguousarray(vertices[faces], dtype=np.float32)
+    mesh_construction.TriangleMesh(sc, tris)
+    return sc
+
+
+@njit(cache=True, inline="always")
+def _concentric(a, b):
+    """Shirley-Chiu concentric map of [0,1)^2 to the unit disk."""
+    x = 2.0 * a - 1.0
+    y = 2.0 * b - 1.0
+    if x == 0.0 and y == 0.0:
+        return 0.0, 0.0
+    if abs(x) > abs(y):
+        r = x
+        phi = (np.pi / 4.0) * (y / x)
+    else:
+        r = y
+        phi = np.pi / 2.0 - (np.pi / 4.0) * (x / y)
+    return r * np.cos(phi), r * np.sin(phi)
+
+
+@njit(parallel=True, cache=True)
+def generate_light_rays(pts, nrm, eps, jitter, n_side, shape, center, u, v, radius, org, dirs, dist, geo):
+    """Fill origins/directions/lengths for len(pts) points x n_side^2 samples.
+    geo[k*S+s] = cos_p * cos_l / r^2 (for the physical mode)."""
+    S = n_side * n_side
+    for k in prange(pts.shape[0]):
+        ox = pts[k, 0] + eps * nrm[k, 0]
+        oy = pts[k, 1] + eps * nrm[k, 1]
+        oz = pts[k, 2] + eps * nrm[k, 2]
+        if shape == 1:  # sphere: disk facing p
+            wx, wy, wz = pts[k, 0] - center[0], pts[k, 1] - center[1], pts[k, 2] - center[2]
+            wl = np.sqrt(wx * wx + wy * wy + wz * wz)
+            wx /= wl
+            wy /= wl
+            wz /= wl
+            if abs(wx) < 0.9:
+                ax, ay, az = 1.0, 0.0, 0.0
+            else:
+                ax, ay, az = 0.0, 1.0, 0.0
+            # e1 = normalize(a x w), e2 = w x e1
+            e1x, e1y, e1z = ay * wz - az * wy, az * wx - ax * wz, ax * wy - ay * wx
+            el = np.sqrt(e1x * e1x + e1y * e1y + e1z * e1z)
+            e1x /= el
+            e1y /= el
+            e1z /= el
+            e2x, e2y, e2z = wy * e1z - wz * e1y, wz * e1x - wx * e1z, wx * e1y - wy * e1x
+            lnx, lny, lnz = wx, wy, wz
+        else:
+            lnx = u[1] * v[2] - u[2] * v[1]
+            lny = u[2] * v[0] - u[0] * v[2]
+            lnz = u[0] * v[1] - u[1] * v[0]
+            ll = np.sqrt(lnx * lnx + lny * lny + lnz * lnz)
+            lnx /= ll
+            lny /= ll
+            lnz /= ll
+        for i in range(n_side):
+            for j in range(n_side):
+                s = i * n_side + j
+                a = (i + jitter[k, s, 0]) / n_side
+                b = (j + jitter[k, s, 1]) / n_side
+                if shape == 1:
+                    dx, dy = _concentric(a, b)
+                    sx = center[0] + radius * (dx * e1x + dy * e2x)
+                    sy = center[1] + radius * (dx * e1y + dy * e2y)
+                    sz = center[2] + radius * (dx * e1z + dy * e2z)
+                else:
+                    sx = center[0] + (a - 0.5) * u[0] + (b - 0.5) * v[0]
+                    sy = center[1] + (a - 0.5) * u[1] + (b - 0.5) * v[1]
+                    sz = center[2] + (a - 0.5) * u[2] + (b - 0.5) * v[2]
+                rx, ry, rz = sx - ox, sy - oy, sz - oz
+                rl = np.sqrt(rx * rx + ry * ry + rz * rz)
+                q = k * S + s
+                org[q, 0] = ox
+                org[q, 1] = oy
+                org[q, 2] = oz
+                dirs[q, 0] = rx / rl
+                dirs[q, 1] = ry / rl
+                dirs[q, 2] = rz / rl
+                dist[q] = rl * (1.0 - 1e-6)
+                cp = (nrm[k, 0] * rx + nrm[k, 1] * ry + nrm[k, 2] * rz) / rl
+                cl = -(lnx * rx + lny * ry + lnz * rz) / rl
+                if cp < 0.0:
+                    cp = 0.0
+                if cl < 0.0:
+                    cl = 0.0
+                geo[q] = cp * cl / (rl * rl)
+
+
+@njit(parallel=True, cache=True)
+def reduce_visibility(hits, geo, S, vis, irr, offset):
+    """vis[k] = unoccluded fraction; irr[k] = sum of geo over unoccluded samples / S."""
+    n = hits.shape[0] // S
+    for k in prange(n):
+        c = 0
+        e = 0.0
+        for s in range(S):
+            if hits[k * S + s] < 0:  # embree: -1 = not occluded
+                c += 1
+                e += geo[k * S + s]
+        vis[offset + k] = c / S
+        irr[offset + k] = e / S
+
+
+def light_arrays(light):
+    if light.shape == "rect":
+        return 0, light.center, light.u, light.v, 0.0
+    z = np.zeros(3)
+    return 1, light.center, z, z, light.radius
+
+
+@register
+class GroundTruth(Method):
+    name = "ground-truth"
+    light_shapes = ("rect", "sphere")
+    summary = "Embree occlusion rays to N x N stratified jittered light samples (reference)"
+    paper = "distribution ray tracing (Cook et al. 1984) with Embree"
+    params = (
+        Param("samples", 256, "light samples per pixel (a perfect square: N x N strata)", min=1, max=65536),
+        Param("physical", False, "image = full area-light integral (cosines, 1/r^2) per sample"),
+        Param("offset", 1e-4, "ray origin offset along the normal, x scene diagonal", min=0.0),
+    )
+
+    def run(self, ctx, samples, physical, offset):
+        n_side = int(round(np.sqrt(samples)))
+        if n_side * n_side != samples:
+            raise SoftShadowsError(f"method 'ground-truth': samples must be a perfect square (N x N strata), got {samples}")
+        scene = ctx.scene
+        pts, nrm, idx = ctx.points()
+        nrm = facing_normals(nrm, pts, scene.camera.eye)
+        lo, hi = scene.bounds()
+        eps = offset * float(np.linalg.norm(hi - lo))
+        with ctx.timer.phase("bvh_build"):
+            esc = _embree_for(scene)
+        S = samples
+        K = len(pts)
+        vis = np.zeros(K, np.float32)
+        irr = np.zeros(K, np.float64)
+        shape, center, u, v, radius = light_arrays(scene.light)
+        per_chunk = max(1, CHUNK_RAYS // S)
+        chunks = range(0, K, per_chunk)
+        bar = None
+        if ctx.progress and K * S > 4_000_000:
+            from tqdm import tqdm
+
+            bar = tqdm(total=K * S, unit="ray", unit_scale=True, desc="ground truth", leave=False)
+        t_gen = t_trace = t_red = 0.0
+        import time
+
+        for ci, start in enumerate(chunks):
+            stop = min(K, start + per_chunk)
+            m = stop - start
+            t0 = time.perf_counter()
+            rng = np.random.Generator(np.random.PCG64([ctx.seed, ci]))
+            jitter = rng.random((m, S, 2))
+            org = np.empty((m * S, 3), np.float32)
+            dirs = np.empty((m * S, 3), np.float32)
+            dist = np.empty(m * S, np.float32)
+            geo = np.empty(m * S, np.float32)
+            generate_light_rays(pts[start:stop], nrm[start:stop], eps, jitter, n_side, shape,
+                                center, u, v, radius, org, dirs, dist, geo)
+            t1 = time.perf_counter()
+            hits = esc.run(org, dirs, dists=dist, query="OCCLUDED")
+            t2 = time.perf_counter()
+            reduce_visibility(hits, geo, S, vis, irr, start)
+            t3 = time.perf_counter()
+            t_gen += t1 - t0
+            t_trace += t2 - t1
+            t_red += t3 - t2
+            if bar is not None:
+                bar.update(m * S)
+        if bar is not None:
+            bar.close()
+        ctx.timer.times["ray_generation"] = ctx.timer.times.get("ray_generation", 0.0) + t_gen
+        ctx.timer.times["trace"] = ctx.timer.times.get("trace", 0.0) + t_trace
+        ctx.timer.times["reduce"] = ctx.timer.times.get("reduce", 0.0) + t_red
+        H, W = ctx.eye.mask.shape
+        out = np.ones(H * W, np.float32)
+        out[idx] = vis
+        stats = {"samples": S, "rays": int(K * S), "points": int(K), "eps": eps,
+                 "rays_per_second": float(K * S / t_trace) if t_trace > 0 else float("nan")}
+        if physical:
+            radiance = scene.light.intensity / scene.light.area
+            e = np.full(H * W, np.nan)
+            e[idx] = irr * radiance * scene.light.area * exposure(scene)
+            stats["_direct_shadowed"] = e.reshape(H, W)
+        return MethodOutput(out.reshape(H, W), stats)
+
+
+_EMBREE_CACHE: dict = {}
+
+
+def _embree_for(scene):
+    """Embree scene for a Scene, cached on the Scene object's identity (BVH built once per scene)."""
+    key = id(scene)
+    hit = _EMBREE_CACHE.get(key)
+    if hit is not None and hit[0] is scene:
+        return hit[1]
+    flat = scene.flat
+    esc = build_embree_scene(flat.vertices, flat.faces[flat.occluder])
+    _EMBREE_CACHE.clear()
+    _EMBREE_CACHE[key] = (scene, esc)
+    return esc

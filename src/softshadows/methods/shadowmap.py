@@ -1,0 +1,146 @@
+"""Shadow maps from the light's center, shared by ``hard``, ``pcss`` and ``penumbra-map``.
+
+* :func:`fit_light_view` — a perspective (or orthographic) view from the light's center whose
+  window covers the occluders (a receiver point outside the window cannot be shadowed, because
+  the segment from it to the light center crosses no occluder), square pixels, near/far fitted.
+* :func:`build_shadow_map` — occluder depths with the shared rasterizer (``rasterize_depth``).
+* :func:`shadow_lookup` — the Williams test with constant and slope-scaled bias and optional
+  percentage-closer filtering, as a Numba kernel over eye points.
+
+Bias is expressed in *texels*: the world size of one shadow-map texel at the point's depth, so
+that the same defaults work on scenes of any scale. The effective depth offset is
+``texel * (bias + slope_bias * tan(theta))`` with theta the angle between the surface normal
+and the direction to the light (tan clamped to 10), the software equivalent of
+``glPolygonOffset(slope, constant)``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit, prange
+
+from ..raster import View, rasterize_depth
+from ..raster.view import light_view
+
+
+@dataclass
+class ShadowMap:
+    view: View
+    depth: np.ndarray  # (H,W) float32 view depth of the nearest occluder, +inf where none
+    tri_id: np.ndarray  # (H,W) int32 index into the faces that were rasterized
+
+    @property
+    def vp(self) -> np.ndarray:
+        return self.view.params()
+
+
+def occluder_faces(scene, which: str = "occluder") -> np.ndarray:
+    """Boolean face mask: ``occluder`` (roles both|occluder), ``receiver`` or ``all``."""
+    flat = scene.flat
+    if which == "occluder":
+        return flat.occluder
+    if which == "receiver":
+        return flat.receiver
+    return np.ones(len(flat.faces), bool)
+
+
+def fit_light_view(scene, size: int, which: str = "occluder", ortho: bool = False,
+                   height: int | None = None, margin: float = 0.02) -> View:
+    """View from the light's center covering the vertices of the selected faces (square pixels)."""
+    flat = scene.flat
+    mask = occluder_faces(scene, which)
+    if not mask.any():
+        mask = np.ones(len(flat.faces), bool)
+    pts = flat.vertices[np.unique(flat.faces[mask])]
+    return light_view(scene.light, pts, size, height or size, ortho=ortho, margin=margin, square_pixels=True)
+
+
+def build_shadow_map(scene, view: View, faces_mask: np.ndarray | None = None, cull: str = "none") -> ShadowMap:
+    """Rasterize the selected faces (default: occluders) into a depth map from ``view``."""
+    flat = scene.flat
+    if faces_mask is None:
+        faces_mask = flat.occluder
+    faces = np.ascontiguousarray(flat.faces[faces_mask])
+    depth, tri = rasterize_depth(view, flat.vertices, faces, cull=cull)
+    return ShadowMap(view, depth, tri)
+
+
+@njit(cache=True, inline="always")
+def _project(vp, x, y, z):
+    dx, dy, dz = x - vp[0], y - vp[1], z - vp[2]
+    vx = dx * vp[3] + dy * vp[4] + dz * vp[5]
+    vy = dx * vp[6] + dy * vp[7] + dz * vp[8]
+    vz = dx * vp[9] + dy * vp[10] + dz * vp[11]
+    if vp[20] == 0.0:
+        vx /= vz
+        vy /= vz
+    sx = (vx - vp[12]) / (vp[13] - vp[12]) * vp[18]
+    sy = (vp[15] - vy) / (vp[15] - vp[14]) * vp[19]
+    return sx, sy, vz
+
+
+@njit(cache=True, inline="always")
+def texel_world_size(vp, depth):
+    """World size of one texel (x) at a view depth."""
+    s = (vp[13] - vp[12]) / vp[18]
+    if vp[20] == 0.0:
+        s *= depth
+    return s
+
+
+@njit(cache=True, inline="always")
+def receiver_offset(vp, px, py, pz, nx, ny, nz, depth, bias, slope_bias):
+    """Depth offset (world units) for the shadow test at a point with normal n."""
+    lx, ly, lz = vp[0] - px, vp[1] - py, vp[2] - pz
+    ln = np.sqrt(lx * lx + ly * ly + lz * lz)
+    c = abs(nx * lx + ny * ly + nz * lz) / max(ln, 1e-30)
+    c = min(max(c, 1e-3), 1.0)
+    tan = min(np.sqrt(1.0 - c * c) / c, 10.0)
+    return texel_world_size(vp, depth) * (bias + slope_bias * tan)
+
+
+@njit(parallel=True, cache=True)
+def shadow_lookup(vp, depth_map, pts, nrm, bias, slope_bias, pcf_radius):
+    """V per point: 1 lit, 0 shadowed; with ``pcf_radius`` r > 0, the fraction of lit tests over
+    the (2r+1)^2 texels around the point (percentage-closer filtering)."""
+    n = pts.shape[0]
+    H, W = depth_map.shape
+    out = np.empty(n, np.float32)
+    for k in prange(n):
+        sx, sy, z = _project(vp, pts[k, 0], pts[k, 1], pts[k, 2])
+        if not (z > 0.0):
+            out[k] = 1.0
+            continue
+        off = receiver_offset(vp, pts[k, 0], pts[k, 1], pts[k, 2], nrm[k, 0], nrm[k, 1], nrm[k, 2],
+                              z, bias, slope_bias)
+        zt = z - off
+        ci = int(np.floor(sx))
+        ri = int(np.floor(sy))
+        lit = 0
+        cnt = 0
+        for dr in range(-pcf_radius, pcf_radius + 1):
+            r = ri + dr
+            for dc in range(-pcf_radius, pcf_radius + 1):
+                c = ci + dc
+                cnt += 1
+                if r < 0 or r >= H or c < 0 or c >= W:
+                    lit += 1
+                elif not (depth_map[r, c] < zt):
+                    lit += 1
+        out[k] = lit / cnt
+    return out
+
+
+def lookup_points(smap: ShadowMap, pts: np.ndarray, nrm: np.ndarray, bias: float, slope_bias: float,
+                  pcf_radius: int = 0) -> np.ndarray:
+    return shadow_lookup(smap.vp, smap.depth, np.ascontiguousarray(pts, dtype=np.float64),
+                         np.ascontiguousarray(nrm, dtype=np.float64), float(bias), float(slope_bias), int(pcf_radius))
+
+
+def scatter(ctx, values: np.ndarray, idx: np.ndarray, fill: float = 1.0) -> np.ndarray:
+    """Per-point values -> (H,W) float32 image (pixels without a surface get ``fill``)."""
+    H, W = ctx.eye.mask.shape
+    out = np.full(H * W, fill, np.float32)
+    out[idx] = values
+    return out.reshape(H, W)

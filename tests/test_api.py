@@ -1,0 +1,68 @@
+"""The shared interface: every method on every built-in scene and light shape."""
+import numpy as np
+import pytest
+
+import softshadows as ss
+from softshadows.scene.builtin import BUILTIN
+
+# the ground truth is tested in test_ground_truth.py; here it runs with few samples to stay fast
+FAST = {"ground-truth": {"samples": 4}}
+
+
+def _methods():
+    return list(ss.methods())
+
+
+@pytest.mark.parametrize("light", ["rect", "sphere"])
+@pytest.mark.parametrize("scene_name", list(BUILTIN))
+def test_every_method_v_finite_in_unit_interval(scene_name, light):
+    scene = ss.load_scene(scene_name, light=light)
+    for name, m in ss.methods().items():
+        if light not in m.light_shapes:
+            with pytest.raises(ss.SoftShadowsError, match=name):
+                ss.render(scene, name, 8, 8)
+            continue
+        params = dict(FAST.get(name, {}))
+        a = ss.render(scene, name, 40, 30, seed=5, **params)
+        v = a.visibility
+        mask = a.mask
+        assert mask.sum() > 100, name
+        assert np.all(np.isfinite(v[mask])), name
+        assert np.all(np.isnan(v[~mask])), name
+        assert v[mask].min() >= 0.0 and v[mask].max() <= 1.0, name
+        assert np.all(np.isfinite(a.image)), name
+        b = ss.render(scene, name, 40, 30, seed=5, **params)
+        assert np.array_equal(a.visibility, b.visibility, equal_nan=True), name
+
+
+def test_unknown_method_and_parameter_name_the_valid_ones():
+    scene = ss.load_scene("square")
+    with pytest.raises(ValueError, match="ground-truth"):
+        ss.render(scene, "nope", 8, 8)
+    with pytest.raises(ValueError, match="map_size"):
+        ss.render(scene, "hard", 8, 8, mapsize=3)
+    with pytest.raises(ValueError, match="samples"):
+        ss.render(scene, "ground-truth", 8, 8, samples="many")
+    with pytest.raises(ValueError, match="width"):
+        ss.render(scene, "hard", 0, 8)
+
+
+def test_hard_shadow_matches_ground_truth_umbra_and_lit():
+    """hard = a point light at the center: compare with ground truth from a tiny light."""
+    scene = ss.load_scene("spheres")
+    small = scene.with_light(scene.light.scaled(1e-3))
+    gt = ss.render(small, "ground-truth", 64, 48, samples=1).visibility
+    hd = ss.render(scene, "hard", 64, 48).visibility
+    m = np.isfinite(gt)
+    # silhouette pixels can differ by one shadow-map texel; everything else must agree
+    assert np.mean(np.abs(gt[m] - hd[m])) < 0.03
+
+
+def test_hard_pcf_softens_only_edges():
+    scene = ss.load_scene("square")
+    a = ss.render(scene, "hard", 64, 48).visibility
+    b = ss.render(scene, "hard", 64, 48, pcf=2, map_size=256).visibility
+    m = np.isfinite(a)
+    assert set(np.unique(a[m])) <= {0.0, 1.0}
+    frac = (b[m] > 0) & (b[m] < 1)
+    assert frac.any() and frac.mean() < 0.2

@@ -1,0 +1,402 @@
+"""Tests of the shared software rasterizer (analytic cases, small images)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from softshadows.raster import (
+    Fragments, GBuffer, View, cull_mask, face_normals, facing, rasterize, rasterize_depth,
+    rasterize_fragments,
+)
+from softshadows.raster.kernels import sample_bilinear, sample_nearest, view_project, view_unproject
+
+
+# ---------------------------------------------------------------------------------------------
+# helpers
+# ---------------------------------------------------------------------------------------------
+def grid_plane(n, x0, x1, z0, z1, y=0.0, jitter=0.0, rng=None, flip_some=False):
+    """(n+1)^2 vertices on the plane y = const, 2 triangles per cell, alternating diagonals.
+    jitter: random in-plane displacement of interior vertices (fraction of a cell)."""
+    xs = np.linspace(x0, x1, n + 1)
+    zs = np.linspace(z0, z1, n + 1)
+    X, Z = np.meshgrid(xs, zs, indexing="xy")
+    if jitter:
+        dx = (x1 - x0) / n
+        dz = (z1 - z0) / n
+        J = rng.uniform(-jitter, jitter, size=(2, n + 1, n + 1))
+        J[:, 0, :] = J[:, -1, :] = J[:, :, 0] = J[:, :, -1] = 0
+        X = X + J[0] * dx
+        Z = Z + J[1] * dz
+    V = np.stack([X.ravel(), np.full(X.size, y), Z.ravel()], axis=1)
+    F = []
+    for r in range(n):
+        for c in range(n):
+            a = r * (n + 1) + c
+            b, d, e = a + 1, a + n + 1, a + n + 2
+            if (r + c) % 2:
+                F += [[a, b, e], [a, e, d]]
+            else:
+                F += [[a, b, d], [b, e, d]]
+    F = np.array(F, dtype=np.int64)
+    if flip_some:
+        flip = rng.random(len(F)) < 0.5
+        F[flip] = F[flip][:, ::-1]
+    return V, F
+
+
+def cube(center=(0.0, 0.0, 0.0), half=1.0):
+    """Closed cube, outward-wound (cross(v1-v0, v2-v0) points outward)."""
+    c = np.asarray(center, float)
+    V = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], float) * half + c
+    idx = lambda x, y, z: (x > 0) * 4 + (y > 0) * 2 + (z > 0)
+    F = []
+    for axis in range(3):
+        for s in (-1, 1):
+            quad = []
+            for u, w in ((-1, -1), (1, -1), (1, 1), (-1, 1)):
+                p = [0, 0, 0]
+                p[axis] = s
+                p[(axis + 1) % 3] = u
+                p[(axis + 2) % 3] = w
+                quad.append(idx(*p))
+            a, b, cc, d = quad
+            tri = [[a, b, cc], [a, cc, d]]
+            for t in tri:
+                n = np.cross(V[t[1]] - V[t[0]], V[t[2]] - V[t[0]])
+                if np.dot(n, V[t[0]] - c) < 0:
+                    t.reverse()
+                F.append(t)
+    return V, np.array(F, dtype=np.int64)
+
+
+def pixel_rays(view):
+    """Per pixel center: (origin (3,), direction (H,W,3) with unit forward component)."""
+    i, j = np.mgrid[0:view.height, 0:view.width]
+    p1 = view.unproject(j + 0.5, i + 0.5, np.ones(i.shape))
+    if view.ortho:
+        o = view.unproject(j + 0.5, i + 0.5, np.zeros(i.shape))
+        return o, p1 - o
+    return view.origin, p1 - view.origin
+
+
+def analytic_plane_depth(view, p0, n):
+    """View depth of the plane (p - p0).n = 0 through every pixel center (NaN if no hit in front)."""
+    o, d = pixel_rays(view)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = ((p0 - o) @ n) / (d @ n)
+    s = np.where(np.isfinite(s) & (s > 0), s, np.nan)
+    return s, o + s[..., None] * d  # the forward component of d is 1: s is the depth
+
+
+# ---------------------------------------------------------------------------------------------
+# coverage: watertight, no double hits
+# ---------------------------------------------------------------------------------------------
+def _assert_exact_cover(view, V, F):
+    fr = rasterize_fragments(view, V, F)
+    assert isinstance(fr, Fragments)
+    npx = view.width * view.height
+    counts = np.bincount(fr.pixel, minlength=npx)
+    assert counts.min() == 1 and counts.max() == 1, (np.sum(counts == 0), np.sum(counts > 1))
+    assert len(fr) == npx
+
+
+@pytest.mark.parametrize("jitter", [0.0, 0.35])
+def test_tessellated_plane_perspective_exact_cover(jitter):
+    rng = np.random.default_rng(1)
+    V, F = grid_plane(40, -6, 6, -10, 0, jitter=jitter, rng=rng, flip_some=True)
+    view = View.look_at([0.3, 4.0, 0.5], [0.1, 0, -3.5], [0, 1, 0], 40, 72, 56)
+    # the plane fills the whole view
+    s, hit = analytic_plane_depth(view, np.zeros(3), np.array([0.0, 1.0, 0.0]))
+    assert np.all(np.isfinite(s)) and np.all(np.abs(hit[..., 0]) < 5.5)
+    assert np.all((hit[..., 2] > -9.5) & (hit[..., 2] < -0.5))
+    _assert_exact_cover(view, V, F)
+
+
+@pytest.mark.parametrize("jitter", [0.0, 0.35])
+def test_tessellated_plane_ortho_exact_cover(jitter):
+    rng = np.random.default_rng(2)
+    V, F = grid_plane(40, -4, 4, -4, 4, jitter=jitter, rng=rng, flip_some=True)
+    view = View.frame([0.1, 5, 0.2], [0.3, -1, 0.2], [0, 0, -1], (-1.2, 1.1, -1.0, 1.3), 0.1, 100,
+                      61, 67, ortho=True)
+    s, hit = analytic_plane_depth(view, np.zeros(3), np.array([0.0, 1.0, 0.0]))
+    assert np.all(np.isfinite(s)) and np.all(np.abs(hit[..., 0]) < 3.5) and np.all(np.abs(hit[..., 2]) < 3.5)
+    _assert_exact_cover(view, V, F)
+
+
+def test_vertices_and_edges_exactly_on_pixel_centers():
+    # ortho view in which every grid vertex and every diagonal passes exactly through pixel centers
+    V, F = grid_plane(34, -1.5, 66.5, -66.5, 1.5, flip_some=True, rng=np.random.default_rng(3))
+    # looking down -y: right = +x, up = -z, so sx = x and sy = 64 + z; the grid overhangs the window
+    view = View.frame([0, 10, 0], [0, -1, 0], [0, 0, -1], (0.0, 64.0, 0.0, 64.0), 0.1, 100, 64, 64,
+                      ortho=True)
+    sx, sy, _ = view.project(V)
+    frac = np.concatenate([sx % 1.0, sy % 1.0])
+    assert np.allclose(frac, 0.5)  # really on pixel centers
+    fr = rasterize_fragments(view, V, F)
+    counts = np.bincount(fr.pixel, minlength=64 * 64)
+    assert counts.min() == 1 and counts.max() == 1
+    # and the nearest-surface buffer has every pixel
+    assert rasterize(view, V, F).mask.all()
+
+
+def test_fragments_min_blend_equals_depth_test():
+    rng = np.random.default_rng(4)
+    V = rng.uniform(-1, 1, size=(60, 3)) + [0, 0, -4]
+    F = rng.integers(0, 60, size=(40, 3))
+    view = View.look_at([0, 0, 0], [0, 0, -4], [0, 1, 0], 50, 48, 40)
+    g = rasterize(view, V, F)
+    fr = rasterize_fragments(view, V, F)
+    zmin = np.full(48 * 40, np.inf, np.float32)
+    np.minimum.at(zmin, fr.pixel, fr.depth)
+    assert np.array_equal(zmin.reshape(40, 48), g.depth)
+    # every fragment's (pixel, tri) is unique and deterministic
+    key = fr.pixel * 1000 + fr.tri
+    assert len(np.unique(key)) == len(key)
+    fr2 = rasterize_fragments(view, V, F)
+    assert np.array_equal(fr.pixel, fr2.pixel) and np.array_equal(fr.tri, fr2.tri)
+
+
+# ---------------------------------------------------------------------------------------------
+# depth, position, barycentrics
+# ---------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("ortho", [False, True])
+def test_tilted_plane_depth_position_bary(ortho):
+    rng = np.random.default_rng(5)
+    n = np.array([0.3, 1.0, 0.45])
+    n /= np.linalg.norm(n)
+    p0 = np.array([0.0, -0.2, -3.0])
+    # a jittered tessellation of the plane: build on y=0, then rotate onto the plane
+    V, F = grid_plane(16, -12, 12, -12, 12, jitter=0.3, rng=rng, flip_some=True)
+    a = np.cross([0, 1.0, 0], n)
+    ang = np.arccos(n[1])
+    a /= np.linalg.norm(a)
+    K = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
+    R = np.eye(3) + np.sin(ang) * K + (1 - np.cos(ang)) * K @ K
+    V = V @ R.T + p0
+    if ortho:
+        view = View.frame([0.2, 0.5, 2.0], [0, -0.1, -1], [0, 1, 0], (-1.0, 1.2, -0.8, 0.9), -1, 50,
+                          40, 36, ortho=True)
+    else:
+        view = View.look_at([0.2, 0.5, 2.0], [0, -0.2, -3], [0, 1, 0], 35, 40, 36)
+    g = rasterize(view, V, F)
+    assert isinstance(g, GBuffer) and g.shape == (36, 40)
+    s, hit = analytic_plane_depth(view, p0, n)
+    assert np.all(np.isfinite(s))
+    assert g.mask.all()
+    np.testing.assert_allclose(g.depth, s, rtol=1e-5)
+    # position is on the ray through the pixel center at the rasterized depth
+    i, j = np.mgrid[0:36, 0:40]
+    ray_p = view.unproject(j + 0.5, i + 0.5, g.depth.astype(np.float64))
+    scale = np.abs(hit).max()
+    np.testing.assert_allclose(g.position, ray_p, atol=1e-5 * scale)
+    np.testing.assert_allclose(g.position, hit, atol=1e-4 * scale)
+    # barycentrics of the original triangle reproduce the position
+    tri = F[g.tri_id]
+    b1, b2 = g.bary[..., 0:1].astype(float), g.bary[..., 1:2].astype(float)
+    p_b = V[tri[..., 0]] * (1 - b1 - b2) + V[tri[..., 1]] * b1 + V[tri[..., 2]] * b2
+    np.testing.assert_allclose(p_b, hit, atol=1e-4 * scale)
+    assert np.all(g.bary >= 0) and np.all(g.bary.sum(-1) <= 1 + 1e-6)
+    # normal: the unit face normal as wound
+    fn = face_normals(V, F)[g.tri_id]
+    np.testing.assert_allclose(g.normal, fn, atol=1e-6)
+    np.testing.assert_allclose(np.abs(g.normal @ n), 1.0, atol=1e-6)
+
+
+def test_background_values():
+    view = View.look_at([0, 0, 3], [0, 0, 0], [0, 1, 0], 40, 24, 20)
+    V = np.array([[-0.2, -0.2, 0], [0.2, -0.2, 0], [0, 0.2, 0]], float)
+    g = rasterize(view, V, np.array([[0, 1, 2]]))
+    bg = ~g.mask
+    assert bg.any() and g.mask.any()
+    assert np.all(np.isnan(g.position[bg])) and np.all(np.isnan(g.normal[bg]))
+    assert np.all(np.isinf(g.depth[bg])) and np.all(g.tri_id[bg] == -1)
+    assert np.array_equal(g.mask, g.tri_id >= 0)
+    assert g.depth.dtype == np.float32 and g.tri_id.dtype == np.int32 and g.position.dtype == np.float32
+
+
+# ---------------------------------------------------------------------------------------------
+# near-plane clipping
+# ---------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("n", [1, 3])
+def test_ground_plane_behind_camera_clipped(n):
+    V, F = grid_plane(n, -100, 100, -100, 100)
+    V[:, 0] += 0.37
+    view = View.look_at([0, 1, 0], [0.3, 0.2, -5], [0, 1, 0], 70, 64, 48, near=0.05, far=1e4)
+    # some triangles are partly behind the camera
+    z = view.to_view(V)[:, 2]
+    assert (z[F] < view.near).any(axis=1).any() and (z[F] > view.near).any(axis=1).any()
+    g = rasterize(view, V, F)
+    s, hit = analytic_plane_depth(view, np.zeros(3), np.array([0.0, 1.0, 0.0]))
+    inside = np.isfinite(s) & (np.abs(hit[..., 0] - 0.37) < 99) & (np.abs(hit[..., 2]) < 99)
+    outside = ~np.isfinite(s) | (np.abs(hit[..., 0] - 0.37) > 101) | (np.abs(hit[..., 2]) > 101)
+    assert inside.sum() > 500 and outside.sum() > 200
+    assert g.mask[inside].all()
+    assert not g.mask[outside].any()
+    np.testing.assert_allclose(g.depth[inside], s[inside], rtol=1e-5)
+    assert np.all(np.isfinite(g.position[g.mask])) and np.all(g.depth[g.mask] >= view.near)
+    # barycentrics are with respect to the ORIGINAL triangle
+    tri = F[g.tri_id[inside]]
+    b = g.bary[inside].astype(float)
+    p_b = V[tri[:, 0]] * (1 - b[:, :1] - b[:, 1:]) + V[tri[:, 1]] * b[:, :1] + V[tri[:, 2]] * b[:, 1:]
+    np.testing.assert_allclose(p_b, hit[inside], atol=1e-3)
+    # fragments: no cracks where the plane is seen
+    fr = rasterize_fragments(view, V, F)
+    counts = np.bincount(fr.pixel, minlength=64 * 48).reshape(48, 64)
+    assert np.all(counts[inside] == 1) and np.all(counts[outside] == 0)
+
+
+def test_far_plane_discards():
+    V, F = grid_plane(2, -100, 100, -100, 100)
+    view = View.look_at([0, 1, 0], [0, 0.8, -5], [0, 1, 0], 60, 40, 30, near=0.05, far=20.0)
+    g = rasterize(view, V, F)
+    s, _ = analytic_plane_depth(view, np.zeros(3), np.array([0.0, 1.0, 0.0]))
+    assert g.mask.any()
+    assert np.all(g.depth[g.mask] <= 20.0)
+    assert not g.mask[np.isfinite(s) & (s > 20.5)].any()
+    assert g.mask[np.isfinite(s) & (s < 19.5)].all()
+
+
+# ---------------------------------------------------------------------------------------------
+# culling, depth test, tie rule
+# ---------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("mirror", [False, True])
+def test_cube_culling(mirror):
+    V, F = cube((0.1, -0.2, 0.0), 1.0)
+    view = View.look_at([3.0, 2.5, 4.0], [0.1, -0.2, 0], [0, 1, 0], 40, 48, 40)
+    if mirror:  # a left-handed frame (mirrored image): facing must not change
+        view = View(view.origin, -view.right, view.up, view.forward, view.window, view.near, view.far,
+                    view.width, view.height)
+    fac = facing(view, V, F)
+    front = fac < 0
+    assert front.sum() == 6  # three faces visible from this corner
+    g0 = rasterize(view, V, F, cull="none")
+    gb = rasterize(view, V, F, cull="back")
+    gf = rasterize(view, V, F, cull="front")
+    assert gb.mask.sum() > 200
+    assert np.array_equal(g0.mask, gb.mask) and np.array_equal(gb.mask, gf.mask)
+    m = gb.mask
+    assert np.all(front[gb.tri_id[m]]) and not np.any(front[gf.tri_id[m]])
+    assert np.array_equal(g0.tri_id, gb.tri_id) and np.array_equal(g0.depth, gb.depth)
+    assert np.all(gf.depth[m] > gb.depth[m])
+    # normals of visible surfaces face the eye for cull=back, away for cull=front
+    to_p = gb.position[m] - view.origin
+    assert np.all(np.einsum("ij,ij->i", gb.normal[m], to_p) < 0)
+    to_p = gf.position[m] - view.origin
+    assert np.all(np.einsum("ij,ij->i", gf.normal[m], to_p) > 0)
+    assert np.array_equal(cull_mask(view, V, F, "back"), front)
+    assert np.array_equal(cull_mask(view, V, F, "front"), fac > 0)
+    with pytest.raises(ValueError):
+        rasterize(view, V, F, cull="sideways")
+
+
+def test_cube_culling_ortho():
+    V, F = cube()
+    view = View.frame([3, 3, 3], [-1, -1, -1], [0, 1, 0], (-2, 2, -2, 2), 0.1, 20, 32, 32, ortho=True)
+    gb = rasterize(view, V, F, cull="back")
+    gf = rasterize(view, V, F, cull="front")
+    front = facing(view, V, F) < 0
+    m = gb.mask
+    assert m.sum() > 100 and np.array_equal(m, gf.mask)
+    assert np.all(front[gb.tri_id[m]]) and not np.any(front[gf.tri_id[m]])
+    assert np.all(gb.normal[m] @ view.forward < 0)
+
+
+def test_nearest_wins_and_ties():
+    view = View.look_at([0, 0, 5], [0, 0, 0], [0, 1, 0], 40, 40, 40)
+    near_tri = np.array([[-1, -1, 0.5], [1, -1, 0.5], [0, 1, 0.5]], float)
+    far_tri = np.array([[-1.2, -1.1, -0.5], [1.1, -1.2, -0.5], [0.1, 1.2, -0.5]], float)
+    for order in (0, 1):
+        V = np.concatenate([near_tri, far_tri] if order == 0 else [far_tri, near_tri])
+        F = np.array([[0, 1, 2], [3, 5, 4]])  # second one wound the other way
+        g = rasterize(view, V, F)
+        near_id = 0 if order == 0 else 1
+        both = rasterize_fragments(view, V, F)
+        cnt = np.bincount(both.pixel, minlength=1600).reshape(40, 40)
+        assert (cnt == 2).sum() > 100
+        assert np.all(g.tri_id[cnt == 2] == near_id)
+        np.testing.assert_allclose(g.depth[cnt == 2], 4.5, rtol=1e-6)
+    # exact tie (same triangle twice): the smaller index wins
+    V = np.concatenate([near_tri, near_tri])
+    g = rasterize(view, V, np.array([[3, 4, 5], [0, 2, 1]]))
+    assert g.mask.sum() > 100 and np.all(g.tri_id[g.mask] == 0)
+
+
+def test_rasterize_depth_matches_rasterize():
+    rng = np.random.default_rng(7)
+    Vc, Fc = cube((0, 0.5, 0), 0.5)
+    Vg, Fg = grid_plane(3, -5, 5, -5, 5)
+    Vr = rng.uniform(-1, 1, size=(90, 3)) + [0, 1, 0]
+    Fr = rng.integers(0, 90, size=(60, 3))
+    V = np.concatenate([Vc, Vg, Vr])
+    F = np.concatenate([Fc, Fg + len(Vc), Fr + len(Vc) + len(Vg)])
+    for view in (View.look_at([2, 3, 4], [0, 0.3, 0], [0, 1, 0], 50, 50, 38),
+                 View.frame([0, 6, 0.5], [0.1, -1, 0], [0, 0, -1], (-3, 3, -2, 2), 0.5, 30, 45, 33,
+                            ortho=True)):
+        for cull in ("none", "back", "front"):
+            g = rasterize(view, V, F, cull=cull)
+            d, t = rasterize_depth(view, V, F, cull=cull)
+            assert d.dtype == np.float32 and t.dtype == np.int32 and d.shape == (view.height, view.width)
+            assert np.array_equal(d, g.depth) and np.array_equal(t, g.tri_id)
+
+
+def test_degenerate_and_nonfinite_inputs():
+    view = View.look_at([0, 0, 3], [0, 0, 0], [0, 1, 0], 40, 24, 20)
+    V = np.array([[-1, -1, 0], [1, -1, 0], [0, 1, 0], [np.nan, 0, 0], [np.inf, 1, 1], [0.5, 0.5, 0]],
+                 float)
+    F = np.array([[0, 1, 3], [3, 4, 0], [0, 0, 1], [0, 5, 5], [0, 1, 2], [2, 1, 4]])
+    g = rasterize(view, V, F)
+    assert g.mask.any() and set(np.unique(g.tri_id[g.mask])) == {4}
+    d, t = rasterize_depth(view, V, F)
+    assert np.array_equal(t, g.tri_id)
+    fr = rasterize_fragments(view, V, F)
+    assert set(np.unique(fr.tri)) == {4}
+    with pytest.raises(ValueError):
+        rasterize(view, V, np.array([[0, 1, 6]]))
+    empty = rasterize(view, V, np.zeros((0, 3), np.int64))
+    assert not empty.mask.any() and np.all(np.isinf(empty.depth))
+    assert len(rasterize_fragments(view, V, np.zeros((0, 3), np.int64))) == 0
+
+
+def test_triangle_fully_behind_or_offscreen():
+    view = View.look_at([0, 0, 0], [0, 0, -1], [0, 1, 0], 40, 16, 16)
+    V = np.array([[-1, -1, 1], [1, -1, 1], [0, 1, 1],          # behind
+                  [50, 50, -1], [52, 50, -1], [51, 52, -1],    # off screen
+                  [-1, -1, -2], [1, -1, -2], [0, 1, -2]], float)
+    F = np.array([[0, 1, 2], [3, 4, 5], [6, 7, 8]])
+    g = rasterize(view, V, F)
+    assert set(np.unique(g.tri_id[g.mask])) == {2}
+
+
+# ---------------------------------------------------------------------------------------------
+# device helpers
+# ---------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("ortho", [False, True])
+def test_view_project_unproject_helpers(ortho):
+    view = View.frame([0.3, 1, 2], [0.1, -0.3, -1], [0, 1, 0], (-0.7, 0.5, -0.4, 0.6), 0.1, 100, 50, 40,
+                      ortho=ortho)
+    vp = view.params()
+    rng = np.random.default_rng(8)
+    P = rng.uniform(-1, 1, size=(20, 3)) + [0, 0, -3]
+    sx, sy, d = view.project(P)
+    for k in range(len(P)):
+        a = view_project(vp, *P[k])
+        np.testing.assert_allclose(a, (sx[k], sy[k], d[k]), rtol=1e-12, atol=1e-12)
+        w = view_unproject(vp, sx[k], sy[k], d[k])
+        np.testing.assert_allclose(w, P[k], atol=1e-10)
+
+
+def test_sampling_helpers():
+    img = np.arange(12, dtype=np.float32).reshape(3, 4)
+    assert sample_nearest(img, 0.5, 0.5, -1.0) == 0.0
+    assert sample_nearest(img, 3.99, 2.01, -1.0) == 11.0
+    assert sample_nearest(img, -5.0, 100.0, -1.0) == 8.0  # clamp to edge
+    assert sample_nearest(img, np.nan, 1.0, -1.0) == -1.0
+    assert sample_bilinear(img, 0.5, 0.5) == 0.0
+    assert sample_bilinear(img, 1.0, 0.5) == pytest.approx(0.5)
+    assert sample_bilinear(img, 1.5, 1.0) == pytest.approx(3.0)
+    assert sample_bilinear(img, -3.0, -3.0) == 0.0
+    assert sample_bilinear(img, 10.0, 10.0) == 11.0
+    assert np.isnan(sample_bilinear(img, np.inf, 1.0))
+    img2 = img.copy()
+    img2[0, 1] = np.nan
+    assert sample_bilinear(img2, 0.5, 0.5) == 0.0  # the NaN neighbour has zero weight
