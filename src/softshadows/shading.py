@@ -9,6 +9,7 @@ with l = (c - p)/r. Normals are flipped to face the eye (two-sided surfaces). Gr
 from __future__ import annotations
 
 import numpy as np
+from numba import njit, prange
 from PIL import Image
 
 AMBIENT = 0.04
@@ -39,28 +40,59 @@ def unshadowed(light, position: np.ndarray, normal: np.ndarray) -> np.ndarray:
 def shade(scene, gbuf, visibility: np.ndarray, shadowed: np.ndarray | None = None) -> np.ndarray:
     """Linear RGB image (H,W,3) float32; background black. ``shadowed``: (H,W) direct light that
     already includes visibility (ground truth's physical mode); otherwise unshadowed x V."""
-    H, W = visibility.shape
-    img = np.zeros((H, W, 3), np.float32)
-    m = gbuf.mask
-    if not m.any():
-        return img
     flat = scene.flat
-    tri = gbuf.tri_id[m]
-    albedo = flat.albedo[flat.mesh_id[tri]]
-    if shadowed is None:
-        pos = gbuf.position[m].astype(np.float64)
-        nrm = facing_normals(gbuf.normal[m].astype(np.float64), pos, scene.camera.eye)
-        # normalized so that a point straight below the light at its height above the ground reads ~1
-        direct = unshadowed(scene.light, pos, nrm) * _exposure(scene)
-        lit = direct * np.nan_to_num(visibility[m], nan=0.0)
-    else:
-        lit = np.nan_to_num(shadowed[m], nan=0.0)
-    img[m] = (albedo * lit[:, None] + AMBIENT * albedo).astype(np.float32)
+    light = scene.light
+    rect = light.shape == "rect"
+    ln = light.normal if rect else np.zeros(3)
+    pix_albedo = flat.albedo[flat.mesh_id].astype(np.float32)  # per triangle
+    use_shadowed = shadowed is not None
+    sh = np.asarray(shadowed, np.float64) if use_shadowed else np.zeros((1, 1))
+    return _shade_kernel(gbuf.position, gbuf.normal, gbuf.tri_id, visibility, pix_albedo,
+                         np.asarray(light.center, np.float64), ln, rect, light.intensity * _exposure(scene),
+                         np.asarray(scene.camera.eye, np.float64), AMBIENT, use_shadowed, sh)
+
+
+@njit(parallel=True, cache=True)
+def _shade_kernel(position, normal, tri_id, vis, tri_albedo, c, ln, rect, scale, eye, ambient, use_shadowed, shadowed):
+    H, W = vis.shape
+    img = np.zeros((H, W, 3), np.float32)
+    for i in prange(H):
+        for j in range(W):
+            t = tri_id[i, j]
+            if t < 0:
+                continue
+            px, py, pz = position[i, j, 0], position[i, j, 1], position[i, j, 2]
+            if use_shadowed:
+                lit = shadowed[i, j]
+                if not np.isfinite(lit):
+                    lit = 0.0
+            else:
+                nx, ny, nz = normal[i, j, 0], normal[i, j, 1], normal[i, j, 2]
+                if nx * (eye[0] - px) + ny * (eye[1] - py) + nz * (eye[2] - pz) < 0.0:
+                    nx, ny, nz = -nx, -ny, -nz
+                dx, dy, dz = c[0] - px, c[1] - py, c[2] - pz
+                r2 = dx * dx + dy * dy + dz * dz
+                r = np.sqrt(r2)
+                cp = (nx * dx + ny * dy + nz * dz) / r
+                if cp < 0.0:
+                    cp = 0.0
+                if rect:
+                    cl = -(ln[0] * dx + ln[1] * dy + ln[2] * dz) / r
+                    if cl < 0.0:
+                        cl = 0.0
+                    cp *= cl
+                v = vis[i, j]
+                if not np.isfinite(v):
+                    v = 0.0
+                lit = scale * cp / r2 * v
+            for ch in range(3):
+                img[i, j, ch] = tri_albedo[t, ch] * (lit + ambient)
     return img
 
 
 def _exposure(scene) -> float:
-    """Scale so that the brightest unshadowed receiver is about 1 (scene-independent look)."""
+    """Scale so that a receiver straight below the light reads about 1 (scene-independent look):
+    the light's height above the lowest point, squared, over its intensity."""
     lo, hi = scene.bounds()
     ground_y = lo[1]
     h = max(scene.light.center[1] - ground_y, 1e-6)

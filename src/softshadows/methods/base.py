@@ -14,7 +14,54 @@ from typing import Any
 
 import numpy as np
 
+from numba import njit, prange
+
 from ..errors import SoftShadowsError
+
+
+@njit(cache=True)
+def _row_counts(mask):
+    H, W = mask.shape
+    c = np.zeros(H + 1, np.int64)
+    for i in range(H):
+        n = 0
+        for j in range(W):
+            if mask[i, j]:
+                n += 1
+        c[i + 1] = c[i] + n
+    return c
+
+
+@njit(parallel=True, cache=True)
+def _gather(position, normal, mask, eye, offs, pts, nrm, idx):
+    H, W = mask.shape
+    for i in prange(H):
+        k = offs[i]
+        for j in range(W):
+            if mask[i, j]:
+                px, py, pz = position[i, j, 0], position[i, j, 1], position[i, j, 2]
+                nx, ny, nz = normal[i, j, 0], normal[i, j, 1], normal[i, j, 2]
+                if nx * (eye[0] - px) + ny * (eye[1] - py) + nz * (eye[2] - pz) < 0.0:
+                    nx, ny, nz = -nx, -ny, -nz
+                pts[k, 0] = px
+                pts[k, 1] = py
+                pts[k, 2] = pz
+                nrm[k, 0] = nx
+                nrm[k, 1] = ny
+                nrm[k, 2] = nz
+                idx[k] = i * W + j
+                k += 1
+
+
+def gather_points(position, normal, mask, eye):
+    """Compact the surface pixels of a G-buffer: positions, eye-facing normals, flat indices."""
+    offs = _row_counts(mask)
+    K = int(offs[-1])
+    pts = np.empty((K, 3), np.float64)
+    nrm = np.empty((K, 3), np.float64)
+    idx = np.empty(K, np.int64)
+    _gather(position, normal, mask, eye, offs, pts, nrm, idx)
+    return pts, nrm, idx
 
 
 @dataclass(frozen=True)
@@ -112,10 +159,12 @@ class FrameContext:
         return self.scene.flat
 
     def points(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(positions (K,3), normals (K,3), flat pixel indices (K,)) of eye pixels with a surface."""
-        idx = np.flatnonzero(self.eye.mask.ravel())
-        return (self.eye.position.reshape(-1, 3)[idx].astype(np.float64),
-                self.eye.normal.reshape(-1, 3)[idx].astype(np.float64), idx)
+        """(positions (K,3) f64, unit normals turned toward the eye (K,3) f64, flat pixel indices
+        (K,) i64) of the eye pixels with a surface, in row-major order. Computed once per frame."""
+        if "points" not in self.cache:
+            self.cache["points"] = gather_points(self.eye.position, self.eye.normal, self.eye.mask,
+                                                 np.asarray(self.scene.camera.eye, np.float64))
+        return self.cache["points"]
 
 
 @dataclass

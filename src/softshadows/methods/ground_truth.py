@@ -13,8 +13,12 @@ With ``physical=true`` the image is the full area-light integral per sample inst
 "unshadowed point light x V": E(p) = sum_s vis_s * L cos(theta_p) cos(theta_l) / r^2 * A / N^2,
 with radiance L = intensity / area (cos(theta_l) on the facing disk for sphere lights); V is the same.
 
-Random numbers: numpy PCG64 seeded with (seed, chunk index), so results do not depend on chunk
-scheduling; the same seed gives the same image.
+Random numbers: a counter-based hash of (seed, pixel, sample) (splitmix64), so results do not
+depend on chunking or threads; the same seed gives the same image.
+
+Speed: Embree's ``run`` (embreex) is single-threaded and holds the GIL; ray generation and
+reduction are Numba ``nogil`` kernels run in a worker thread, overlapped with tracing
+(:func:`trace_in_pipeline`), so the method runs at close to raw Embree throughput.
 """
 from __future__ import annotations
 
@@ -22,7 +26,7 @@ import numpy as np
 from numba import njit, prange
 
 from ..errors import SoftShadowsError
-from ..shading import exposure, facing_normals
+from ..shading import exposure
 from .base import Method, MethodOutput, Param, register
 
 CHUNK_RAYS = 1 << 20
@@ -54,10 +58,30 @@ def _concentric(a, b):
     return r * np.cos(phi), r * np.sin(phi)
 
 
-@njit(parallel=True, cache=True)
-def generate_light_rays(pts, nrm, eps, jitter, n_side, shape, center, u, v, radius, org, dirs, dist, geo):
-    """Fill origins/directions/lengths for len(pts) points x n_side^2 samples.
-    geo[k*S+s] = cos_p * cos_l / r^2 (for the physical mode)."""
+@njit(cache=True, inline="always")
+def _mix64(z):
+    """splitmix64 finalizer: a well-mixed 64-bit hash."""
+    z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+    z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    return z ^ (z >> np.uint64(31))
+
+
+@njit(cache=True, inline="always")
+def jitter_pair(seed, pixel, sample):
+    """Two uniforms in [0,1) for (seed, pixel, sample): counter-based, so results do not depend
+    on how pixels are split into chunks or threads."""
+    h = _mix64(np.uint64(seed) * np.uint64(0x9E3779B97F4A7C15) + np.uint64(pixel))
+    h = _mix64(h ^ (np.uint64(sample) * np.uint64(0xD1B54A32D192ED03) + np.uint64(0x632BE59BD9B4E019)))
+    a = (h >> np.uint64(40)) * (1.0 / 16777216.0)
+    b = ((h >> np.uint64(16)) & np.uint64(0xFFFFFF)) * (1.0 / 16777216.0)
+    return a, b
+
+
+@njit(parallel=True, cache=True, nogil=True)
+def generate_light_rays(pts, nrm, pix, eps, seed, n_side, shape, center, u, v, radius, org, dirs, dist, geo):
+    """Fill origins/directions/lengths for len(pts) points x n_side^2 samples (sample s of point k
+    at row k*S+s). geo = cos_p * cos_l / r^2 (for the physical mode). ``pix``: global pixel ids
+    seeding the jitter."""
     S = n_side * n_side
     for k in prange(pts.shape[0]):
         ox = pts[k, 0] + eps * nrm[k, 0]
@@ -92,8 +116,9 @@ def generate_light_rays(pts, nrm, eps, jitter, n_side, shape, center, u, v, radi
         for i in range(n_side):
             for j in range(n_side):
                 s = i * n_side + j
-                a = (i + jitter[k, s, 0]) / n_side
-                b = (j + jitter[k, s, 1]) / n_side
+                ja, jb = jitter_pair(seed, pix[k], s)
+                a = (i + ja) / n_side
+                b = (j + jb) / n_side
                 if shape == 1:
                     dx, dy = _concentric(a, b)
                     sx = center[0] + radius * (dx * e1x + dy * e2x)
@@ -122,7 +147,7 @@ def generate_light_rays(pts, nrm, eps, jitter, n_side, shape, center, u, v, radi
                 geo[q] = cp * cl / (rl * rl)
 
 
-@njit(parallel=True, cache=True)
+@njit(parallel=True, cache=True, nogil=True)
 def reduce_visibility(hits, geo, S, vis, irr, offset):
     """vis[k] = unoccluded fraction; irr[k] = sum of geo over unoccluded samples / S."""
     n = hits.shape[0] // S
@@ -135,6 +160,64 @@ def reduce_visibility(hits, geo, S, vis, irr, offset):
                 e += geo[k * S + s]
         vis[offset + k] = c / S
         irr[offset + k] = e / S
+
+
+def trace_in_pipeline(esc, pts, nrm, pix, eps, seed, n_side, light, vis, irr, progress=False):
+    """Generate, trace and reduce rays chunk by chunk. Embree's ``run`` is single-threaded and holds
+    the GIL, so ray generation and reduction (Numba, ``nogil``) run in one worker thread, overlapped
+    with tracing: chunk i+1 is generated while chunk i is traced. Returns (trace, generation,
+    reduction) seconds; the latter two overlap the first."""
+    import time
+    from concurrent.futures import ThreadPoolExecutor
+
+    S = n_side * n_side
+    K = len(pts)
+    shape, center, u, v, radius = light_arrays(light)
+    per_chunk = max(1, CHUNK_RAYS // S)
+    starts = list(range(0, K, per_chunk))
+    times = {"gen": 0.0, "red": 0.0}
+
+    def gen(start):
+        t0 = time.perf_counter()
+        stop = min(K, start + per_chunk)
+        m = stop - start
+        org = np.empty((m * S, 3), np.float32)
+        dirs = np.empty((m * S, 3), np.float32)
+        dist = np.empty(m * S, np.float32)
+        geo = np.empty(m * S, np.float32)
+        generate_light_rays(pts[start:stop], nrm[start:stop], pix[start:stop], eps, seed, n_side, shape,
+                            center, u, v, radius, org, dirs, dist, geo)
+        times["gen"] += time.perf_counter() - t0
+        return org, dirs, dist, geo
+
+    def red(hits, geo, start):
+        t0 = time.perf_counter()
+        reduce_visibility(hits, geo, S, vis, irr, start)
+        times["red"] += time.perf_counter() - t0
+
+    bar = None
+    if progress and K * S > 4_000_000:
+        from tqdm import tqdm
+
+        bar = tqdm(total=K * S, unit="ray", unit_scale=True, desc="ground truth", leave=False)
+    t_trace = 0.0
+    t_wall = time.perf_counter()
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        fut = pool.submit(gen, starts[0]) if starts else None
+        for i, start in enumerate(starts):
+            org, dirs, dist, geo = fut.result()
+            if i + 1 < len(starts):
+                fut = pool.submit(gen, starts[i + 1])
+            t0 = time.perf_counter()
+            hits = esc.run(org, dirs, dists=dist, query="OCCLUDED")
+            t_trace += time.perf_counter() - t0
+            pool.submit(red, hits, geo, start)
+            if bar is not None:
+                bar.update(len(dist))
+    t_wall = time.perf_counter() - t_wall
+    if bar is not None:
+        bar.close()
+    return t_trace, times["gen"], times["red"], t_wall
 
 
 def light_arrays(light):
@@ -162,7 +245,6 @@ class GroundTruth(Method):
             raise SoftShadowsError(f"method 'ground-truth': samples must be a perfect square (N x N strata), got {samples}")
         scene = ctx.scene
         pts, nrm, idx = ctx.points()
-        nrm = facing_normals(nrm, pts, scene.camera.eye)
         lo, hi = scene.bounds()
         eps = offset * float(np.linalg.norm(hi - lo))
         with ctx.timer.phase("bvh_build"):
@@ -171,49 +253,18 @@ class GroundTruth(Method):
         K = len(pts)
         vis = np.zeros(K, np.float32)
         irr = np.zeros(K, np.float64)
-        shape, center, u, v, radius = light_arrays(scene.light)
-        per_chunk = max(1, CHUNK_RAYS // S)
-        chunks = range(0, K, per_chunk)
-        bar = None
-        if ctx.progress and K * S > 4_000_000:
-            from tqdm import tqdm
-
-            bar = tqdm(total=K * S, unit="ray", unit_scale=True, desc="ground truth", leave=False)
-        t_gen = t_trace = t_red = 0.0
-        import time
-
-        for ci, start in enumerate(chunks):
-            stop = min(K, start + per_chunk)
-            m = stop - start
-            t0 = time.perf_counter()
-            rng = np.random.Generator(np.random.PCG64([ctx.seed, ci]))
-            jitter = rng.random((m, S, 2))
-            org = np.empty((m * S, 3), np.float32)
-            dirs = np.empty((m * S, 3), np.float32)
-            dist = np.empty(m * S, np.float32)
-            geo = np.empty(m * S, np.float32)
-            generate_light_rays(pts[start:stop], nrm[start:stop], eps, jitter, n_side, shape,
-                                center, u, v, radius, org, dirs, dist, geo)
-            t1 = time.perf_counter()
-            hits = esc.run(org, dirs, dists=dist, query="OCCLUDED")
-            t2 = time.perf_counter()
-            reduce_visibility(hits, geo, S, vis, irr, start)
-            t3 = time.perf_counter()
-            t_gen += t1 - t0
-            t_trace += t2 - t1
-            t_red += t3 - t2
-            if bar is not None:
-                bar.update(m * S)
-        if bar is not None:
-            bar.close()
-        ctx.timer.times["ray_generation"] = ctx.timer.times.get("ray_generation", 0.0) + t_gen
-        ctx.timer.times["trace"] = ctx.timer.times.get("trace", 0.0) + t_trace
-        ctx.timer.times["reduce"] = ctx.timer.times.get("reduce", 0.0) + t_red
+        trace_t, gen_t, red_t, wall = trace_in_pipeline(esc, pts, nrm, idx, eps, ctx.seed, n_side, scene.light,
+                                                  vis, irr, progress=ctx.progress)
+        for k, t in (("ray_generation", gen_t), ("trace", trace_t), ("reduce", red_t)):
+            ctx.timer.times[k] = ctx.timer.times.get(k, 0.0) + t
+        ctx.timer.times["rays_wall"] = ctx.timer.times.get("rays_wall", 0.0) + wall
+        t_trace = wall
         H, W = ctx.eye.mask.shape
         out = np.ones(H * W, np.float32)
         out[idx] = vis
         stats = {"samples": S, "rays": int(K * S), "points": int(K), "eps": eps,
-                 "rays_per_second": float(K * S / t_trace) if t_trace > 0 else float("nan")}
+                 "rays_per_second": float(K * S / t_trace) if t_trace > 0 else float("nan"),
+                 "overlapped_phases": "ray_generation and reduce overlap trace; rays_wall is their wall time"}
         if physical:
             radiance = scene.light.intensity / scene.light.area
             e = np.full(H * W, np.nan)

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 from .base import Method, MethodOutput, Param, register
 from .shadowmap import build_shadow_map, fit_light_view, lookup_points, scatter
-from ..shading import facing_normals
 
 
 @register
@@ -28,7 +27,6 @@ class Hard(Method):
 
     def run(self, ctx, map_size, bias, slope_bias, pcf):
         pts, nrm, idx = ctx.points()
-        nrm = facing_normals(nrm, pts, ctx.scene.camera.eye)
         with ctx.timer.phase("shadow_map"):
             view = fit_light_view(ctx.scene, map_size)
             smap = build_shadow_map(ctx.scene, view)

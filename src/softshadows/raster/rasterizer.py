@@ -2,22 +2,26 @@
 
 Pipeline (all Numba kernels on plain arrays; the functions at the bottom only orchestrate):
 
-1. **setup** (parallel over triangles): transform the three corners to view space, cull in *world*
+1. **setup** (parallel over chunks of triangles, fused with the binning count pass): transform the three corners to view space, cull in *world*
    space, reject triangles beyond ``far`` or behind ``near``, clip against the near plane
    (``z = near``) in view space (up to 2 pieces per triangle, both carrying the original index), project,
-   snap to a 1/256 px grid, orient, and store per piece its pixel bounding box and its three edge
+   snap to a 1/4096 px grid, orient, and store per piece its pixel bounding box and its three edge
    equations; per original triangle store the view-space plane (``n . X = d``) and the dual vectors
    that give its barycentrics. Depth and barycentrics of a fragment are computed from the *original*
    triangle's plane by intersecting the ray through the pixel center with it, so they are exact
    (float64) and perspective-correct whatever clipping did; clipping only decides coverage.
-2. **binning** (parallel over chunks of triangles): count pass, prefix sum, fill pass; each tile's bin
-   lists its pieces in increasing triangle index.
+2. **binning**: per (chunk, tile) counts (during setup), prefix sum, fill pass (parallel over the same
+   chunks); each tile's bin lists its pieces in increasing triangle index, so the result does not
+   depend on the thread count.
 3. **tiles** (parallel over ``TILE`` x ``TILE`` pixel tiles): each tile is rasterized by one thread into
    its own region of the outputs (no atomics). Coverage: pixel centers ``(j+0.5, i+0.5)``, float64 edge
    functions evaluated from the edge's canonically ordered endpoints (a shared edge gives exactly
-   opposite values for the two triangles; with the 1/256 px snap they are exact for coordinates within
-   about +-1e5 px) and a top-left fill rule: a pixel center on a shared edge or vertex belongs to
-   exactly one triangle. Either winding is rasterized.
+   opposite values for the two triangles, always) and a top-left fill rule: a pixel center on a shared
+   edge or vertex belongs to exactly one triangle. With the 1/4096 px snap the edge functions are
+   exact (no rounding at all) for every piece whose bounding box is under 16384 px, and coverage
+   differs from the true triangle by at most 1/8192 px, so the exact plane depth is never
+   extrapolated noticeably (a coarser snap, e.g. 1/256 px, let back faces win the depth test on some
+   silhouette pixels). Either winding is rasterized.
 
 Depth is the view-space z (distance along ``forward``, world units) for both perspective and
 orthographic views; the depth test runs in float64 and the outputs are float32.
@@ -34,7 +38,7 @@ from .gbuffer import Fragments, GBuffer
 from .kernels import view_coords, view_coords_to_screen
 
 TILE = 16  #: tile size in pixels (square)
-SUBPIXEL = 256.0  #: screen coordinates are snapped to 1/SUBPIXEL px before coverage
+SUBPIXEL = 4096.0  #: screen coordinates are snapped to 1/SUBPIXEL px before coverage
 _PERSPECTIVE_MIN_NEAR = 1e-9
 
 _JIT = dict(cache=True, fastmath=False, error_model="numpy")
@@ -330,7 +334,7 @@ def _bary(PL, t, xw, yw, z, ortho):
 
 
 @njit(parallel=True, **_JIT)
-def _raster_tiles(mode, vp, T, ntx, nty, bstart, bins, CB, CE, CZ, PL, NW, scratch,
+def _raster_tiles(mode, vp, near, T, ntx, nty, bstart, bins, CB, CE, CZ, PL, NW, scratch,
                   depth_out, tri_out, pos_out, nrm_out, bary_out, mask_out,
                   fcount, foff, fpix, ftri, fbary, fdepth):
     """mode 0: depth + tri; 1: full G-buffer; 2: count fragments per tile; 3: write fragments."""
@@ -416,8 +420,19 @@ def _raster_tiles(mode, vp, T, ntx, nty, bstart, bins, CB, CE, CZ, PL, NW, scrat
                         full = False
                 if reject:
                     continue
+            # sanity bounds for the plane depth of this piece's pixels: the snapped coverage may
+            # extrapolate the plane a fraction of a pixel beyond the true triangle, which near the
+            # plane's horizon or for edge-on triangles can give huge, negative or NaN depths
             zmin = CZ[ct, 0]
             zmax = CZ[ct, 1]
+            if ortho:
+                zlo = zmin - (zmax - zmin) - 1e-9 * (abs(zmin) + abs(zmax))
+                zhi = zmax + (zmax - zmin) + 1e-9 * (abs(zmin) + abs(zmax))
+            else:
+                zlo = 0.5 * zmin
+                zhi = 2.0 * zmax
+            if zlo < near:
+                zlo = near
             pnx = PL[t, 0]
             pny = PL[t, 1]
             pnz = PL[t, 2]
@@ -449,10 +464,10 @@ def _raster_tiles(mode, vp, T, ntx, nty, bstart, bins, CB, CE, CZ, PL, NW, scrat
                         z = (zrow - pnx * xw) / pnz
                     else:
                         z = pd / (pnx * xw + zrow)
-                    if not (z >= zmin):  # also catches NaN (edge-on planes)
-                        z = zmin
-                    elif z > zmax:
-                        z = zmax
+                    if not (z >= zlo):  # also catches NaN (edge-on planes)
+                        z = zlo
+                    elif z > zhi:
+                        z = zhi
                     if z > far:
                         continue
                     if mode <= 1:
@@ -595,7 +610,7 @@ def _front_end(vp, W, H, verts, fcs, code, near):
     _bin_offsets(cnt, bstart)
     bins = np.empty(int(bstart[-1]), dtype=np.int32)
     _bin_fill(NC, CB, T, ntx, chunk, cnt, bins)
-    return T, ntx, nty, bstart, bins, CB, CE, CZ, PL, NW
+    return T, ntx, nty, bstart, bins, CB, CE, CZ, PL, NW, near
 
 
 _E1 = np.empty(0, dtype=np.int64)
@@ -610,13 +625,13 @@ _EFB = np.empty((0, 2), dtype=np.float32)
 
 def _run_tiles(mode, vp, fe, depth=_E2F, tri=_E2I, pos=_E3F, nrm=_E3F, bary=_E3F, mask=_E2B,
                fcount=_E1, foff=_E1, fpix=_E1, ftri=_E1I, fbary=_EFB, fdepth=_E1F):
-    T, ntx, nty, bstart, bins, CB, CE, CZ, PL, NW = fe
+    T, ntx, nty, bstart, bins, CB, CE, CZ, PL, NW, near = fe
     nthreads = numba.config.NUMBA_NUM_THREADS
     scratch = np.empty((nthreads, T, T), dtype=np.float64)
     ntiles = ntx * nty
     old = numba.set_parallel_chunksize(max(1, ntiles // (8 * numba.get_num_threads())))
     try:
-        _raster_tiles(mode, vp, T, ntx, nty, bstart, bins, CB, CE, CZ, PL, NW, scratch,
+        _raster_tiles(mode, vp, near, T, ntx, nty, bstart, bins, CB, CE, CZ, PL, NW, scratch,
                       depth, tri, pos, nrm, bary, mask, fcount, foff, fpix, ftri, fbary, fdepth)
     finally:
         numba.set_parallel_chunksize(old)

@@ -1,0 +1,97 @@
+"""Foundation benchmark (issue 2): per-phase times at 512x512 on `bunny` for `hard` and
+`ground-truth`, and ground truth's rays/s next to a raw Embree occlusion call on the same rays.
+
+    python benchmarks/bench_foundation.py [--size 512] [--samples 64] [--repeats 5]
+
+All numbers are medians after JIT warm-up, measured in this one process.
+"""
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+
+import numpy as np
+
+import softshadows as ss
+from softshadows.api import eye_view
+from softshadows.methods import ground_truth as gtm
+from softshadows.raster import rasterize
+from softshadows.shading import facing_normals
+
+
+def med_phases(results):
+    keys = results[0].timings.keys()
+    return {k: statistics.median(r.timings[k] for r in results) for k in keys}
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--scene", default="bunny")
+    ap.add_argument("--size", type=int, default=512)
+    ap.add_argument("--samples", type=int, default=64)
+    ap.add_argument("--repeats", type=int, default=5)
+    a = ap.parse_args()
+    scene = ss.load_scene(a.scene)
+    n = a.size
+    print(f"scene={a.scene} size={n}x{n} ({len(scene.flat.faces)} triangles)")
+
+    # eye G-buffer alone
+    view = eye_view(scene, n, n)
+    flat = scene.flat
+    rasterize(view, flat.vertices, flat.faces)
+    ts = []
+    for _ in range(max(a.repeats, 5)):
+        t0 = time.perf_counter()
+        rasterize(view, flat.vertices, flat.faces)
+        ts.append(time.perf_counter() - t0)
+    print(f"eye G-buffer: {statistics.median(ts) * 1e3:.1f} ms (target <= 20 ms)")
+
+    ss.render(scene, "hard", n, n)
+    hard = [ss.render(scene, "hard", n, n) for _ in range(a.repeats)]
+    ph = med_phases(hard)
+    print("hard: " + "  ".join(f"{k}={v * 1e3:.1f}ms" for k, v in ph.items()) + "  (target total <= 30 ms)")
+
+    ss.render(scene, "ground-truth", 32, 32, samples=a.samples)
+    gts = [ss.render(scene, "ground-truth", n, n, samples=a.samples) for _ in range(max(1, a.repeats // 2))]
+    pg = med_phases(gts)
+    rays = gts[0].stats["rays"]
+    method_time = pg["rays_wall"]  # generation + reduction overlap tracing
+    print("ground-truth: " + "  ".join(f"{k}={v * 1e3:.1f}ms" for k, v in pg.items()))
+
+    # raw Embree on the same rays, one call per chunk exactly like the method
+    g = rasterize(view, flat.vertices, flat.faces)
+    idx = np.flatnonzero(g.mask.ravel())
+    pts = g.position.reshape(-1, 3)[idx].astype(np.float64)
+    nrm = facing_normals(g.normal.reshape(-1, 3)[idx].astype(np.float64), pts, scene.camera.eye)
+    esc = gtm._embree_for(scene)
+    S = a.samples
+    side = int(round(np.sqrt(S)))
+    lo, hi = scene.bounds()
+    eps = 1e-4 * float(np.linalg.norm(hi - lo))
+    shape, center, u, v, radius = gtm.light_arrays(scene.light)
+    per = max(1, gtm.CHUNK_RAYS // S)
+    batches = []
+    for ci, start in enumerate(range(0, len(pts), per)):
+        stop = min(len(pts), start + per)
+        m = stop - start
+        org = np.empty((m * S, 3), np.float32)
+        dirs = np.empty((m * S, 3), np.float32)
+        dist = np.empty(m * S, np.float32)
+        geo = np.empty(m * S, np.float32)
+        gtm.generate_light_rays(pts[start:stop], nrm[start:stop], idx[start:stop], eps, 0, side, shape, center, u, v, radius,
+                                org, dirs, dist, geo)
+        batches.append((org, dirs, dist))
+    raw = []
+    for _ in range(max(1, a.repeats // 2)):
+        t0 = time.perf_counter()
+        for org, dirs, dist in batches:
+            esc.run(org, dirs, dists=dist, query="OCCLUDED")
+        raw.append(time.perf_counter() - t0)
+    raw_t = statistics.median(raw)
+    print(f"rays: {rays}  ground-truth method: {rays / method_time / 1e6:.2f} Mrays/s   raw Embree: "
+          f"{rays / raw_t / 1e6:.2f} Mrays/s   ratio {raw_t / method_time:.2f} (target >= 0.67)")
+
+
+if __name__ == "__main__":
+    main()
