@@ -21,7 +21,10 @@ import numpy as np
 from numba import njit, prange
 
 from ..raster import View, rasterize_depth
+from ..raster.kernels import view_project
 from ..raster.view import light_view
+
+_project = view_project  # old name, kept for callers
 
 
 @dataclass
@@ -67,20 +70,6 @@ def build_shadow_map(scene, view: View, faces_mask: np.ndarray | None = None, cu
 
 
 @njit(cache=True, inline="always")
-def _project(vp, x, y, z):
-    dx, dy, dz = x - vp[0], y - vp[1], z - vp[2]
-    vx = dx * vp[3] + dy * vp[4] + dz * vp[5]
-    vy = dx * vp[6] + dy * vp[7] + dz * vp[8]
-    vz = dx * vp[9] + dy * vp[10] + dz * vp[11]
-    if vp[20] == 0.0:
-        vx /= vz
-        vy /= vz
-    sx = (vx - vp[12]) / (vp[13] - vp[12]) * vp[18]
-    sy = (vp[15] - vy) / (vp[15] - vp[14]) * vp[19]
-    return sx, sy, vz
-
-
-@njit(cache=True, inline="always")
 def texel_world_size(vp, depth):
     """World size of one texel (x) at a view depth."""
     s = (vp[13] - vp[12]) / vp[18]
@@ -108,7 +97,7 @@ def shadow_lookup(vp, depth_map, pts, nrm, bias, slope_bias, pcf_radius):
     H, W = depth_map.shape
     out = np.empty(n, np.float32)
     for k in prange(n):
-        sx, sy, z = _project(vp, pts[k, 0], pts[k, 1], pts[k, 2])
+        sx, sy, z = view_project(vp, pts[k, 0], pts[k, 1], pts[k, 2])
         if not (z > 0.0):
             out[k] = 1.0
             continue

@@ -1,0 +1,104 @@
+"""PCSS (Fernando 2005): contact hardening, the analytic square, range on every built-in scene."""
+import numpy as np
+import pytest
+
+import softshadows as ss
+from softshadows.errors import SoftShadowsError
+from softshadows.methods.pcss import sample_pattern
+from softshadows.scene import Camera
+from softshadows.scene.builtin import BUILTIN, square_visibility
+
+# Top-down camera over the `contact` scene (box x in [-0.5, 0.5], z in [-0.3, 0.3], 0.8 tall; light
+# at x = -1.8): image rows run along x, columns along z, so a row crosses the shadow's lateral edge
+# on the +z side of the box.
+TOP = Camera((0.5, 5.0, 0.0), (0.5, 0.0, 0.0), (1.0, 0.0, 0.0), 30.0)
+N = 128
+
+
+def _lateral_penumbra_width(res, x0: float) -> tuple[float, float]:
+    """Extent in z (world units) of the ground pixels with 0.1 < V < 0.9 on the +z side, in the
+    pixel row-band at x = x0; also returns the pixel size."""
+    pos = res.position
+    px = (np.nanmax(pos[..., 0]) - np.nanmin(pos[..., 0])) / N
+    m = (np.abs(pos[..., 0] - x0) < 0.5 * px) & (pos[..., 1] < 1e-4) & (pos[..., 2] > 0.0)
+    assert m.sum() > 20, "the band must cross the shadow edge"
+    z, v = pos[..., 2][m], res.visibility[m]
+    pen = (v > 0.1) & (v < 0.9)
+    return (float(np.ptp(z[pen])) if pen.any() else 0.0), px
+
+
+@pytest.mark.parametrize("light", ["rect", "sphere"])
+def test_contact_hardening(light):
+    """Along the box's side wall, the blocking wall is low near the lit end (x = -0.2: the
+    occluding part of the wall is close to the ground) and high far from it (x = 0.9, past the
+    box): the penumbra must widen with the blocker-receiver distance, as in ground truth."""
+    sc = ss.load_scene("contact", light=light).with_camera(TOP)
+    p = ss.render(sc, "pcss", N, N)
+    gt = ss.render(sc, "ground-truth", N, N, samples=256)
+    near, px = _lateral_penumbra_width(p, -0.2)
+    far, _ = _lateral_penumbra_width(p, 0.9)
+    g_near, _ = _lateral_penumbra_width(gt, -0.2)
+    g_far, _ = _lateral_penumbra_width(gt, 0.9)
+    # measured (128 px, pixel 0.021): pcss 0.06-0.08 near vs 0.21-0.23 far; ground truth 0.06-0.08 vs 0.21
+    assert far > 2.0 * near, (near, far)
+    assert near < 0.12 and far > 0.15, (near, far)
+    # and close to ground truth: within 2 pixels + 25% (PCSS's parallel-plane estimate is approximate)
+    for w, g in ((near, g_near), (far, g_far)):
+        assert abs(w - g) <= 2 * px + 0.25 * g, (w, g)
+
+
+def test_square_matches_closed_form():
+    """Parallel square occluder and square light: the PCF kernel of the light's shape scaled by
+    (z_r - z_b) / z_b is the exact soft shadow, so PCSS only has sampling error. With a 16 x 16
+    grid the tap quantization is 1/256 per tap step; measured MAE 0.003 on the ground, bound 0.008."""
+    sc = ss.load_scene("square")
+    r = ss.render(sc, "pcss", 96, 72, pattern="grid", filter_samples=256, search_samples=64)
+    pos = r.position
+    m = ~np.isnan(r.visibility) & (pos[..., 1] < 1e-4)
+    ref = square_visibility(pos[m].astype(float))
+    err = np.abs(r.visibility[m] - ref)
+    assert ((ref > 0) & (ref < 1)).sum() > 500  # the penumbra is well covered
+    assert err.mean() < 0.008, err.mean()
+    # default settings (16 Poisson taps): coarser but still close (measured 0.011)
+    r16 = ss.render(sc, "pcss", 96, 72)
+    assert np.abs(r16.visibility[m] - ref).mean() < 0.025
+
+
+@pytest.mark.parametrize("light", ["rect", "sphere"])
+@pytest.mark.parametrize("name", list(BUILTIN))
+def test_visibility_finite_in_unit_range(name, light):
+    sc = ss.load_scene(name, light=light)
+    r = ss.render(sc, "pcss", 48, 36)
+    v = r.visibility
+    surf = r.mask
+    assert surf.any()
+    assert np.isfinite(v[surf]).all()
+    assert v[surf].min() >= 0.0 and v[surf].max() <= 1.0
+    assert np.isnan(v[~surf]).all()
+
+
+def test_options_and_determinism():
+    sc = ss.load_scene("spheres", light="sphere")
+    a = ss.render(sc, "pcss", 64, 48, rotate=True, seed=3)
+    b = ss.render(sc, "pcss", 64, 48, rotate=True, seed=3)
+    np.testing.assert_array_equal(a.visibility, b.visibility)
+    g = ss.render(sc, "pcss", 64, 48, pattern="grid", filter_samples=20, bilinear=False, receiver_plane=False)
+    assert g.stats["filter_taps"] == 16  # grid rounds to N x N, N = round(sqrt(20))
+    assert 0.0 < g.stats["early_out_fraction"] < 1.0
+    with pytest.raises(SoftShadowsError):
+        ss.render(sc, "pcss", 16, 16, pattern="hexagon")
+    with pytest.raises(SoftShadowsError):
+        ss.render(sc, "pcss", 16, 16, filter_samples=0)
+
+
+def test_patterns_cover_the_light_shape():
+    disk = sample_pattern(32, "poisson", True)
+    sq = sample_pattern(32, "poisson", False)
+    assert disk.shape == (32, 2) and sq.shape == (32, 2)
+    assert (np.hypot(disk[:, 0], disk[:, 1]) <= 1.0 + 1e-12).all()
+    assert np.abs(sq).max() <= 1.0
+    # Poisson disk: no two taps closer than half the spacing of a regular grid of the same count
+    d = np.sqrt(((sq[:, None] - sq[None]) ** 2).sum(-1)) + np.eye(32) * 9
+    assert d.min() > 0.5 * 2.0 / np.sqrt(32)
+    g = sample_pattern(16, "grid", False)
+    assert np.allclose(np.sort(np.unique(g[:, 0])), [-0.75, -0.25, 0.25, 0.75])
