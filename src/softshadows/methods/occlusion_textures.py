@@ -1,0 +1,872 @@
+"""Occlusion textures (Eisemann & Décoret 2006, "Plausible image based soft shadows using occlusion
+textures", SIBGRAPI 2006; ``papers/eisemann2006-occlusion-textures.txt``).
+
+The scene is cut into slices parallel to the (rectangular) light; everything inside a slice is
+projected onto the slice's plane farthest from the light as a binary *occlusion texture*. The
+textures are prefiltered so that a box filter of any size can be looked up quickly. For an eye point
+P, each slice between P and the light blocks the fraction of the light given by the mean of its
+texture over the pyramid (P, light) cut by the slice plane -- a rectangle of size Eq. 4 -- and the
+slices' blocked fractions are combined with the probabilistic formula of Eq. 5.
+
+Steps, in the paper's order (its Fig. 9), one function each:
+
+1. Slicing (Sec. 3.4): :func:`fit_slicing_view` places the centre of projection (COP) behind the light
+   at distance d, with the frustum fitted to the light and d the largest distance for which the
+   frustum contains the scene (Fig. 4, 5); :func:`slice_scene` rasterizes the scene once from the COP
+   (shared rasterizer, every fragment: the equivalent of the paper's single pass into 4-16 colour
+   channels) and sets texel (i, j) of slice k when a fragment of depth inside slice k covers it. The
+   optional light-leak fix for thin occluders (Fig. 6) also sets the same texel in slice k+1.
+2. Prefiltering (Sec. 3.2), selectable with ``filter``: :func:`prefilter_mipmap` (the GPU mipmap
+   pyramid; rectangular kernels through the GPU's anisotropic filtering, :func:`lookup_mipmap`),
+   :func:`prefilter_nbuffers` (level l = mean over the 2^l x 2^l box starting at each texel, full
+   resolution; :func:`lookup_nbuffers` interpolates linearly between the two levels bracketing the
+   kernel size) and :func:`prefilter_sat` (summed-area table, exact box filter, :func:`lookup_sat`).
+3. Kernel size (Eq. 4): :func:`kernel_rect` -- the light seen from P cut by the slice plane, a
+   rectangle of size d(P, slice)/d(P, light) x size(light), mapped into the slice's texels.
+4. Combination (Sec. 3.3): :func:`combine_occlusion` -- ``product`` (Eq. 5: V = prod(1 - I_k),
+   default), ``max`` (V = 1 - max I_k) or ``sum`` (V = max(0, 1 - sum I_k), clamped).
+5. Self-shadowing (Sec. 3.4): :func:`slice_weight` -- the slice containing P is not used, and the
+   contribution of the slice just above P (the closest one between P and the light) fades in
+   linearly with the distance of P to that slice's lower plane (0 when P is on the plane, 1 one
+   slice thickness below it), so V is continuous where geometry crosses slice planes.
+   ``self_shadow="skip"`` (hard skip, the discontinuity the paper warns about) and ``"include"`` (use
+   the containing slice too: Fig. 7's self-shadowing) are the failure modes, switchable.
+6. The eye pass: :func:`eye_pass` visits, for every eye point, the slices between it and the light.
+
+Parameters (paper defaults): ``slices=16`` (4-16 useful), ``texture_size=512`` (Fig. 10: 16
+textures of 512^2), ``filter="nbuffers"`` (the paper's choice: "best tradeoff"), ``combine="product"``,
+``cop_distance=0`` (0: automatic, the largest d whose frustum fitted to the light contains the scene;
+> 0: that distance in world units, the frustum then widened to still contain the occluders),
+``leak_fix=False`` (the paper enables it "uniquely for thin objects"), ``anisotropy=16`` (maximum
+anisotropy of the mipmap lookup, as a GeForce 7800), ``self_shadow="fade"``.
+
+Stats: ``slices``, ``slices_used`` (non-empty slices; empty ones are neither filtered nor looked
+up), ``fragments``, ``cop_distance``, ``fov_deg``, ``texel_size`` (world size of a texel at the
+first and last slice planes), ``nbuffer_levels`` / ``mip_levels``, ``slicing_s``, ``prefilter_s``,
+``prefilter_s_<filter>``, ``eye_pass_s`` (the same as the timer phases ``slicing``, ``prefilter``,
+``eye_pass``).
+
+Deviations from the paper (honest differences; also in docs/occlusion-textures.md):
+
+* Slicing range: the slices cover the depth range (along the light normal) of the geometry that
+  casts shadows -- every mesh with role ``both`` or ``occluder`` -- split uniformly. With roles all
+  ``both`` this is the paper's "the scene". Receiver-only meshes are not sliced (they cannot cast
+  shadows), and the frustum is fitted to the occluders and to the eye points being shaded (every
+  kernel is then inside the textures, the property the paper's COP choice is for, Sec. 3.4, note 2).
+  A scene whose occluders are all at one depth gets a slab of 1e-3 x depth around it.
+* Automatic d is 98% of the largest containing distance (a margin for rounding), capped at
+  max(scene depth, light size) (a scene entirely inside the light's prism admits any d; we keep a
+  perspective from at most one scene depth behind the light, Fig. 4's argument against ortho) and
+  floored at 2% of the light size (geometry that reaches the light plane outside the light would
+  otherwise force an almost 180-degree frustum; such geometry is clipped).
+* Summed-area tables are 32-bit integer tables (the textures are binary, so sums are exact: the
+  "32 bit textures" the paper requires, without the precision artifacts), and they are interpolated
+  bilinearly, which makes the box filter exact for any real-valued rectangle. The paper's GPU of 2006
+  could not interpolate 32-bit textures and showed texels (its Fig. 2 close-up).
+* N-Buffers are square; a rectangular light's kernel is covered by ceil(long/short) square lookups
+  along its long side (like anisotropic probes). Lookups use clamp-to-edge; levels are built only up
+  to the largest kernel any eye point needs (the paper builds all log2(size) levels).
+* Mipmap lookups follow the EXT_texture_filter_anisotropic model (N = min(ceil(Pmax/Pmin),
+  anisotropy) trilinear probes along the major axis at LOD log2(Pmax/N)), with a zero border.
+* Slices that received no fragment are skipped, and so is a slice whose occupied texels lie outside
+  the filter's support around the kernel (their occlusion is 0: the result is identical).
+* Sec. 3.6's loop over N-Buffer levels with a running slice index is a workaround for shaders that
+  cannot index texture arrays; here the eye pass loops over the slices and picks the levels directly.
+* Self-shadowing fade, as we read Sec. 3.4/3.5: "the contribution of the slice closest to P is
+  weighted according to the distance of P to the slice" -- the closest slice between P and the light
+  gets weight d(P, its lower plane) / thickness (clamped to 1); the containing slice gets 0. This is
+  the reading that is continuous across every slice plane (tested); the hard skip is ``"skip"``.
+* A sphere light is accepted through the square of equal area at its centre facing the scene
+  (``softshadows.scene.sphere_to_rect``); the method itself is defined for rectangles only.
+* The paper's 8-bit RGBA packing and swizzling are GPU encoding details: textures here are uint8
+  (binary) and prefiltered values float32.
+
+Known limits (from the paper): occluders inside the slice containing P are ignored and those of the
+slice above are faded, so close self-occlusion and contact shadows are missed or too light; the slice
+approximation moves occluders to the slice's lower plane (penumbra sizes err by up to one slice
+thickness); thin occluders and surfaces steep to the slices leak light between slices (rings in
+the spheres' umbrae; ``leak_fix``); a closed object spanning
+several slices is counted once per slice and the product (which assumes independent occluders) makes
+its shadow too dark, more so with the leak fix; very fine occluders are
+over- or under-estimated at texel level; the combination assumes uncorrelated occluders.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit, prange
+
+from ..errors import SoftShadowsError
+from ..raster import View, rasterize_fragments
+from ..raster.view import light_frame
+from .base import Method, MethodOutput, Param, register
+
+FILTERS = ("mipmap", "nbuffers", "sat")
+COMBINES = ("product", "max", "sum")
+SELF_SHADOW = ("fade", "skip", "include")
+TEXTURE_SIZES = (32, 64, 128, 256, 512, 1024, 2048)
+
+_FILTER_ID = {f: i for i, f in enumerate(FILTERS)}
+_COMBINE_ID = {c: i for i, c in enumerate(COMBINES)}
+_SELF_ID = {s: i for i, s in enumerate(SELF_SHADOW)}
+
+
+# =====================================================================================
+# 1. Slicing (Sec. 3.4)
+# =====================================================================================
+@dataclass
+class SlicingSetup:
+    """The slicing camera and planes.
+
+    view:     the COP view (origin d behind the light centre, looking along the light normal)
+    frame:    (origin, right, up, forward) of the light frame (origin = light centre)
+    half:     (hu, hv) half extents of the light along right / up
+    d:        distance of the COP behind the light plane
+    z_planes: (N+1,) light-frame depths of the slice planes z_0 < ... < z_N; slice k spans
+              [z_k, z_{k+1}) and its texture lies on z_{k+1}, its plane farthest from the light
+    depth:    largest light-frame depth of the occluders and of the points to shade
+    """
+
+    view: View
+    frame: tuple
+    half: tuple
+    d: float
+    z_planes: np.ndarray
+    depth: float = 0.0  # largest light-frame depth of the occluders and fit points
+
+    @property
+    def slices(self) -> int:
+        return len(self.z_planes) - 1
+
+    def params(self) -> np.ndarray:
+        """Flat float64 array for kernels: origin(3) right(3) up(3) forward(3) hu hv d l r b t W H."""
+        o, r, u, f = self.frame
+        l, rr, b, t = self.view.window
+        return np.concatenate([o, r, u, f, [self.half[0], self.half[1], self.d, l, rr, b, t,
+                                            self.view.width, self.view.height]]).astype(np.float64)
+
+
+def light_rect_frame(light):
+    """(origin, right, up, forward, hu, hv) of a rectangle light; its edges must be orthogonal."""
+    u, v = light.u, light.v
+    nu, nv = float(np.linalg.norm(u)), float(np.linalg.norm(v))
+    if abs(float(np.dot(u, v))) > 1e-6 * nu * nv:
+        raise SoftShadowsError("method 'occlusion-textures': the rectangle light's u and v must be orthogonal")
+    r, up, f = light_frame(light)
+    return light.center.astype(np.float64), r, up, f, nu / 2.0, nv / 2.0
+
+
+def to_light_frame(points, frame) -> np.ndarray:
+    o, r, u, f = frame
+    q = np.asarray(points, dtype=np.float64).reshape(-1, 3) - o
+    return np.stack([q @ r, q @ u, q @ f], axis=1)
+
+
+@njit(cache=True, parallel=True)
+def _fit_reduce(pts, o, r, u, f, hu, hv, eps):
+    """Per point in front of the light (z > eps): the largest d keeping it in the frustum
+    (hu z / (|x| - hu) when |x| > hu, likewise in y; inf otherwise); also max z. Parallel chunks
+    with private results merged after."""
+    nchunk = 64
+    n = pts.shape[0]
+    dmin = np.full(nchunk, np.inf)
+    zmax = np.full(nchunk, -np.inf)
+    for c in prange(nchunk):
+        a = c * n // nchunk
+        b = (c + 1) * n // nchunk
+        dm = np.inf
+        zm = -np.inf
+        for i in range(a, b):
+            qx = pts[i, 0] - o[0]
+            qy = pts[i, 1] - o[1]
+            qz = pts[i, 2] - o[2]
+            x = abs(qx * r[0] + qy * r[1] + qz * r[2])
+            y = abs(qx * u[0] + qy * u[1] + qz * u[2])
+            z = qx * f[0] + qy * f[1] + qz * f[2]
+            zm = max(zm, z)
+            if z <= eps:
+                continue
+            if x > hu * (1.0 + 1e-9):
+                dm = min(dm, hu * z / (x - hu))
+            if y > hv * (1.0 + 1e-9):
+                dm = min(dm, hv * z / (y - hv))
+        dmin[c] = dm
+        zmax[c] = zm
+    return dmin.min(), zmax.max()
+
+
+def fit_cop_distance(dmax: float, zmax: float, light_size: float) -> float:
+    """The COP distance from the frustum constraint ``dmax`` (the largest d such that the frustum
+    from (0, 0, -d) through the light rectangle contains the points: |x| / (z + d) <= hu / d, i.e.
+    d <= hu z / (|x| - hu) for |x| > hu, likewise in y), kept 2% inside, capped at
+    max(scene depth, light size) and floored at 2% of the light size (see the module docstring)."""
+    d = min(max(zmax, light_size), dmax)
+    return max(d * 0.98, 0.02 * light_size)
+
+
+def fit_slicing_view(light, occluder_points, fit_points, size: int, slices: int,
+                     cop_distance: float = 0.0) -> SlicingSetup:
+    """The slicing camera of Sec. 3.4 / Fig. 4-5: COP at distance d behind the light centre, frustum
+    fitted to the light (its section at the light plane is the light), d chosen so the frustum
+    contains the scene (``fit_points``: occluders and shaded points). Slice planes split the
+    occluders' depth range uniformly."""
+    o, r, u, f, hu, hv = light_rect_frame(light)
+    frame = (o, r, u, f)
+    qo = to_light_frame(occluder_points, frame)
+    fp = np.ascontiguousarray(np.asarray(fit_points, dtype=np.float64).reshape(-1, 3))
+    light_size = 2.0 * max(hu, hv)
+    zo = float(qo[:, 2].max()) if len(qo) else -np.inf
+    _, zf = _fit_reduce(fp, o, r, u, f, hu, hv, np.inf) if len(fp) else (np.inf, -np.inf)
+    scene_depth = float(max(zo, zf))
+    if not scene_depth > 0:
+        raise SoftShadowsError("method 'occlusion-textures': the scene is entirely behind the light")
+    eps = 1e-4 * scene_depth
+    front_o = qo[qo[:, 2] > eps]
+    if cop_distance > 0:
+        d = float(cop_distance)
+    else:
+        dmax = np.inf
+        for pts in (np.ascontiguousarray(occluder_points, dtype=np.float64).reshape(-1, 3), fp):
+            if len(pts):
+                dmax = min(dmax, _fit_reduce(pts, o, r, u, f, hu, hv, eps)[0])
+        d = fit_cop_distance(dmax, scene_depth, light_size)
+    # window: the light's section (x/(z+d) at z=0), widened if needed to contain the occluders
+    l, rr, b, t = -hu / d, hu / d, -hv / d, hv / d
+    if len(front_o):
+        zz = front_o[:, 2] + d
+        xs, ys = front_o[:, 0] / zz, front_o[:, 1] / zz
+        if xs.min() < l or xs.max() > rr or ys.min() < b or ys.max() > t:
+            m = 1e-3
+            l, rr = min(l, xs.min() - m * (rr - l)), max(rr, xs.max() + m * (rr - l))
+            b, t = min(b, ys.min() - m * (t - b)), max(t, ys.max() + m * (t - b))
+    # slice planes over the occluders' depth range
+    if len(front_o):
+        z0, z1 = float(front_o[:, 2].min()), float(front_o[:, 2].max())
+    else:
+        z0, z1 = 0.5 * scene_depth, 0.5 * scene_depth
+    pad = max(1e-3 * scene_depth - (z1 - z0), 0.0) / 2 + 1e-6 * scene_depth
+    z0, z1 = max(z0 - pad, eps * 0.5), z1 + pad
+    z_planes = np.linspace(z0, z1, slices + 1)
+    view = View(o - d * f, r, u, f, (l, rr, b, t), d + z0, d + z1, size, size, False)
+    return SlicingSetup(view, frame, (hu, hv), d, z_planes, scene_depth)
+
+
+@njit(cache=True)
+def _mark_occlusion_textures(pixel, depth, d, z_planes, leak_fix, tex):
+    """Binary occlusion textures: texel of every fragment set in its slice (and in the next one
+    with the leak fix). Serial: a texel may be hit by many fragments."""
+    n = tex.shape[0]
+    hw = tex.shape[1] * tex.shape[2]
+    z0 = z_planes[0]
+    zn = z_planes[n]
+    thick = (zn - z0) / n
+    for i in range(pixel.shape[0]):
+        z = depth[i] - d
+        if z < z0 or z > zn:
+            continue
+        k = int((z - z0) / thick)
+        if k >= n:
+            k = n - 1
+        # uniform planes: guard float rounding against the stored planes
+        while k > 0 and z < z_planes[k]:
+            k -= 1
+        while k < n - 1 and z >= z_planes[k + 1]:
+            k += 1
+        p = pixel[i]
+        if p < 0 or p >= hw:
+            continue
+        row = p // tex.shape[2]
+        col = p - row * tex.shape[2]
+        tex[k, row, col] = 1
+        if leak_fix and k + 1 < n:
+            tex[k + 1, row, col] = 1
+
+
+def slice_scene(setup: SlicingSetup, vertices, faces, leak_fix: bool = False):
+    """One rasterization of the occluders from the COP; returns (textures uint8 (N,S,S), fragments).
+
+    Each texel of slice k is 1 when some surface inside the slice projects on it: everything in the
+    slice is projected onto its plane farthest from the light (the COP projection maps a texel of
+    one plane onto the same texel of every other plane). ``leak_fix`` also marks slice k+1 (Fig. 6)."""
+    v = setup.view
+    n = setup.slices
+    tex = np.zeros((n, v.height, v.width), np.uint8)
+    if len(faces) == 0:
+        return tex, 0
+    frags = rasterize_fragments(v, vertices, faces, cull="none")
+    _mark_occlusion_textures(np.ascontiguousarray(frags.pixel, dtype=np.int64),
+                             np.ascontiguousarray(frags.depth, dtype=np.float64), float(setup.d),
+                             setup.z_planes, bool(leak_fix), tex)
+    return tex, len(frags)
+
+
+def occupied_bounds(tex: np.ndarray) -> np.ndarray:
+    """(N, 4) float64 texel bounds (x0, x1, y0, y1) of the set texels of each texture (for culling)."""
+    out = np.zeros((tex.shape[0], 4))
+    for s in range(tex.shape[0]):
+        rows = np.flatnonzero(tex[s].any(axis=1))
+        cols = np.flatnonzero(tex[s].any(axis=0))
+        if len(rows):
+            out[s] = (cols[0], cols[-1] + 1, rows[0], rows[-1] + 1)
+        else:
+            out[s] = (1e30, -1e30, 1e30, -1e30)
+    return out
+
+
+# =====================================================================================
+# 2. Prefiltering (Sec. 3.2)
+# =====================================================================================
+@njit(cache=True, parallel=True)
+def _mip_level0(tex, pyr):
+    n, h, w = tex.shape
+    for s in prange(n):
+        for i in range(h):
+            for j in range(w):
+                pyr[s, i * w + j] = tex[s, i, j]
+
+
+@njit(cache=True, parallel=True)
+def _mip_reduce(pyr, src_off, src_h, src_w, dst_off, dst_h, dst_w):
+    n = pyr.shape[0]
+    for job in prange(n * dst_h):
+        s = job // dst_h
+        i = job - s * dst_h
+        for j in range(dst_w):
+            a = src_off + (2 * i) * src_w + 2 * j
+            pyr[s, dst_off + i * dst_w + j] = 0.25 * (pyr[s, a] + pyr[s, a + 1] + pyr[s, a + src_w] + pyr[s, a + src_w + 1])
+
+
+def prefilter_mipmap(tex: np.ndarray):
+    """GPU mipmap pyramid (dyadic 2x2 box downsampling) of every texture.
+
+    Returns (pyramid float32 (N, total), level offsets int64 (L+1,), level sizes int64 (L+1,))."""
+    n, h, w = tex.shape
+    sizes = [w]
+    while sizes[-1] > 1:
+        sizes.append(sizes[-1] // 2)
+    offs = np.cumsum([0] + [s * s for s in sizes[:-1]]).astype(np.int64)
+    total = int(offs[-1] + sizes[-1] ** 2)
+    pyr = np.empty((n, total), np.float32)
+    _mip_level0(tex, pyr)
+    for lv in range(1, len(sizes)):
+        _mip_reduce(pyr, offs[lv - 1], sizes[lv - 1], sizes[lv - 1], offs[lv], sizes[lv], sizes[lv])
+    return pyr, offs, np.asarray(sizes, np.int64)
+
+
+@njit(cache=True, parallel=True)
+def _nbuffer_levels(tex, nb):
+    """nb[s, l, i, j] = mean of tex[s] over rows [i, i+2^l) x cols [j, j+2^l) (zero outside):
+    level l from four lookups in level l-1 at offsets 0 and 2^(l-1) (Décoret's N-Buffers)."""
+    n, nl, h, w = nb.shape
+    for job in prange(n * h):
+        s = job // h
+        i = job - s * h
+        for j in range(w):
+            nb[s, 0, i, j] = tex[s, i, j]
+    for lv in range(1, nl):
+        o = 1 << (lv - 1)
+        jm = max(w - o, 0)
+        for job in prange(n * h):
+            s = job // h
+            i = job - s * h
+            a = nb[s, lv - 1, i]
+            dst = nb[s, lv, i]
+            if i + o < h:
+                c = nb[s, lv - 1, i + o]
+                for j in range(jm):  # branch-free body (vectorizes)
+                    dst[j] = 0.25 * (a[j] + a[j + o] + c[j] + c[j + o])
+                for j in range(jm, w):
+                    dst[j] = 0.25 * (a[j] + c[j])
+            else:
+                for j in range(jm):
+                    dst[j] = 0.25 * (a[j] + a[j + o])
+                for j in range(jm, w):
+                    dst[j] = 0.25 * a[j]
+
+
+def prefilter_nbuffers(tex: np.ndarray, levels: int | None = None) -> np.ndarray:
+    """N-Buffers: float32 (N, L+1, S, S); level l holds the 2^l x 2^l box response at each texel.
+    ``levels`` (L) defaults to log2(S), the paper's full set."""
+    n, h, w = tex.shape
+    full = int(round(math.log2(max(h, w))))
+    nl = full if levels is None else int(min(max(levels, 0), full))
+    nb = np.empty((n, nl + 1, h, w), np.float32)
+    _nbuffer_levels(tex, nb)
+    return nb
+
+
+@njit(cache=True, parallel=True)
+def _sat_build(tex, sat):
+    n, h, w = tex.shape
+    for s in prange(n):
+        for j in range(w + 1):
+            sat[s, 0, j] = 0
+        for i in range(h):
+            row = 0
+            sat[s, i + 1, 0] = 0
+            for j in range(w):
+                row += tex[s, i, j]
+                sat[s, i + 1, j + 1] = sat[s, i, j + 1] + row
+
+
+def prefilter_sat(tex: np.ndarray) -> np.ndarray:
+    """Summed-area table int32 (N, S+1, S+1): sat[s, i, j] = sum of tex[s, :i, :j] (exact)."""
+    n, h, w = tex.shape
+    if h * w >= 2**31:
+        raise SoftShadowsError("method 'occlusion-textures': texture too large for a 32-bit summed-area table")
+    sat = np.empty((n, h + 1, w + 1), np.int32)
+    _sat_build(tex, sat)
+    return sat
+
+
+# =====================================================================================
+# 3. Kernel size (Eq. 4) and filtered lookups
+# =====================================================================================
+@njit(cache=True)
+def kernel_rect(px, py, pz, zs, sp):
+    """Eq. 4: the pyramid (P, light) cut by the slice plane z = zs is the rectangle centred at
+    P * zs / pz (the light centre being the origin) of half sizes hu |pz - zs| / pz and
+    hv |pz - zs| / pz (= d(P, slice) / d(P, light) x size / 2). Returned in the slice texture's
+    continuous texel coordinates (x0, x1, y0, y1): the plane is parallel to the COP image plane at
+    depth d + zs, so the map is a scale."""
+    hu = sp[12]
+    hv = sp[13]
+    d = sp[14]
+    l = sp[15]
+    r = sp[16]
+    b = sp[17]
+    t = sp[18]
+    W = sp[19]
+    H = sp[20]
+    a = abs(pz - zs) / pz
+    cx = px * zs / pz
+    cy = py * zs / pz
+    ax = hu * a
+    ay = hv * a
+    D = d + zs
+    sx = W / ((r - l) * D)
+    sy = H / ((t - b) * D)
+    x0 = (cx - ax) * sx - l * W / (r - l)
+    x1 = (cx + ax) * sx - l * W / (r - l)
+    y0 = t * H / (t - b) - (cy + ay) * sy
+    y1 = t * H / (t - b) - (cy - ay) * sy
+    return x0, x1, y0, y1
+
+
+@njit(cache=True, inline="always")
+def _mip_fetch(pyr, s, off, size, i, j):
+    if i < 0 or j < 0 or i >= size or j >= size:
+        return 0.0  # CLAMP_TO_BORDER, border 0 (nothing outside the frustum)
+    return pyr[s, off + i * size + j]
+
+
+@njit(cache=True)
+def _mip_bilinear(pyr, s, off, size, scale, x, y):
+    """Bilinear sample of one mip level at level-0 texel coordinates (x, y)."""
+    u = x / scale - 0.5
+    v = y / scale - 0.5
+    j0 = int(math.floor(u))
+    i0 = int(math.floor(v))
+    fu = u - j0
+    fv = v - i0
+    a = _mip_fetch(pyr, s, off, size, i0, j0)
+    b = _mip_fetch(pyr, s, off, size, i0, j0 + 1)
+    c = _mip_fetch(pyr, s, off, size, i0 + 1, j0)
+    e = _mip_fetch(pyr, s, off, size, i0 + 1, j0 + 1)
+    return (1 - fv) * ((1 - fu) * a + fu * b) + fv * ((1 - fu) * c + fu * e)
+
+
+@njit(cache=True)
+def _mip_trilinear(pyr, s, offs, sizes, lod, x, y):
+    nl = offs.shape[0]
+    if lod <= 0.0:
+        return _mip_bilinear(pyr, s, offs[0], sizes[0], 1.0, x, y)
+    if lod >= nl - 1:
+        return _mip_bilinear(pyr, s, offs[nl - 1], sizes[nl - 1], float(1 << (nl - 1)), x, y)
+    l0 = int(math.floor(lod))
+    f = lod - l0
+    a = _mip_bilinear(pyr, s, offs[l0], sizes[l0], float(1 << l0), x, y)
+    b = _mip_bilinear(pyr, s, offs[l0 + 1], sizes[l0 + 1], float(1 << (l0 + 1)), x, y)
+    return (1 - f) * a + f * b
+
+
+@njit(cache=True)
+def lookup_mipmap(pyr, s, offs, sizes, max_aniso, x0, x1, y0, y1):
+    """Rectangular kernel through anisotropic mipmap filtering (EXT_texture_filter_anisotropic):
+    Pmax, Pmin = footprint sides; N = min(ceil(Pmax/Pmin), max_aniso) trilinear probes along the
+    major axis at i/(N+1) - 1/2 of its length, at LOD log2(Pmax/N)."""
+    wx = x1 - x0
+    wy = y1 - y0
+    cx = 0.5 * (x0 + x1)
+    cy = 0.5 * (y0 + y1)
+    pmax = max(wx, wy)
+    pmin = min(wx, wy)
+    if pmin > 1e-12:
+        n = int(math.ceil(pmax / pmin - 1e-9))
+    else:
+        n = max_aniso
+    n = max(1, min(n, max_aniso))
+    lod = math.log2(max(pmax / n, 1e-30))
+    acc = 0.0
+    for i in range(1, n + 1):
+        o = i / (n + 1.0) - 0.5
+        if wx >= wy:
+            acc += _mip_trilinear(pyr, s, offs, sizes, lod, cx + o * wx, cy)
+        else:
+            acc += _mip_trilinear(pyr, s, offs, sizes, lod, cx, cy + o * wy)
+    return acc / n
+
+
+@njit(cache=True)
+def _mip_support(x0, x1, y0, y1, max_aniso, nl):
+    """How far (level-0 texels) beyond the rectangle :func:`lookup_mipmap` reads: its probes lie
+    inside the rectangle and each bilinear tap reaches 1.5 texels of the coarser level used."""
+    wx = x1 - x0
+    wy = y1 - y0
+    pmax = max(wx, wy)
+    pmin = min(wx, wy)
+    n = int(math.ceil(pmax / pmin - 1e-9)) if pmin > 1e-12 else max_aniso
+    n = max(1, min(n, max_aniso))
+    lod = math.log2(max(pmax / n, 1e-30))
+    if lod <= 0.0:
+        return 1.5
+    lv = min(int(math.floor(lod)) + 1, nl - 1)
+    return 1.5 * (1 << lv) + 1e-6
+
+
+@njit(cache=True)
+def _nb_box(nb, s, lv, sx, sy):
+    """Bilinear lookup of N-Buffer level lv at continuous box origin (sx, sy) (texel (i, j) holds
+    the box whose corner is (j, i)); clamp-to-edge."""
+    h = nb.shape[2]
+    w = nb.shape[3]
+    j0 = int(math.floor(sx))
+    i0 = int(math.floor(sy))
+    fu = sx - j0
+    fv = sy - i0
+    ja = min(max(j0, 0), w - 1)
+    jb = min(max(j0 + 1, 0), w - 1)
+    ia = min(max(i0, 0), h - 1)
+    ib = min(max(i0 + 1, 0), h - 1)
+    return ((1 - fv) * ((1 - fu) * nb[s, lv, ia, ja] + fu * nb[s, lv, ia, jb])
+            + fv * ((1 - fu) * nb[s, lv, ib, ja] + fu * nb[s, lv, ib, jb]))
+
+
+@njit(cache=True)
+def _nb_square(nb, s, cx, cy, size):
+    """Box response of a size x size square centred at (cx, cy): the two levels bracketing the
+    size, interpolated linearly in size."""
+    lmax = nb.shape[1] - 1
+    if size <= 1.0:
+        return _nb_box(nb, s, 0, cx - 0.5, cy - 0.5)
+    lf = math.log2(size)
+    l0 = int(math.floor(lf))
+    if l0 >= lmax:
+        h = 0.5 * (1 << lmax)
+        return _nb_box(nb, s, lmax, cx - h, cy - h)
+    s0 = float(1 << l0)
+    t = size / s0 - 1.0
+    a = _nb_box(nb, s, l0, cx - 0.5 * s0, cy - 0.5 * s0)
+    b = _nb_box(nb, s, l0 + 1, cx - s0, cy - s0)
+    return (1 - t) * a + t * b
+
+
+@njit(cache=True)
+def lookup_nbuffers(nb, s, max_probes, x0, x1, y0, y1):
+    """Rectangular kernel from square N-Buffer lookups: ceil(long/short) squares of the short side
+    spread along the long side (one for a square light)."""
+    wx = x1 - x0
+    wy = y1 - y0
+    side = min(wx, wy)
+    big = max(wx, wy)
+    if side > 1e-12:
+        n = int(math.ceil(big / side - 1e-9))
+    else:
+        n = max_probes
+    n = max(1, min(n, max_probes))
+    if n == 1:
+        return _nb_square(nb, s, 0.5 * (x0 + x1), 0.5 * (y0 + y1), side)
+    acc = 0.0
+    for i in range(n):
+        o = (big - side) * i / (n - 1.0) + 0.5 * side
+        if wx >= wy:
+            acc += _nb_square(nb, s, x0 + o, 0.5 * (y0 + y1), side)
+        else:
+            acc += _nb_square(nb, s, 0.5 * (x0 + x1), y0 + o, side)
+    return acc / n
+
+
+@njit(cache=True)
+def _sat_at(sat, s, x, y):
+    """The SAT as a continuous function: bilinear between integer corners (exact integral of the
+    piecewise-constant texture), clamped (zero occlusion outside the texture)."""
+    h = sat.shape[1] - 1
+    w = sat.shape[2] - 1
+    x = min(max(x, 0.0), float(w))
+    y = min(max(y, 0.0), float(h))
+    j0 = min(int(math.floor(x)), w - 1)
+    i0 = min(int(math.floor(y)), h - 1)
+    fu = x - j0
+    fv = y - i0
+    a = float(sat[s, i0, j0])
+    b = float(sat[s, i0, j0 + 1])
+    c = float(sat[s, i0 + 1, j0])
+    e = float(sat[s, i0 + 1, j0 + 1])
+    return (1 - fv) * ((1 - fu) * a + fu * b) + fv * ((1 - fu) * c + fu * e)
+
+
+@njit(cache=True)
+def lookup_sat(sat, s, x0, x1, y0, y1):
+    """Exact box filter: (S(x1,y1) - S(x0,y1) - S(x1,y0) + S(x0,y0)) / area."""
+    area = (x1 - x0) * (y1 - y0)
+    if area < 1e-8:
+        h = sat.shape[1] - 1
+        w = sat.shape[2] - 1
+        j = int(math.floor(0.5 * (x0 + x1)))
+        i = int(math.floor(0.5 * (y0 + y1)))
+        if i < 0 or j < 0 or i >= h or j >= w:
+            return 0.0
+        return float(sat[s, i + 1, j + 1] - sat[s, i, j + 1] - sat[s, i + 1, j] + sat[s, i, j])
+    v = (_sat_at(sat, s, x1, y1) - _sat_at(sat, s, x0, y1) - _sat_at(sat, s, x1, y0)
+         + _sat_at(sat, s, x0, y0)) / area
+    return min(max(v, 0.0), 1.0)
+
+
+# =====================================================================================
+# 4. Combination (Sec. 3.3, Eq. 5) and 5. self-shadowing weight (Sec. 3.4)
+# =====================================================================================
+@njit(cache=True, inline="always")
+def combine_occlusion(acc, occ, mode):
+    """Accumulate one slice's (weighted) occlusion ``occ``: product -> acc = prod (1 - I_k)
+    (Eq. 5, acc starts at 1); max -> acc = max I_k; sum -> acc = sum I_k (both start at 0)."""
+    if mode == 0:
+        return acc * (1.0 - occ)
+    elif mode == 1:
+        return max(acc, occ)
+    return acc + occ
+
+
+@njit(cache=True, inline="always")
+def finish_visibility(acc, mode):
+    if mode == 0:
+        return acc
+    return min(max(1.0 - acc, 0.0), 1.0)
+
+
+@njit(cache=True, inline="always")
+def slice_weight(pz, z_top, z_low, thick, mode):
+    """Weight of slice [z_top, z_low) (texture on z_low) for a point at depth pz.
+
+    fade (paper): clamp((pz - z_low) / thickness, 0, 1): the slice containing P (pz < z_low) is not
+    used; the one just above fades in with P's distance to its lower plane. skip: 1 if the slice is
+    entirely above P. include: 1 if the slice starts above P (the containing slice too, Fig. 7)."""
+    if mode == 0:
+        w = (pz - z_low) / thick
+        return min(max(w, 0.0), 1.0)
+    elif mode == 1:
+        return 1.0 if pz >= z_low else 0.0
+    return 1.0 if pz > z_top else 0.0
+
+
+# =====================================================================================
+# 6. Eye pass (Sec. 3.5): per point, all slices between it and the light
+# =====================================================================================
+@njit(cache=True, parallel=True)
+def eye_pass(pts, sp, z_planes, slot, bbox, filt, combine, self_mode, max_aniso,
+             pyr, offs, sizes, nb, sat, out):
+    """V for every point ``pts`` (K,3) world. ``slot[k]`` is the index of slice k in the filtered
+    arrays, -1 for an empty slice (skipped: its occlusion is 0). ``bbox[slot]`` = (x0, x1, y0, y1)
+    texel bounds of the slice's occupied texels: a kernel whose filter support (the rectangle,
+    widened by what the N-Buffer boxes or the mipmap probes read beyond it) misses them has
+    occlusion 0 and is skipped, so the result is unchanged."""
+    n = z_planes.shape[0] - 1
+    thick = (z_planes[n] - z_planes[0]) / n
+    for i in prange(pts.shape[0]):
+        qx = pts[i, 0] - sp[0]
+        qy = pts[i, 1] - sp[1]
+        qz = pts[i, 2] - sp[2]
+        px = qx * sp[3] + qy * sp[4] + qz * sp[5]
+        py = qx * sp[6] + qy * sp[7] + qz * sp[8]
+        pz = qx * sp[9] + qy * sp[10] + qz * sp[11]
+        if not (pz > 0.0):
+            out[i] = 1.0  # at or behind the light plane: nothing lies between P and the light
+            continue
+        acc = 1.0 if combine == 0 else 0.0
+        for k in range(n):
+            if z_planes[k] >= pz:
+                break  # this slice and all later ones are below P
+            w = slice_weight(pz, z_planes[k], z_planes[k + 1], thick, self_mode)
+            s = slot[k]
+            if w <= 0.0 or s < 0:
+                continue
+            x0, x1, y0, y1 = kernel_rect(px, py, pz, z_planes[k + 1], sp)
+            if filt == 0:  # probes inside the rectangle read +-1.5 texels of their upper level
+                m = _mip_support(x0, x1, y0, y1, max_aniso, offs.shape[0])
+            elif filt == 1:  # the larger N-Buffer box is at most twice the short side, +1 bilinear
+                m = 0.5 * min(x1 - x0, y1 - y0) + 1.5
+            else:  # exact box
+                m = 1.0
+            if x1 + m < bbox[s, 0] or x0 - m > bbox[s, 1] or y1 + m < bbox[s, 2] or y0 - m > bbox[s, 3]:
+                continue
+            if filt == 0:
+                o = lookup_mipmap(pyr, s, offs, sizes, max_aniso, x0, x1, y0, y1)
+            elif filt == 1:
+                o = lookup_nbuffers(nb, s, max_aniso, x0, x1, y0, y1)
+            else:
+                o = lookup_sat(sat, s, x0, x1, y0, y1)
+            o = min(max(o, 0.0), 1.0)
+            acc = combine_occlusion(acc, w * o, combine)
+            if combine == 0 and acc <= 0.0:
+                break  # product already 0
+        out[i] = finish_visibility(acc, combine)
+
+
+def nbuffer_levels_needed(setup: SlicingSetup, pz_max: float) -> int:
+    """Highest N-Buffer level any lookup can use: floor(log2(widest kernel in texels)) + 1, the
+    widest kernel being that of the farthest eye point on each slice plane (Eq. 4)."""
+    zs = setup.z_planes[1:]
+    hu, hv = setup.half
+    l, r, b, t = setup.view.window
+    S = setup.view.width
+    a = np.abs(pz_max - zs) / max(pz_max, 1e-12)
+    a = np.maximum(a, (zs - setup.z_planes[:-1]) / np.maximum(setup.z_planes[:-1], 1e-12))  # "include" mode
+    D = setup.d + zs
+    wx = 2 * hu * a / ((r - l) * D / S)
+    wy = 2 * hv * a / ((t - b) * D / S)
+    wmax = float(np.max(np.minimum(wx, wy)))  # N-Buffer squares use the short side
+    full = int(round(math.log2(S)))
+    if wmax <= 1.0:
+        return min(1, full)
+    return int(min(full, math.floor(math.log2(wmax)) + 1))
+
+
+def prefilter(tex_used: np.ndarray, filt: str, setup: SlicingSetup | None = None, pz_max: float | None = None):
+    """Run the selected prefilter on the non-empty textures; returns the lookup arrays and stats."""
+    e32 = np.zeros((1, 1), np.float32)
+    pyr, offs, sizes = e32, np.zeros(1, np.int64), np.ones(1, np.int64)
+    nb = np.zeros((1, 1, 1, 1), np.float32)
+    sat = np.zeros((1, 2, 2), np.int32)
+    st = {}
+    if filt == "mipmap":
+        pyr, offs, sizes = prefilter_mipmap(tex_used)
+        st["mip_levels"] = int(len(sizes))
+    elif filt == "nbuffers":
+        lv = None if setup is None or pz_max is None else nbuffer_levels_needed(setup, pz_max)
+        nb = prefilter_nbuffers(tex_used, lv)
+        st["nbuffer_levels"] = int(nb.shape[1] - 1)
+    else:
+        sat = prefilter_sat(tex_used)
+    return (pyr, offs, sizes, nb, sat), st
+
+
+def occlusion_visibility(light, flat, points, slices=16, texture_size=512, filter="nbuffers",
+                         combine="product", cop_distance=0.0, leak_fix=False, anisotropy=16,
+                         self_shadow="fade", timer=None, scene_bounds=None):
+    """The whole method on arbitrary points: V (K,) float64 and stats. ``flat`` is the scene's
+    FlatGeometry (occluders = faces of role both|occluder); ``points`` (K,3) world points to shade
+    (they also enter the frustum fit). ``timer`` (optional) gets the phases slicing / prefilter /
+    eye_pass."""
+    from contextlib import contextmanager, nullcontext
+
+    own: dict = {}
+
+    @contextmanager
+    def phase(name):
+        t = time.perf_counter()
+        with timer.phase(name) if timer is not None else nullcontext():
+            yield
+        own[name] = time.perf_counter() - t
+
+    if filter not in FILTERS or combine not in COMBINES or self_shadow not in SELF_SHADOW:
+        raise SoftShadowsError(f"method 'occlusion-textures': bad filter/combine/self_shadow "
+                               f"({filter!r}, {combine!r}, {self_shadow!r})")
+    if int(texture_size) not in TEXTURE_SIZES:
+        raise SoftShadowsError(f"method 'occlusion-textures': parameter 'texture_size' must be one of "
+                               f"{', '.join(map(str, TEXTURE_SIZES))}, got {texture_size!r}")
+    stats: dict = {}
+    if light.shape == "sphere":
+        from ..scene.types import sphere_to_rect
+
+        lo, hi = scene_bounds if scene_bounds is not None else (flat.vertices.min(0), flat.vertices.max(0))
+        light = sphere_to_rect(light, direction=(np.asarray(lo) + np.asarray(hi)) / 2 - light.center)
+        stats["light_approximation"] = "sphere as equal-area square"
+    pos = np.ascontiguousarray(np.asarray(points, dtype=np.float64).reshape(-1, 3))
+
+    # 1. slicing
+    with phase("slicing"):
+        occ_faces = np.ascontiguousarray(flat.faces[flat.occluder])
+        occ_pts = flat.vertices[np.unique(occ_faces)] if len(occ_faces) else np.zeros((0, 3))
+        setup = fit_slicing_view(light, occ_pts, pos, int(texture_size), int(slices), float(cop_distance))
+        tex, nfrag = slice_scene(setup, flat.vertices, occ_faces, bool(leak_fix))
+        nonempty = tex.reshape(tex.shape[0], -1).any(axis=1)
+        slot = np.full(tex.shape[0], -1, np.int64)
+        slot[nonempty] = np.arange(int(nonempty.sum()))
+        tex_used = np.ascontiguousarray(tex[nonempty])
+        bbox = occupied_bounds(tex_used)
+    # 2. prefiltering
+    with phase("prefilter"):
+        pz_max = max(float(setup.z_planes[-1]), setup.depth)  # bounds the N-Buffer levels needed
+        arrays, pst = prefilter(tex_used, filter, setup, pz_max)
+    # 3-6. eye pass
+    with phase("eye_pass"):
+        vis = np.ones(len(pos), np.float64)
+        if len(pos) and len(tex_used):
+            pyr, offs, sizes, nb, sat = arrays
+            eye_pass(pos, setup.params(), setup.z_planes, slot, bbox, _FILTER_ID[filter], _COMBINE_ID[combine],
+                     _SELF_ID[self_shadow], int(anisotropy), pyr, offs, sizes, nb, sat, vis)
+
+    l, r, b, t = setup.view.window
+    stats.update({
+        "slices": int(slices),
+        "slices_used": int(nonempty.sum()),
+        "fragments": int(nfrag),
+        "cop_distance": float(setup.d),
+        "fov_deg": float(np.degrees(2 * np.arctan(max(r - l, t - b) / 2))),
+        "texel_size": [float(setup.view.pixel_size_at(setup.d + setup.z_planes[1])),
+                       float(setup.view.pixel_size_at(setup.d + setup.z_planes[-1]))],
+        "slice_range": [float(setup.z_planes[0]), float(setup.z_planes[-1])],
+        "slicing_s": own["slicing"],
+        "prefilter_s": own["prefilter"],
+        f"prefilter_s_{filter}": own["prefilter"],
+        "eye_pass_s": own["eye_pass"],
+    })
+    stats.update(pst)
+    return vis, stats
+
+
+@register
+class OcclusionTextures(Method):
+    name = "occlusion-textures"
+    light_shapes = ("rect", "sphere")
+    summary = ("Eisemann & Décoret 2006: scene sliced into binary occlusion textures, prefiltered "
+               "(mipmap / N-Buffers / SAT), box-filtered per slice (Eq. 4) and combined as a product (Eq. 5)")
+    paper = "eisemann2006-occlusion-textures"
+    params = (
+        Param("slices", 16, "number of slices parallel to the light (paper: 4-16)", min=1, max=64),
+        Param("texture_size", 512, "occlusion texture resolution (square, power of two)", choices=TEXTURE_SIZES),
+        Param("filter", "nbuffers", "prefilter: mipmap (anisotropic), nbuffers, sat (summed-area table)",
+              choices=FILTERS),
+        Param("combine", "product", "combination of the slices: product (Eq. 5), max, sum (clamped)",
+              choices=COMBINES),
+        Param("cop_distance", 0.0, "distance d of the centre of projection behind the light; 0 = automatic "
+              "(largest d whose frustum fitted to the light contains the scene)", min=0.0),
+        Param("leak_fix", False, "light-leak fix for thin occluders: also mark the next slice (Fig. 6)"),
+        Param("anisotropy", 16, "maximum anisotropy (mipmap probes; N-Buffer squares per rectangular kernel)",
+              min=1, max=64),
+        Param("self_shadow", "fade", "slice containing P: fade (paper), skip (hard skip, seams), "
+              "include (self-shadowing, Fig. 7)", choices=SELF_SHADOW),
+    )
+
+    def run(self, ctx, slices=16, texture_size=512, filter="nbuffers", combine="product", cop_distance=0.0,
+            leak_fix=False, anisotropy=16, self_shadow="fade") -> MethodOutput:
+        pos, _nrm, idx = ctx.points()
+        H, W = ctx.eye.depth.shape
+        vis, stats = occlusion_visibility(ctx.light, ctx.flat, pos, slices, texture_size, filter, combine,
+                                          cop_distance, leak_fix, anisotropy, self_shadow, timer=ctx.timer,
+                                          scene_bounds=ctx.scene.bounds())
+        v = np.ones(H * W, np.float32)
+        v[idx] = vis.astype(np.float32)
+        return MethodOutput(visibility=v.reshape(H, W), stats=stats)
