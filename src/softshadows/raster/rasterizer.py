@@ -36,6 +36,7 @@ from numba import njit, prange
 
 from .gbuffer import Fragments, GBuffer
 from .kernels import view_coords, view_coords_to_screen
+from .programs import run_program
 
 TILE = 16  #: tile size in pixels (square)
 SUBPIXEL = 4096.0  #: screen coordinates are snapped to 1/SUBPIXEL px before coverage
@@ -46,7 +47,7 @@ _JIT = dict(cache=True, fastmath=False, error_model="numpy")
 _CULL = {"none": 0, "back": 1, "front": 2}
 
 # modes of the tile kernel
-_M_DEPTH, _M_GBUF, _M_FCOUNT, _M_FFILL = 0, 1, 2, 3
+_M_DEPTH, _M_GBUF, _M_FCOUNT, _M_FFILL, _M_MINBLEND = 0, 1, 2, 3, 4
 
 
 # ----------------------------------------------------------------------------------------------
@@ -336,8 +337,11 @@ def _bary(PL, t, xw, yw, z, ortho):
 @njit(parallel=True, **_JIT)
 def _raster_tiles(mode, vp, near, T, ntx, nty, bstart, bins, CB, CE, CZ, PL, NW, scratch,
                   depth_out, tri_out, pos_out, nrm_out, bary_out, mask_out,
-                  fcount, foff, fpix, ftri, fbary, fdepth):
-    """mode 0: depth + tri; 1: full G-buffer; 2: count fragments per tile; 3: write fragments."""
+                  fcount, foff, fpix, ftri, fbary, fdepth,
+                  program, pparams, cattr, img, blend, bstats, split):
+    """mode 0: depth + tri; 1: full G-buffer; 2: count fragments per tile; 3: write fragments;
+    4: run a fragment program per fragment and MIN-blend its value into ``blend`` (bstats[tile] =
+    fragments and kept fragments for triangles below / from ``split``)."""
     W = int(vp[18])
     H = int(vp[19])
     ortho = vp[20] != 0.0
@@ -364,6 +368,10 @@ def _raster_tiles(mode, vp, near, T, ntx, nty, bstart, bins, CB, CE, CZ, PL, NW,
         w = 0
         if mode == 3:
             w = foff[tile]
+        elif mode == 4:
+            for i in range(y0, y1 + 1):
+                for j in range(x0, x1 + 1):
+                    zb[i - y0, j - x0] = blend[i, j]
         for bi in range(bstart[tile], bstart[tile + 1]):
             ct = bins[bi]
             t = ct >> 1
@@ -479,6 +487,18 @@ def _raster_tiles(mode, vp, near, T, ntx, nty, bstart, bins, CB, CE, CZ, PL, NW,
                             tri_out[i, j] = t
                     elif mode == 2:
                         nfrag += 1
+                    elif mode == 4:
+                        b1, b2 = _bary(PL, t, xw, yw, z, ortho)
+                        a = (1.0 - b1 - b2) * cattr[t, 0] + b1 * cattr[t, 1] + b2 * cattr[t, 2]
+                        val = run_program(program, pparams, a, img[i, j], z)
+                        side = 0 if t < split else 1
+                        bstats[tile, side] += 1
+                        if val == val:  # not discarded (NaN)
+                            bstats[tile, 2 + side] += 1
+                            li = i - y0
+                            lj = j - x0
+                            if val < zb[li, lj]:
+                                zb[li, lj] = val
                     else:
                         b1, b2 = _bary(PL, t, xw, yw, z, ortho)
                         fpix[w] = i * W + j
@@ -523,6 +543,10 @@ def _raster_tiles(mode, vp, near, T, ntx, nty, bstart, bins, CB, CE, CZ, PL, NW,
                     bary_out[i, j, 1] = b2
         elif mode == 2:
             fcount[tile] = nfrag
+        elif mode == 4:
+            for i in range(y0, y1 + 1):
+                for j in range(x0, x1 + 1):
+                    blend[i, j] = zb[i - y0, j - x0]
 
 
 # ----------------------------------------------------------------------------------------------
@@ -623,8 +647,14 @@ _E3F = np.empty((0, 0, 3), dtype=np.float32)
 _EFB = np.empty((0, 2), dtype=np.float32)
 
 
+_EP = np.empty(0, dtype=np.float64)
+_ECA = np.empty((0, 3), dtype=np.float64)
+_EBS = np.empty((0, 4), dtype=np.int64)
+
+
 def _run_tiles(mode, vp, fe, depth=_E2F, tri=_E2I, pos=_E3F, nrm=_E3F, bary=_E3F, mask=_E2B,
-               fcount=_E1, foff=_E1, fpix=_E1, ftri=_E1I, fbary=_EFB, fdepth=_E1F):
+               fcount=_E1, foff=_E1, fpix=_E1, ftri=_E1I, fbary=_EFB, fdepth=_E1F,
+               program=0, pparams=_EP, cattr=_ECA, img=_E2F, blend=_E2F, bstats=_EBS, split=0):
     T, ntx, nty, bstart, bins, CB, CE, CZ, PL, NW, near = fe
     nthreads = numba.config.NUMBA_NUM_THREADS
     scratch = np.empty((nthreads, T, T), dtype=np.float64)
@@ -632,7 +662,8 @@ def _run_tiles(mode, vp, fe, depth=_E2F, tri=_E2I, pos=_E3F, nrm=_E3F, bary=_E3F
     old = numba.set_parallel_chunksize(max(1, ntiles // (8 * numba.get_num_threads())))
     try:
         _raster_tiles(mode, vp, near, T, ntx, nty, bstart, bins, CB, CE, CZ, PL, NW, scratch,
-                      depth, tri, pos, nrm, bary, mask, fcount, foff, fpix, ftri, fbary, fdepth)
+                      depth, tri, pos, nrm, bary, mask, fcount, foff, fpix, ftri, fbary, fdepth,
+                      program, pparams, cattr, img, blend, bstats, split)
     finally:
         numba.set_parallel_chunksize(old)
 
@@ -691,3 +722,32 @@ def rasterize_fragments(view, vertices, faces, cull: str = "none") -> Fragments:
     _run_tiles(_M_FFILL, vp, fe, fcount=fcount, foff=foff, fpix=fpix, ftri=ftri, fbary=fbary,
                fdepth=fdepth)
     return Fragments(pixel=fpix, tri=ftri, bary=fbary, depth=fdepth, width=W, height=H)
+
+
+def rasterize_min_blend(view, vertices, faces, program: int, corner_attr, image, params, out,
+                        cull: str = "none", split: int = 0) -> dict:
+    """Run a fragment program on every fragment and MIN-blend its value into ``out`` (H,W) float32
+    in place: the equivalent of a GPU fragment program with MIN blending (or of writing the value
+    as depth with a LESS depth test). No depth test on the geometry itself.
+
+    program: a code from :mod:`softshadows.raster.programs`; corner_attr (F,3): an attribute per
+    triangle corner, interpolated perspective-correctly; image (H,W) float32: read at each
+    fragment's pixel; params: float64 uniforms. Fragments for which the program returns NaN are
+    discarded. Returns counts of fragments and kept fragments for triangles with index below
+    ``split`` and from ``split`` on (e.g. two kinds of primitives drawn in one call).
+    """
+    vp, W, H, verts, fcs, code, near = _prepare(view, vertices, faces, cull)
+    if out.shape != (H, W) or out.dtype != np.float32:
+        raise ValueError(f"out must be a float32 array of shape {(H, W)}")
+    ca = np.ascontiguousarray(corner_attr, dtype=np.float64)
+    if ca.shape != (len(faces), 3):
+        raise ValueError(f"corner_attr must have shape {(len(faces), 3)}, got {ca.shape}")
+    im = np.ascontiguousarray(image, dtype=np.float32)
+    if im.shape != (H, W):
+        raise ValueError(f"image must have shape {(H, W)}, got {im.shape}")
+    fe = _front_end(vp, W, H, verts, fcs, code, near)
+    bstats = np.zeros((fe[1] * fe[2], 4), dtype=np.int64)
+    _run_tiles(_M_MINBLEND, vp, fe, program=int(program), pparams=np.asarray(params, dtype=np.float64),
+               cattr=ca, img=im, blend=out, bstats=bstats, split=int(split))
+    tot = bstats.sum(axis=0)
+    return {"fragments_a": int(tot[0]), "fragments_b": int(tot[1]), "kept_a": int(tot[2]), "kept_b": int(tot[3])}

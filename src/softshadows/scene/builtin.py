@@ -149,16 +149,11 @@ def square_visibility(points) -> np.ndarray:
     """Closed-form V of the ``square`` scene's rect light at ``points`` (K,3) below the occluder
     (y < ``SQUARE_OCCLUDER_Y``): 1 - (area of the light covered by the occluder's projection
     through p onto the light's plane) / (light area). The overlap is separable in x and z."""
-    p = np.asarray(points, float).reshape(-1, 3)
-    h = SQUARE_LIGHT_Y - p[:, 1]
-    k = h / (SQUARE_OCCLUDER_Y - p[:, 1])  # projection scale from p onto the light's plane
+    from ..analytic import rect_occluder_visibility
+
     ho, hl = SQUARE_OCCLUDER_SIDE / 2, SQUARE_LIGHT_SIDE / 2
-    cover = np.ones(len(p))
-    for axis in (0, 2):
-        a = p[:, axis] + (-ho - p[:, axis]) * k
-        b = p[:, axis] + (ho - p[:, axis]) * k
-        cover *= np.clip(np.minimum(b, hl) - np.maximum(a, -hl), 0.0, None)
-    return 1.0 - cover / (SQUARE_LIGHT_SIDE**2)
+    return rect_occluder_visibility(points, (0.0, SQUARE_OCCLUDER_Y, 0.0), (ho, ho),
+                                    (0.0, SQUARE_LIGHT_Y, 0.0), (hl, hl))
 
 
 def spheres(light: str = "rect", object_role: str = "occluder") -> Scene:

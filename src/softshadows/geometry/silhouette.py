@@ -1,0 +1,288 @@
+"""Silhouette edges and vertices of triangle meshes as seen from a point (e.g. a light's center).
+
+Definition. A triangle ``(a, b, c)`` *faces* a point ``p`` when ``((b - a) x (c - a)) . (p - a) > 0``
+(edge-on counts as not facing). An edge, after welding vertices that share a position, is a
+*silhouette edge* seen from ``p`` when
+
+* it is a boundary edge (exactly one adjacent triangle: open meshes such as a single quad), or
+* its adjacent triangles include both facing and non-facing ones (the contour fold of a closed
+  mesh; for a non-manifold edge with three or more triangles, any mix).
+
+Because boundary edges count whatever their facing, the result does not depend on winding or on
+one-sided geometry. Silhouette *vertices* are the endpoints of silhouette edges; their *degree* is
+the number of silhouette edges meeting there. Degrees other than 2 are normal (Wyman & Hansen 2003
+found vertices with 3-4 silhouette edges common and up to 8 in pathological cases), so consumers
+must not assume closed loops.
+
+Two paths return identical results (same facing arithmetic, same canonical edge order):
+
+* :func:`silhouette_brute` — no precomputation: every call welds the vertices, lists the three
+  edges of every triangle, matches them by sorting and tests every edge (what a per-frame
+  "brute force" extraction does; O(F log F)).
+* :func:`silhouette_adjacency` — from an :class:`EdgeAdjacency` built once per mesh
+  (:func:`build_adjacency`: welded edges, their adjacent faces in CSR form, face planes); a call
+  is one plane test per face and one segmented sum per edge (O(F), no sorting).
+
+:func:`find_silhouette` dispatches on ``method`` and caches the adjacency of a mesh (by array
+identity) so that repeated frames of the same geometry pay the build once.
+
+All functions are vectorized numpy and take plain arrays: ``vertices`` (V,3) float64,
+``faces`` (F,3) int64, ``point`` (3,).
+"""
+from __future__ import annotations
+
+import weakref
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import SoftShadowsError
+
+__all__ = ["EdgeAdjacency", "Silhouette", "build_adjacency", "facing", "find_silhouette",
+           "silhouette_adjacency", "silhouette_brute", "weld_vertices"]
+
+
+# ---------------------------------------------------------------------------------------------
+# results
+# ---------------------------------------------------------------------------------------------
+@dataclass
+class Silhouette:
+    """Silhouette of a mesh seen from ``point``.
+
+    edges:       (S,2) int64 vertex indices (welded representatives: the lowest input index of
+                 each distinct position), ``edges[:,0] < edges[:,1]``, sorted lexicographically
+    edge_faces:  (S,2) int64 one adjacent facing triangle and one adjacent non-facing triangle
+                 (indices into ``faces``), -1 where there is none (boundary edges have one)
+    boundary:    (S,) bool, the edge has exactly one adjacent triangle
+    vertices:    (N,) int64 distinct silhouette vertex indices (sorted)
+    degree:      (N,) int64 silhouette edges at each vertex
+    """
+
+    edges: np.ndarray
+    edge_faces: np.ndarray
+    boundary: np.ndarray
+    vertices: np.ndarray
+    degree: np.ndarray
+    point: np.ndarray
+
+    @property
+    def n_edges(self) -> int:
+        return int(len(self.edges))
+
+    @property
+    def n_vertices(self) -> int:
+        return int(len(self.vertices))
+
+    @property
+    def max_degree(self) -> int:
+        return int(self.degree.max()) if len(self.degree) else 0
+
+    @property
+    def n_vertices_degree3(self) -> int:
+        """Vertices where three or more silhouette edges meet."""
+        return int((self.degree >= 3).sum())
+
+    def vertex_slot(self) -> np.ndarray:
+        """(S,2) positions of each edge's endpoints in :attr:`vertices` (for per-vertex data)."""
+        return np.searchsorted(self.vertices, self.edges)
+
+
+@dataclass
+class EdgeAdjacency:
+    """Edge adjacency of a triangle mesh (after welding), built once, reused every frame.
+
+    rep:        (V,) int64 welded representative of every input vertex
+    edges:      (E,2) int64 representative vertex pairs, lo < hi, sorted lexicographically
+    edge_faces: (3F,) int64 adjacent faces of all edges, grouped by edge (CSR)
+    offsets:    (E+1,) int64 group starts in ``edge_faces``
+    count:      (E,) int64 adjacent faces per edge (1 boundary, 2 manifold, >2 non-manifold)
+    normals:    (F,3) float64 unnormalized face normals ``(b - a) x (c - a)``
+    anchors:    (F,3) float64 first vertex of every face
+    """
+
+    rep: np.ndarray
+    edges: np.ndarray
+    edge_faces: np.ndarray
+    offsets: np.ndarray
+    count: np.ndarray
+    normals: np.ndarray
+    anchors: np.ndarray
+    n_faces: int
+
+    @property
+    def n_edges(self) -> int:
+        return int(len(self.edges))
+
+    @property
+    def n_boundary(self) -> int:
+        return int((self.count == 1).sum())
+
+    @property
+    def n_nonmanifold(self) -> int:
+        return int((self.count > 2).sum())
+
+
+# ---------------------------------------------------------------------------------------------
+# building blocks
+# ---------------------------------------------------------------------------------------------
+def weld_vertices(vertices: np.ndarray) -> np.ndarray:
+    """(V,) representative index of every vertex: the lowest index with exactly the same position
+    (meshes with per-face vertices, like flat-shaded boxes, share edges only after welding)."""
+    v = np.ascontiguousarray(vertices, dtype=np.float64)
+    if len(v) == 0:
+        return np.zeros(0, np.int64)
+    _, first, inverse = np.unique(v, axis=0, return_index=True, return_inverse=True)
+    # np.unique's return_index gives the first occurrence: the lowest index
+    return first[inverse.reshape(-1)].astype(np.int64)
+
+
+def _face_planes(vertices, faces) -> tuple[np.ndarray, np.ndarray]:
+    v = np.asarray(vertices, dtype=np.float64)
+    a, b, c = v[faces[:, 0]], v[faces[:, 1]], v[faces[:, 2]]
+    return np.cross(b - a, c - a), a
+
+
+def _facing_from_planes(normals, anchors, point) -> np.ndarray:
+    p = np.asarray(point, dtype=np.float64).reshape(3)
+    return np.einsum("ij,ij->i", normals, p - anchors) > 0.0
+
+
+def facing(vertices: np.ndarray, faces: np.ndarray, point) -> np.ndarray:
+    """(F,) bool: triangle faces ``point`` (``((b-a) x (c-a)) . (point - a) > 0``)."""
+    n, a = _face_planes(vertices, np.asarray(faces, np.int64))
+    return _facing_from_planes(n, a, point)
+
+
+def _edge_keys(rep, faces):
+    f = rep[np.asarray(faces, np.int64)]
+    a = f[:, [0, 1, 2]].ravel()
+    b = f[:, [1, 2, 0]].ravel()
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    n = np.int64(max(len(rep), 1))
+    return lo, hi, lo * n + hi
+
+
+def _finish(edges, edge_faces, boundary, point) -> Silhouette:
+    if len(edges):
+        verts, deg = np.unique(edges.ravel(), return_counts=True)
+    else:
+        verts, deg = np.zeros(0, np.int64), np.zeros(0, np.int64)
+    return Silhouette(edges.astype(np.int64).reshape(-1, 2), edge_faces.astype(np.int64).reshape(-1, 2),
+                      boundary.astype(bool), verts.astype(np.int64), deg.astype(np.int64),
+                      np.asarray(point, np.float64).reshape(3).copy())
+
+
+# ---------------------------------------------------------------------------------------------
+# brute force: everything from the raw triangles, every call
+# ---------------------------------------------------------------------------------------------
+def silhouette_brute(vertices: np.ndarray, faces: np.ndarray, point, weld: bool = True) -> Silhouette:
+    """Silhouette seen from ``point`` with no precomputed connectivity: weld, list the 3F edges
+    of all triangles, group equal edges by sorting, test each group's facing mix."""
+    faces = np.asarray(faces, np.int64)
+    F = len(faces)
+    if F == 0:
+        return _finish(np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0, bool), point)
+    rep = weld_vertices(vertices) if weld else np.arange(len(vertices), dtype=np.int64)
+    n, a = _face_planes(vertices, faces)
+    fr = _facing_from_planes(n, a, point)
+    lo, hi, key = _edge_keys(rep, faces)
+    fr3 = np.repeat(fr, 3)
+    face_of = np.repeat(np.arange(F, dtype=np.int64), 3)
+    order = np.lexsort((~fr3, key))  # by edge, facing triangles first within an edge
+    ks = key[order]
+    start = np.flatnonzero(np.r_[True, ks[1:] != ks[:-1]])
+    ca = np.diff(np.r_[start, len(ks)])
+    cf = np.add.reduceat(fr3[order].astype(np.int64), start)
+    sil = (ca == 1) | ((cf > 0) & (cf < ca))
+    g = start[sil]
+    edges = np.stack([lo[order][g], hi[order][g]], axis=1)
+    fo = face_of[order]
+    first = fo[g]
+    last = fo[g + ca[sil] - 1]
+    ef = np.stack([np.where(cf[sil] > 0, first, -1), np.where(cf[sil] < ca[sil], last, -1)], axis=1)
+    return _finish(edges, ef, ca[sil] == 1, point)
+
+
+# ---------------------------------------------------------------------------------------------
+# fast path: edge adjacency built once
+# ---------------------------------------------------------------------------------------------
+def build_adjacency(vertices: np.ndarray, faces: np.ndarray, weld: bool = True) -> EdgeAdjacency:
+    """Welded edge -> adjacent faces table (CSR) plus face planes, for :func:`silhouette_adjacency`."""
+    faces = np.asarray(faces, np.int64)
+    F = len(faces)
+    rep = weld_vertices(vertices) if weld else np.arange(len(vertices), dtype=np.int64)
+    n, a = _face_planes(vertices, faces)
+    if F == 0:
+        z = np.zeros(0, np.int64)
+        return EdgeAdjacency(rep, np.zeros((0, 2), np.int64), z, np.zeros(1, np.int64), z, n, a, 0)
+    lo, hi, key = _edge_keys(rep, faces)
+    order = np.argsort(key, kind="stable")
+    ks = key[order]
+    start = np.flatnonzero(np.r_[True, ks[1:] != ks[:-1]])
+    offsets = np.r_[start, len(ks)].astype(np.int64)
+    edges = np.stack([lo[order][start], hi[order][start]], axis=1)
+    edge_faces = (order // 3).astype(np.int64)
+    return EdgeAdjacency(rep, edges, edge_faces, offsets, np.diff(offsets), n, a, F)
+
+
+def silhouette_adjacency(adj: EdgeAdjacency, point) -> Silhouette:
+    """Silhouette seen from ``point`` from a prebuilt :class:`EdgeAdjacency`: one plane test per
+    face, one segmented sum of facing flags per edge."""
+    if adj.n_faces == 0:
+        return _finish(np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0, bool), point)
+    fr = _facing_from_planes(adj.normals, adj.anchors, point)
+    frc = fr[adj.edge_faces]
+    cf = np.add.reduceat(frc.astype(np.int64), adj.offsets[:-1])
+    ca = adj.count
+    sil = (ca == 1) | ((cf > 0) & (cf < ca))
+    idx = np.flatnonzero(sil)
+    s = adj.offsets[idx]
+    c = ca[idx]
+    f0 = adj.edge_faces[s]
+    f1 = adj.edge_faces[s + c - 1]
+    front = np.where(fr[f0], f0, np.where(fr[f1], f1, -1))
+    back = np.where(~fr[f0], f0, np.where(~fr[f1], f1, -1))
+    # non-manifold edges (>2 faces): the first facing / last non-facing face, as the brute path
+    for j in np.flatnonzero(c > 2):
+        grp = adj.edge_faces[s[j]:s[j] + c[j]]
+        fg = fr[grp]
+        front[j] = grp[fg][0] if fg.any() else -1
+        back[j] = grp[~fg][-1] if (~fg).any() else -1
+    return _finish(adj.edges[idx], np.stack([front, back], axis=1), c == 1, point)
+
+
+# ---------------------------------------------------------------------------------------------
+# dispatch with a per-mesh adjacency cache
+# ---------------------------------------------------------------------------------------------
+_CACHE: dict = {}
+
+
+def cached_adjacency(vertices: np.ndarray, faces: np.ndarray) -> tuple[EdgeAdjacency, bool]:
+    """(adjacency, built_now): reuse the adjacency of the same (identical, alive) arrays."""
+    key = (id(vertices), id(faces))
+    hit = _CACHE.get(key)
+    if hit is not None:
+        wv, wf, shape_v, shape_f, adj = hit
+        if wv() is vertices and wf() is faces and vertices.shape == shape_v and faces.shape == shape_f:
+            return adj, False
+    adj = build_adjacency(vertices, faces)
+    try:
+        for k in [k for k, h in _CACHE.items() if h[0]() is None or h[1]() is None]:
+            del _CACHE[k]
+        _CACHE[key] = (weakref.ref(vertices), weakref.ref(faces), vertices.shape, faces.shape, adj)
+    except TypeError:  # arrays that do not support weak references: no caching
+        pass
+    return adj, True
+
+
+def find_silhouette(vertices: np.ndarray, faces: np.ndarray, point, method: str = "adjacency",
+                    adjacency: EdgeAdjacency | None = None) -> Silhouette:
+    """Silhouette of ``(vertices, faces)`` seen from ``point``; ``method`` is ``brute`` or
+    ``adjacency`` (uses ``adjacency`` if given, else a cached one for these arrays)."""
+    if method == "brute":
+        return silhouette_brute(vertices, faces, point)
+    if method == "adjacency":
+        if adjacency is None:
+            adjacency, _ = cached_adjacency(vertices, faces)
+        return silhouette_adjacency(adjacency, point)
+    raise SoftShadowsError(f"silhouette method must be 'brute' or 'adjacency', got {method!r}")

@@ -1,0 +1,868 @@
+"""``penumbra-map``: Wyman & Hansen, "Penumbra Maps: Approximate Soft Shadows in Real-Time" (EGSR 2003).
+
+A shadow map from the light's center gives the hard shadow, taken as the umbra. A second map of
+the same view, the *penumbra map*, stores on the foremost surfaces seen from the light a shadow
+intensity produced by drawing, outside the object silhouettes, a cone at every silhouette vertex
+and a sheet along every silhouette edge (Haines' plateaus, generalized to arbitrary receivers).
+The eye pass makes two lookups: the shadow-map test (umbra: V = 0), else the penumbra map.
+
+The paper's three passes, one function each, in the paper's order:
+
+1. :func:`shadow_map_pass` — the shadow map from the light's center (occluder depths; exactly
+   ``hard``'s view, texels and bias), and for the penumbra map's view (the same texel grid grown by
+   a border that can hold the outer penumbra, :func:`penumbra_map_view`) the depth ``Z_P`` of the
+   foremost surface of every texel (occluders and receivers) that the fragment program reads.
+2. :func:`render_penumbra_map` — the penumbra map, cleared to white (1):
+
+   a. :func:`find_silhouettes` — silhouette edges E and vertices V seen from the light center
+      (``softshadows.geometry.silhouette``: the per-frame ``brute`` force of the paper, or the
+      ``adjacency`` fast path). Vertices with three or more silhouette edges are handled: every
+      vertex gets exactly one cone and every edge one sheet, whatever the degree.
+   b. :func:`build_cones` — at each v_i a cone with its tip at v_i and its base on the far plane,
+      radius ``C_ri = (Z_far - Z_vi) L_r / Z_vi`` around the point where the ray from the light
+      center through v_i meets the far plane, split into ``cone_segments`` triangles with one vertex
+      at v_i and two on the far plane. Per-vertex attribute: ``Z_vi`` (constant on a cone).
+   c. :func:`build_sheets` — per edge a quad joining the edge to the outer common tangent of the two
+      cones' base circles (on the side away from the occluder), i.e. a sheet tangent to both cones;
+      split into strips where far from planar (a parallelogram). Per-vertex attribute: the ``Z_v``
+      of the silhouette point each ruling starts from, interpolated by the rasterizer as in the paper.
+   d. :func:`penumbra_fragment_program` — cones and sheets go through the shared rasterizer
+      (``rasterize_min_blend``: every fragment, no depth test, fused with the fragment program); per fragment F at texel P:
+      discard if ``Z_F`` is behind the shadow-map surface ``Z_P``; ``I = (Z_F - Z_v)/(Z_P - Z_v)``
+      with world-space (view-depth) values; ``I' = 3I^2 - 2I^3`` (Bernstein, Parker et al.) or I;
+      the darkest value per texel is kept (the paper writes I' as depth with ``GL_LESS``: a MIN blend).
+3. :func:`eye_pass` — per eye pixel: the shadow-map test with ``hard``'s bias (V = 0: umbra), else
+   V = the penumbra-map texel.
+
+Parameters (defaults): ``map_size`` 1024 (the paper: maps of the image size, 1024), ``bias`` 1.0 and
+``slope_bias`` 1.0 (texels, as ``hard``; the paper only says it used "a larger bias"),
+``smoothstep`` ``bernstein`` (the paper) | ``linear``, ``silhouettes`` ``brute`` (the paper) |
+``adjacency``, ``cone_segments`` 16 (the paper: "a number of triangles"), ``sheet_tolerance``
+0.005 and ``sheet_max_subdiv`` 16 (the paper: "we subdivide extremely non-planar quads", no
+numbers), ``early_reject`` true.
+
+Statistics: silhouette edges / vertices / max degree / vertices of degree >= 3, cone and sheet
+triangles and fragments (rasterized and kept), subdivided sheets, penumbra-map size and border,
+texels in penumbra; phases ``shadow_map``, ``silhouettes``, ``penumbra_map``, ``eye_pass``.
+
+Light shapes. The paper's light is a sphere of radius L_r. A rectangle light is accepted through
+its equivalent radius (the disk of equal area, ``light.equivalent_radius``): an approximation —
+the penumbra of a rectangle is not rotationally symmetric and the paper's cones would need
+rectangular bases (the paper mentions triangular bases for triangular lights).
+
+Deviations and implementation choices (none changes the paper's result except where said):
+
+* Roles: the shadow map (umbra test) holds occluder-role faces, as in ``hard``; ``Z_P`` is the
+  nearest of those and the receiver-only faces (a receiver-only ground must still carry the
+  penumbra). The paper has no roles (everything casts and receives).
+* Map extent: ``hard``'s light view covers the occluders only, but the outer penumbra lies outside
+  them. The shadow map is ``hard``'s own (same view, texels and bias: the umbra is bit for bit
+  ``hard``'s shadow); the penumbra map uses the same texel grid grown by a border wide enough for
+  the widest possible outer penumbra, ``L_r (1/z_min_occluder - 1/z_max)`` in window units,
+  clipped to where there is geometry and to ``map_size // 2`` texels per side (stat
+  ``border_clipped``). Every occluder lies inside ``hard``'s window, so only receiver-only faces
+  are rasterized into the border.
+* Far plane: the paper's ``Z_far`` is the light frustum's far plane; we use the farthest ``Z_P``
+  of the map (a tight far plane: cones and sheets beyond every surface only produce discarded
+  fragments). The cones' and sheets' shapes do not depend on it (a cone's cross-section at depth
+  z has radius ``L_r (1/Z_v - 1/z)`` in window units whatever ``Z_far`` is; the tangent
+  direction of a sheet neither), only their extent.
+* ``early_reject`` (on by default): before rasterizing, with a max-depth pyramid of ``Z_P``, each
+  cone triangle is shortened along its rulings to the largest ``Z_P`` under its footprint (two
+  whole-triangle bounds, then 8 slices along the rulings), and each sheet is shortened to the
+  part ``u <= u_cut`` of all its rulings (the same ruled surface, triangulated over the shorter
+  extent); cones and sheets with nothing behind them are dropped. Every fragment removed would
+  have been discarded by the fragment program, so the penumbra map is the same up to rounding
+  (cones: same planes; sheets: the strips' triangulation of the ruled surface moves within the
+  subdivision tolerance). It cuts the fragments on ``bunny`` from 11.6M + 1.6M to 7.3M + 0.7M.
+  A GPU's fill rate made this unnecessary for the paper; our CPU rasterizer pays per fragment.
+* Discard with a tolerance: a fragment is discarded when ``Z_F >= Z_P - bias * texel`` (the
+  constant bias in world units at ``Z_P``), so that ``Z_P - Z_v`` never nears 0/0 on surfaces that
+  contain the silhouette vertex (e.g. the top of a box).
+* Sheet side: the side away from the adjacent triangles' projection; an edge whose adjacent
+  triangles project to both sides (non-manifold) gets a sheet on each side. An edge that projects
+  to (almost) a point gets no sheet (its cones cover it).
+* Lookups are nearest-texel (the paper's texture lookup filter is not stated).
+
+Known limits (the paper's own, shown not hidden; see ``docs/penumbra-map.md``):
+
+* Outer penumbra only: the hard shadow is taken as the umbra, so the umbra is overestimated (too
+  large and too dark), increasingly with light size and occluder-receiver distance; there is no
+  light bleeding under small occluders.
+* One silhouette, from the light's center: silhouettes that change over the light are missed.
+* Overlapping penumbrae: the darkest wins (no summing or multiplying; artifacts at silhouette
+  concavities, worse for large penumbrae).
+* Cost: every silhouette vertex draws a whole cone, so the fragments grow with (silhouette
+  vertices) x (penumbra area in texels): ~8M on ``bunny`` at the default light, ~750M on
+  ``plant`` (21k silhouette vertices on open leaves) — seconds per frame on a CPU.
+"""
+from __future__ import annotations
+
+import math
+import time
+import weakref
+from contextlib import nullcontext
+from dataclasses import dataclass, field
+
+import numba
+import numpy as np
+from numba import njit, prange
+
+from ..errors import SoftShadowsError
+from ..geometry.silhouette import Silhouette, cached_adjacency, silhouette_adjacency, silhouette_brute
+from ..raster import View, rasterize_depth, rasterize_min_blend
+from ..raster.programs import PROGRAM_PENUMBRA, penumbra_intensity, smoothstep_bernstein  # noqa: F401
+from ..raster.rasterizer import TILE
+from ..shading import facing_normals
+from .base import Method, MethodOutput, Param, register
+from .shadowmap import _project, fit_light_view, receiver_offset, scatter
+
+_JIT = dict(cache=True)
+
+#: most fragments rasterized at once (memory bound: 24 bytes each)
+#: border of the penumbra map, at most this fraction of ``map_size`` per side
+MAX_BORDER_FRACTION = 0.5
+#: max-depth pyramid refinements per cone triangle (early_reject)
+REJECT_ITERATIONS = 2
+#: slices along each cone triangle's rulings for the final bound (early_reject)
+REJECT_PIECES = 8
+
+
+# ==============================================================================================
+# 1. shadow map from the light's center
+# ==============================================================================================
+@dataclass
+class ShadowMapPass:
+    """Pass 1. ``hard_view`` is ``hard``'s light view (map_size x map_size) and ``occluder_depth``
+    (H,W) float32 exactly ``hard``'s shadow map (umbra test). ``view`` is the same texel grid grown
+    by ``border = (left, right, top, bottom)`` texels and ``surface_depth`` its ``Z_P``: the
+    foremost surface (occluders and receivers), float32, +inf where empty."""
+
+    hard_view: View
+    view: View
+    border: tuple
+    occluder_depth: np.ndarray
+    surface_depth: np.ndarray
+    border_clipped: bool = False
+
+
+def penumbra_map_view(scene, map_size: int, light_radius: float,
+                      base_view: View | None = None) -> tuple[View, View, tuple, bool]:
+    """(hard's view, grown view, border (l, r, t, b) in texels, clipped?). The border holds the
+    widest outer penumbra: in window units (x/z) a penumbra around a silhouette vertex at depth
+    z_v reaches at most ``L_r (1/z_v - 1/z_P)`` <= ``L_r (1/z_min_occluder - 1/z_max)``.
+    ``base_view`` replaces ``hard``'s view (a perspective view from the light center), e.g. to
+    compare maps of several scenes on one texel grid."""
+    hv = fit_light_view(scene, map_size) if base_view is None else base_view
+    flat = scene.flat
+    q = hv.to_view(flat.vertices)
+    occ_idx = np.unique(flat.faces[flat.occluder]) if flat.occluder.any() else np.arange(len(q))
+    zo = q[occ_idx, 2]
+    zo = zo[zo > 1e-9]
+    front = q[q[:, 2] > 1e-9]
+    l, r, b, t = hv.window
+    s = (r - l) / hv.width  # window units per texel (square pixels)
+    s_y = (t - b) / hv.height
+    if len(zo) == 0 or len(front) == 0:
+        return hv, hv, (0, 0, 0, 0), False
+    zmax = float(front[:, 2].max())
+    m = max(light_radius * (1.0 / float(zo.min()) - 1.0 / zmax), 0.0)
+    xa, ya = front[:, 0] / front[:, 2], front[:, 1] / front[:, 2]
+    cap = int(MAX_BORDER_FRACTION * max(hv.width, hv.height))
+
+    def pad(ext_geom, step):  # texels needed on one side: min(penumbra reach, geometry extent) + 1 guard
+        e = min(m, max(ext_geom, 0.0))
+        if e <= 0.0:
+            return 0, False
+        n = int(math.ceil(e / step)) + 1
+        return min(n, cap), n > cap
+
+    pl, cl = pad(l - xa.min(), s)
+    pr, cr = pad(xa.max() - r, s)
+    pt, ct = pad(ya.max() - t, s_y)
+    pb, cb = pad(b - ya.min(), s_y)
+    window = (l - pl * s, r + pr * s, b - pb * s_y, t + pt * s_y)
+    near = max(min(hv.near, float(front[:, 2].min()) * 0.98), 1e-6)
+    far = max(hv.far, zmax * 1.02)
+    view = View(hv.origin, hv.right, hv.up, hv.forward, window, near, far,
+                hv.width + pl + pr, hv.height + pt + pb, False)
+    return hv, view, (pl, pr, pt, pb), bool(cl or cr or ct or cb)
+
+
+def shadow_map_pass(scene, map_size: int, light_radius: float, base_view: View | None = None) -> ShadowMapPass:
+    """Pass 1: the occluders' shadow map from the light center (``hard``'s view and texels) and the
+    depth ``Z_P`` of the foremost surface per texel of the bordered view. Every occluder lies
+    inside ``hard``'s window, so the border only holds receiver-only faces; inside the window
+    ``Z_P`` is the nearer of the occluder map and the receivers."""
+    hv, view, border, clipped = penumbra_map_view(scene, map_size, light_radius, base_view)
+    flat = scene.flat
+    occ_faces = np.ascontiguousarray(flat.faces[flat.occluder])
+    d_occ, _ = rasterize_depth(hv, flat.vertices, occ_faces, cull="none")
+    only_recv = flat.receiver & ~flat.occluder
+    if only_recv.any():
+        zp, _ = rasterize_depth(view, flat.vertices, np.ascontiguousarray(flat.faces[only_recv]), cull="none")
+    else:
+        zp = np.full((view.height, view.width), np.inf, np.float32)
+    pl, _, pt, _ = border
+    inner = zp[pt:pt + hv.height, pl:pl + hv.width]
+    np.minimum(inner, d_occ, out=inner)
+    return ShadowMapPass(hv, view, border, d_occ, zp, clipped)
+
+
+# ==============================================================================================
+# 2. the penumbra map
+# ==============================================================================================
+def find_silhouettes(scene, point, method: str = "brute") -> tuple[Silhouette, float]:
+    """Pass 2a: silhouette of the occluder faces seen from ``point`` (the light center).
+    Returns (silhouette, seconds spent building the edge adjacency this call, 0 if cached)."""
+    flat = scene.flat
+    faces = flat.faces if flat.occluder.all() else np.ascontiguousarray(flat.faces[flat.occluder])
+    if method == "brute":
+        return silhouette_brute(flat.vertices, faces, point), 0.0
+    if method == "adjacency":
+        t0 = time.perf_counter()
+        # cache on the scene's flat arrays; the occluder subset is cached per flat geometry
+        key_faces = _occluder_faces_cached(flat)
+        adj, built = cached_adjacency(flat.vertices, key_faces)
+        t_build = time.perf_counter() - t0 if built else 0.0
+        return silhouette_adjacency(adj, point), t_build
+    raise SoftShadowsError(f"method 'penumbra-map': parameter 'silhouettes' must be brute or adjacency, got {method!r}")
+
+
+_OCC_FACES: dict = {}
+
+
+def _occluder_faces_cached(flat) -> np.ndarray:
+    """The occluder-face array of a FlatGeometry, the same object on every call (adjacency cache key)."""
+    key = id(flat.faces)
+    hit = _OCC_FACES.get(key)
+    if hit is not None and hit[0]() is flat.faces:
+        return hit[1]
+    faces = flat.faces if flat.occluder.all() else np.ascontiguousarray(flat.faces[flat.occluder])
+    for k in [k for k, h in _OCC_FACES.items() if h[0]() is None]:
+        del _OCC_FACES[k]
+    _OCC_FACES[key] = (weakref.ref(flat.faces), faces)
+    return faces
+
+
+@dataclass
+class Primitives:
+    """Triangles to rasterize into the penumbra map (world space) with a per-corner ``Z_v``."""
+
+    vertices: np.ndarray  # (N,3) float64
+    triangles: np.ndarray  # (T,3) int64
+    zv: np.ndarray  # (T,3) float64 Z_v at each corner
+    n_objects: int = 0  # cones or sheets built (before early rejection)
+    n_rejected: int = 0  # cones or sheets dropped by early rejection
+    n_subdivided: int = 0  # sheets split into strips
+    n_two_sided: int = 0  # sheets drawn on both sides
+
+    @staticmethod
+    def empty() -> "Primitives":
+        return Primitives(np.zeros((0, 3)), np.zeros((0, 3), np.int64), np.zeros((0, 3)))
+
+
+def _view_basis(view: View):
+    return np.asarray(view.origin, float), np.asarray(view.right, float), np.asarray(view.up, float), \
+        np.asarray(view.forward, float)
+
+
+def _far_point(view: View, x, y, z_far):
+    """World point at view coordinates (x, y, z_far) (arrays)."""
+    o, r, u, f = _view_basis(view)
+    return o + np.asarray(x)[..., None] * r + np.asarray(y)[..., None] * u + z_far * f
+
+
+def build_cones(view: View, positions: np.ndarray, light_radius: float, z_far: float, segments: int,
+                zmax_pyramid=None) -> Primitives:
+    """Pass 2b: a cone per silhouette vertex (positions (N,3)): tip at v_i, base circle of radius
+    ``C_ri = (Z_far - Z_vi) L_r / Z_vi`` on the far plane around the ray from the light center through
+    v_i, as ``segments`` triangles (v_i, B_k, B_k+1). With ``zmax_pyramid`` (early rejection) each
+    base vertex is pulled in along its ruling to the largest ``Z_P`` under the adjacent triangles."""
+    n = len(positions)
+    if n == 0:
+        return Primitives.empty()
+    q = view.to_view(positions)
+    zv = q[:, 2]
+    ok = (zv > view.near) & (zv < z_far)
+    q, zv = q[ok], zv[ok]
+    n_ok = len(zv)
+    if n_ok == 0:
+        return Primitives(np.zeros((0, 3)), np.zeros((0, 3), np.int64), np.zeros((0, 3)), n, n)
+    ax, ay = q[:, 0] * (z_far / zv), q[:, 1] * (z_far / zv)  # far-plane axis point (view x, y)
+    cr = (z_far - zv) * light_radius / zv
+    th = 2.0 * np.pi * np.arange(segments) / segments
+    bx = ax[:, None] + cr[:, None] * np.cos(th)[None, :]  # (n, seg)
+    by = ay[:, None] + cr[:, None] * np.sin(th)[None, :]
+    lam = np.ones((n_ok, segments))  # fraction of each ruling kept (1 = to the far plane)
+    keep = np.ones(n_ok, bool)
+    if zmax_pyramid is not None:
+        lam, keep = _reject_cones(view, q, zv, bx, by, z_far, zmax_pyramid)
+    tips = np.asarray(positions, np.float64)[ok][keep]
+    zv, bx, by, lam = zv[keep], bx[keep], by[keep], lam[keep]
+    m = len(zv)
+    far = _far_point(view, bx, by, z_far)  # (m, seg, 3)
+    base = tips[:, None, :] + (far - tips[:, None, :]) * lam[..., None]
+    verts = np.concatenate([tips, base.reshape(-1, 3)])
+    i = np.arange(m)[:, None]
+    k = np.arange(segments)[None, :]
+    tri = np.stack([np.broadcast_to(i, (m, segments)),
+                    m + i * segments + k,
+                    m + i * segments + (k + 1) % segments], axis=-1).reshape(-1, 3)
+    zattr = np.repeat(zv, segments)[:, None].repeat(3, axis=1)
+    return Primitives(verts, tri.astype(np.int64), zattr, n, n - m)
+
+
+def _occluder_side(view: View, scene_vertices, faces, sil: Silhouette, a0, a1, z_far) -> np.ndarray:
+    """(S,) +1 / -1: side of the edge (far-plane coordinates a0 -> a1) where its adjacent triangles
+    project (left = +1), 0 where they project to both sides or edge-on."""
+    d = a1 - a0
+    side = np.zeros(len(a0))
+    cnt = np.zeros(len(a0))
+    for col in range(2):
+        f = sil.edge_faces[:, col]
+        has = f >= 0
+        if not has.any():
+            continue
+        cen = scene_vertices[faces[f[has]]].mean(axis=1)
+        qc = view.to_view(cen)
+        zc = np.maximum(qc[:, 2], 1e-12)
+        c2 = np.stack([qc[:, 0] * z_far / zc, qc[:, 1] * z_far / zc], 1)
+        cr = d[has, 0] * (c2[:, 1] - a0[has, 1]) - d[has, 1] * (c2[:, 0] - a0[has, 0])
+        sg = np.sign(cr)
+        prev = side[has]
+        agree = (cnt[has] == 0) | (prev == sg)
+        side[has] = np.where(agree, sg, 0.0)
+        cnt[has] += 1
+    return side
+
+
+def build_sheets(view: View, scene_vertices: np.ndarray, faces: np.ndarray, sil: Silhouette,
+                 light_radius: float, z_far: float, tolerance: float, max_subdiv: int,
+                 zmax_pyramid=None) -> Primitives:
+    """Pass 2c: per silhouette edge (v_0, v_1) a sheet from the edge to the outer common tangent of
+    the two cones' base circles (far plane), tangent to both cones, on the side away from the
+    occluder: the ruled surface of the lines from v(t) = lerp(v_0, v_1, t) to F(t) = lerp(F_0, F_1, t),
+    along which ``Z_v`` is that of v(t). Two triangles reproduce it only for a parallelogram
+    (F_1 - v_1 = F_0 - v_0); otherwise both the surface (non-planar) and the rasterizer's linear
+    interpolation of ``Z_v`` across the rulings are off, so the quad is split into
+    ``k = ceil(q / tolerance)`` strips (at most ``max_subdiv``), ``q = |(F_1 - v_1) - (F_0 - v_0)| /
+    length``. Corner attribute: the ``Z_v`` of the silhouette point the ruling starts from."""
+    S = sil.n_edges
+    if S == 0:
+        return Primitives.empty()
+    p0 = scene_vertices[sil.edges[:, 0]]
+    p1 = scene_vertices[sil.edges[:, 1]]
+    q0, q1 = view.to_view(p0), view.to_view(p1)
+    z0, z1 = q0[:, 2], q1[:, 2]
+    ok = (z0 > view.near) & (z1 > view.near) & (z0 < z_far) & (z1 < z_far)
+    a0 = np.stack([q0[:, 0], q0[:, 1]], 1) * (z_far / np.where(ok, z0, 1.0))[:, None]
+    a1 = np.stack([q1[:, 0], q1[:, 1]], 1) * (z_far / np.where(ok, z1, 1.0))[:, None]
+    c0 = (z_far - z0) * light_radius / np.where(ok, z0, 1.0)
+    c1 = (z_far - z1) * light_radius / np.where(ok, z1, 1.0)
+    dvec = a1 - a0
+    dlen = np.linalg.norm(dvec, axis=1)
+    # an edge that projects to (almost) a point: its cones cover it
+    tiny = dlen <= 1e-9 * np.maximum(np.abs(a0).max(axis=1) + c0, 1e-30)
+    ok &= ~tiny
+    side = _occluder_side(view, scene_vertices, faces, sil, a0, a1, z_far)
+    idx = np.flatnonzero(ok)
+    # outward normals: away from the occluder's side; both sides where undecided
+    e = dvec[idx] / dlen[idx, None]
+    left = np.stack([-e[:, 1], e[:, 0]], 1)
+    sg = side[idx]
+    two = sg == 0
+    out_dirs = [np.where((sg > 0)[:, None], -left, left)]
+    rows = [idx]
+    if two.any():
+        out_dirs.append(-left[two])  # the first set used +left for these; add -left
+        rows.append(idx[two])
+    pout = np.concatenate(out_dirs)
+    rows = np.concatenate(rows)
+    ee = dvec[rows] / dlen[rows, None]
+    sin_a = (c0[rows] - c1[rows]) / dlen[rows]
+    inside = np.abs(sin_a) < 1.0  # otherwise one base circle contains the other: perpendicular offset
+    cos_a = np.sqrt(np.clip(1.0 - sin_a**2, 0.0, 1.0))
+    nrm = np.where(inside[:, None], cos_a[:, None] * pout + sin_a[:, None] * ee, pout)
+    f0 = a0[rows] + c0[rows, None] * nrm
+    f1 = a1[rows] + c1[rows, None] * nrm
+    V0, V1 = p0[rows], p1[rows]
+    F0 = _far_point(view, f0[:, 0], f0[:, 1], z_far)
+    F1 = _far_point(view, f1[:, 0], f1[:, 1], z_far)
+    zz0, zz1 = z0[rows], z1[rows]
+    n_objects = len(rows)
+    keep = np.ones(n_objects, bool)
+    if zmax_pyramid is not None:
+        ucut = _reject_sheets(view, V0, V1, F0, F1, zz0, zz1, z_far, zmax_pyramid)
+        keep = ucut > 0.0
+        # the sub-sheet u in [0, ucut] of every ruling: the same ruled surface, shorter
+        F0 = V0 + (F0 - V0) * ucut[:, None]
+        F1 = V1 + (F1 - V1) * ucut[:, None]
+    V0, V1, F0, F1, zz0, zz1 = V0[keep], V1[keep], F0[keep], F1[keep], zz0[keep], zz1[keep]
+    # how far the quad is from a parallelogram (non-planar, or rulings of different directions or
+    # lengths): two triangles then distort both the surface and the Z_v interpolation along the
+    # rulings. Measure: |(F1 - V1) - (F0 - V0)| relative to the sheet's length.
+    length = np.maximum(np.linalg.norm(F0 - V0, axis=1), np.linalg.norm(F1 - V1, axis=1))
+    ratio = np.linalg.norm((F1 - V1) - (F0 - V0), axis=1) / np.maximum(length, 1e-300)
+    if tolerance > 0:
+        k = np.clip(np.ceil(ratio / tolerance), 1, max_subdiv).astype(np.int64)
+    else:
+        k = np.full(len(V0), max_subdiv, np.int64)
+    k[~np.isfinite(ratio)] = 1
+    # strips: rulings at t = j / k, j = 0..k, each ruling = (v(t), F(t)) with Z_v(t)
+    nr = k + 1
+    sheet = np.repeat(np.arange(len(k)), nr)
+    start = np.cumsum(nr) - nr
+    j = np.arange(nr.sum()) - np.repeat(start, nr)
+    t = j / np.repeat(k, nr)
+    vt = V0[sheet] + (V1 - V0)[sheet] * t[:, None]
+    ft = F0[sheet] + (F1 - F0)[sheet] * t[:, None]
+    zt = zz0[sheet] + (zz1 - zz0)[sheet] * t
+    R = len(t)
+    verts = np.concatenate([vt, ft])  # ruling r: near vertex r, far vertex R + r
+    # strip between ruling r and r+1 (same sheet): (v_r, v_r+1, F_r+1), (v_r, F_r+1, F_r)
+    first = np.ones(R, bool)
+    first[start] = False  # ruling r has a previous ruling in the same sheet
+    r1 = np.flatnonzero(first)
+    r0 = r1 - 1
+    tri = np.concatenate([np.stack([r0, r1, R + r1], 1), np.stack([r0, R + r1, R + r0], 1)])
+    za = np.concatenate([np.stack([zt[r0], zt[r1], zt[r1]], 1), np.stack([zt[r0], zt[r1], zt[r0]], 1)])
+    return Primitives(verts, tri.astype(np.int64), za, n_objects, int((~keep).sum()),
+                      int((k > 1).sum()), int(two.sum()))
+
+
+# ---- early rejection: a max-depth pyramid of Z_P ----------------------------------------------
+@njit(parallel=True, **_JIT)
+def _pyramid_level0(zp, out):
+    H, W = zp.shape
+    for i in prange(H):
+        for j in range(W):
+            z = zp[i, j]
+            out[i * W + j] = z if math.isfinite(z) else 0.0
+
+
+@njit(parallel=True, **_JIT)
+def _pyramid_down(data, src_off, h, w, dst_off, h2, w2):
+    for i in prange(h2):
+        for j in range(w2):
+            m = 0.0
+            for di in range(2):
+                ii = 2 * i + di
+                if ii < h:
+                    for dj in range(2):
+                        jj = 2 * j + dj
+                        if jj < w:
+                            v = data[src_off + ii * w + jj]
+                            if v > m:
+                                m = v
+            data[dst_off + i * w2 + j] = m
+
+
+def build_zmax_pyramid(zp: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Max-depth mip pyramid of ``Z_P`` (empty texels count as 0: nothing behind them), as flat
+    float32 data, level offsets, widths, heights (level 0 = ``Z_P``)."""
+    h, w = zp.shape
+    ws, hs, offs = [w], [h], [0]
+    total = w * h
+    while ws[-1] > 1 or hs[-1] > 1:
+        offs.append(total)
+        ws.append((ws[-1] + 1) // 2)
+        hs.append((hs[-1] + 1) // 2)
+        total += ws[-1] * hs[-1]
+    data = np.empty(total, np.float32)
+    _pyramid_level0(np.ascontiguousarray(zp, dtype=np.float32), data)
+    for L in range(1, len(ws)):
+        _pyramid_down(data, offs[L - 1], hs[L - 1], ws[L - 1], offs[L], hs[L], ws[L])
+    return data, np.array(offs, np.int64), np.array(ws, np.int64), np.array(hs, np.int64)
+
+
+@njit(**_JIT)
+def _zmax_rect(data, offs, ws, hs, x0, y0, x1, y1):
+    """Max of level-0 texels [x0..x1] x [y0..y1] (inclusive, clamped) through the pyramid."""
+    W0 = ws[0]
+    H0 = hs[0]
+    if x1 < 0 or y1 < 0 or x0 >= W0 or y0 >= H0:
+        return 0.0
+    x0 = max(x0, 0)
+    y0 = max(y0, 0)
+    x1 = min(x1, W0 - 1)
+    y1 = min(y1, H0 - 1)
+    span = max(x1 - x0 + 1, y1 - y0 + 1)
+    L = 0
+    while (1 << (L + 3)) < span and L + 1 < len(offs):
+        L += 1
+    m = 0.0
+    w = ws[L]
+    for yy in range(y0 >> L, (y1 >> L) + 1):
+        base = offs[L] + yy * w
+        for xx in range(x0 >> L, (x1 >> L) + 1):
+            v = data[base + xx]
+            if v > m:
+                m = v
+    return m
+
+
+@njit(**_JIT)
+def _wedge_zmax(wl, wt, sxs, sys_, tx, ty, ux0, uy0, ux1, uy1, fa, fb, data, offs, ws, hs):
+    """Max Z_P under the part of a cone wedge between ruling fractions fa < fb (window-space
+    fractions from the tip (tx, ty) to the base vertices (ux0, uy0), (ux1, uy1))."""
+    xa = 1e300
+    xb = -1e300
+    ya = 1e300
+    yb = -1e300
+    for f in (fa, fb):
+        for ux, uy in ((ux0, uy0), (ux1, uy1)):
+            px = ((tx + (ux - tx) * f) - wl) * sxs
+            py = (wt - (ty + (uy - ty) * f)) * sys_
+            xa = min(xa, px)
+            xb = max(xb, px)
+            ya = min(ya, py)
+            yb = max(yb, py)
+    return _zmax_rect(data, offs, ws, hs, int(math.floor(xa)) - 1, int(math.floor(ya)) - 1,
+                      int(math.floor(xb)) + 1, int(math.floor(yb)) + 1) * (1.0 + 1e-6)
+
+
+@njit(parallel=True, **_JIT)
+def _cone_reject_kernel(wl, wt, sx_scale, sy_scale, qx, qy, zv, bx, by, z_far, iters, pieces, data, offs, ws,
+                        hs, eps, lam, keep):
+    """Per cone (row) and base vertex k: lam[i,k] in [0,1] (fraction of the ruling to the far plane
+    that can carry kept fragments); keep[i] false when no triangle of the cone can.
+
+    A fragment at depth z is kept only if z < Z_P of its texel <= max Z_P under any region of the
+    wedge containing it. (1) The whole wedge, truncated at depth z, is bounded ``iters`` times;
+    (2) the rest is cut into ``pieces`` slices along the rulings: the wedge ends at the last slice
+    whose max Z_P lies behind its nearest depth (and not behind that max)."""
+    n, seg = bx.shape
+    for i in prange(n):
+        iz = 1.0 / zv[i]
+        izf = 1.0 / z_far
+        tx = qx[i] * iz
+        ty = qy[i] * iz
+        zlim = np.empty(seg)
+        anyk = False
+        for k in range(seg):
+            k2 = (k + 1) % seg
+            ux0 = bx[i, k] * izf
+            uy0 = by[i, k] * izf
+            ux1 = bx[i, k2] * izf
+            uy1 = by[i, k2] * izf
+            z = z_far
+            for _ in range(iters):
+                f = (iz - 1.0 / z) / (iz - izf)
+                zm = _wedge_zmax(wl, wt, sx_scale, sy_scale, tx, ty, ux0, uy0, ux1, uy1, 0.0, f, data, offs, ws, hs)
+                if zm < z:
+                    z = zm
+                if z <= zv[i] + eps:
+                    break
+            if z > zv[i] + eps and pieces > 1:
+                fhi = (iz - 1.0 / z) / (iz - izf)
+                zlast = zv[i]
+                for m in range(pieces):
+                    fa = fhi * m / pieces
+                    fb = fhi * (m + 1) / pieces
+                    za = 1.0 / (iz - fa * (iz - izf))
+                    zb = 1.0 / (iz - fb * (iz - izf))
+                    zm = _wedge_zmax(wl, wt, sx_scale, sy_scale, tx, ty, ux0, uy0, ux1, uy1, fa, fb, data, offs,
+                                     ws, hs)
+                    if zm > za + eps:
+                        zlast = min(zb, zm)
+                z = zlast
+            zlim[k] = z
+            if z > zv[i] + eps:
+                anyk = True
+        keep[i] = anyk
+        # base vertex k is shared by triangles k-1 and k: keep the longer of the two limits
+        for k in range(seg):
+            z = max(zlim[k], zlim[(k - 1) % seg])
+            if z <= zv[i]:
+                lam[i, k] = 0.0
+            else:
+                # the ruling point at depth z: tip + (far - tip) * lam, depth linear in lam
+                lam[i, k] = min((z - zv[i]) / (z_far - zv[i]), 1.0)
+
+
+def _reject_cones(view, q, zv, bx, by, z_far, pyr):
+    data, offs, ws, hs = pyr
+    l, r, b, t = view.window
+    n, seg = bx.shape
+    lam = np.ones((n, seg))
+    keep = np.ones(n, bool)
+    eps = 1e-9 * z_far
+    _cone_reject_kernel(l, t, view.width / (r - l), view.height / (t - b), np.ascontiguousarray(q[:, 0]),
+                        np.ascontiguousarray(q[:, 1]), np.ascontiguousarray(zv), np.ascontiguousarray(bx),
+                        np.ascontiguousarray(by), float(z_far), REJECT_ITERATIONS, REJECT_PIECES, data, offs, ws, hs, eps, lam, keep)
+    return lam, keep
+
+
+@njit(parallel=True, **_JIT)
+def _sheet_reject_kernel(sx, sy, zc, z_far, iters, pieces, eps, data, offs, ws, hs, ucut):
+    """Per sheet: the fraction ``ucut`` of every ruling (from the edge, u = 0, to the far line,
+    u = 1) that can carry kept fragments; 0 drops the sheet. ``sx, sy`` (n, 4) pixel coordinates of
+    the corners v0, v1, F1, F0; ``zc`` (n, 2) depths of v0, v1 (F0, F1 lie at ``z_far``).
+
+    At fraction u the sheet's depth is (1 - u) Z_v(t) + u z_far >= (1 - u) z_min + u z_far, and
+    its footprint between fractions ua < ub lies in the hull of the four ruling points there. As
+    for the cones: bound the whole sheet ``iters`` times, then cut it in ``pieces`` slices and end
+    after the last slice whose max Z_P lies behind its nearest depth (and not behind that max)."""
+    n = sx.shape[0]
+    for i in prange(n):
+        zmin = min(zc[i, 0], zc[i, 1])
+        u = 1.0
+        for _ in range(iters):
+            zm = _sheet_zmax(sx[i], sy[i], zc[i], z_far, 0.0, u, data, offs, ws, hs)
+            uc = (zm - zmin) / (z_far - zmin)
+            if uc < u:
+                u = uc
+            if u <= eps:
+                break
+        if u > eps and pieces > 1:
+            last = 0.0
+            for m in range(pieces):
+                ua = u * m / pieces
+                ub = u * (m + 1) / pieces
+                zm = _sheet_zmax(sx[i], sy[i], zc[i], z_far, ua, ub, data, offs, ws, hs)
+                za = (1.0 - ua) * zmin + ua * z_far
+                if zm > za + eps * z_far:
+                    last = min(ub, (zm - zmin) / (z_far - zmin))
+            u = last
+        ucut[i] = u if u > eps else 0.0
+
+
+@njit(**_JIT)
+def _sheet_zmax(sx, sy, zc, z_far, ua, ub, data, offs, ws, hs):
+    """Max Z_P under the part ua <= u <= ub of a sheet: the hull of the four ruling points there
+    (corners v0, v1, F1, F0 in pixels, ``zc`` the depths of v0, v1; F0, F1 at ``z_far``)."""
+    xa = 1e300
+    xb = -1e300
+    ya = 1e300
+    yb = -1e300
+    for e in range(2):  # ruling at v0 (corners 0 -> 3) and at v1 (corners 1 -> 2)
+        c0 = 0 if e == 0 else 1
+        c1 = 3 if e == 0 else 2
+        zv = zc[e]
+        for u in (ua, ub):
+            # the world point v + u (F - v) projects to a fraction g of the ruling's pixel segment
+            g = u * z_far / ((1.0 - u) * zv + u * z_far)
+            px = sx[c0] + (sx[c1] - sx[c0]) * g
+            py = sy[c0] + (sy[c1] - sy[c0]) * g
+            xa = min(xa, px)
+            xb = max(xb, px)
+            ya = min(ya, py)
+            yb = max(yb, py)
+    return _zmax_rect(data, offs, ws, hs, int(math.floor(xa)) - 1, int(math.floor(ya)) - 1,
+                      int(math.floor(xb)) + 1, int(math.floor(yb)) + 1) * (1.0 + 1e-6)
+
+
+def _reject_sheets(view, V0, V1, F0, F1, z0, z1, z_far, pyr):
+    """(n,) fraction of each sheet's rulings that can carry kept fragments (0: drop the sheet)."""
+    data, offs, ws, hs = pyr
+    pts = np.stack([V0, V1, F1, F0], axis=1).reshape(-1, 3)
+    sx, sy, _ = view.project(pts)
+    ucut = np.ones(len(V0))
+    _sheet_reject_kernel(np.ascontiguousarray(sx.reshape(-1, 4)), np.ascontiguousarray(sy.reshape(-1, 4)),
+                         np.ascontiguousarray(np.stack([z0, z1], 1), dtype=np.float64), float(z_far),
+                         REJECT_ITERATIONS, REJECT_PIECES, 1e-9, data, offs, ws, hs, ucut)
+    return ucut
+
+
+# ---- the fragment program ----------------------------------------------------------------------
+# The paper's fragment program (I = (Z_F - Z_V)/(Z_P - Z_V), discard behind the surface, smoothstep)
+# lives with the rasterizer's fragment programs (raster/programs.py: ``penumbra_intensity``), which
+# runs it per fragment and keeps the darkest value per texel: the paper's depth-test trick.
+fragment_intensity = penumbra_intensity
+
+
+def penumbra_fragment_program(view: View, prims: Primitives, n_cone_tris: int, zp: np.ndarray, bias: float,
+                              bernstein: bool, pm: np.ndarray) -> dict:
+    """Pass 2d: rasterize cones and sheets with the shared rasterizer and run the fragment program
+    on every fragment, MIN-blending into the penumbra map ``pm`` (H,W) float32 in place
+    (``rasterize_min_blend``: fused, nothing is written per fragment)."""
+    l, r, _, _ = view.window
+    tex_scale = (r - l) / view.width  # world size of a texel at depth z = tex_scale * z
+    zpf = np.ascontiguousarray(zp, dtype=np.float32)
+    zattr = np.ascontiguousarray(prims.zv, dtype=np.float64)
+    if len(prims.triangles) == 0:
+        return {"cone_fragments": 0, "sheet_fragments": 0, "cone_fragments_kept": 0, "sheet_fragments_kept": 0}
+    c = rasterize_min_blend(view, prims.vertices, prims.triangles, PROGRAM_PENUMBRA, zattr, zpf,
+                            (float(bias), tex_scale, 1.0 if bernstein else 0.0), pm, cull="none",
+                            split=n_cone_tris)
+    return {"cone_fragments": c["fragments_a"], "sheet_fragments": c["fragments_b"],
+            "cone_fragments_kept": c["kept_a"], "sheet_fragments_kept": c["kept_b"]}
+
+
+@dataclass
+class PenumbraMap:
+    """Pass 2 result: ``intensity`` (H,W) float32 of ``view`` (1 = lit), the silhouette, statistics."""
+
+    view: View
+    intensity: np.ndarray
+    silhouette: Silhouette
+    z_far: float
+    stats: dict = field(default_factory=dict)
+
+
+def render_penumbra_map(scene, smp: ShadowMapPass, light_radius: float, *, silhouettes: str = "brute",
+                        smoothstep: str = "bernstein", bias: float = 1.0, cone_segments: int = 16,
+                        sheet_tolerance: float = 0.005, sheet_max_subdiv: int = 16, early_reject: bool = True,
+                        timer=None) -> PenumbraMap:
+    """Pass 2: clear to white, find silhouettes, draw cones and sheets through the fragment program."""
+    phase = timer.phase if timer is not None else (lambda name: nullcontext())
+    view = smp.view
+    flat = scene.flat
+    with phase("silhouettes"):
+        sil, t_build = find_silhouettes(scene, view.origin, silhouettes)
+    with phase("penumbra_map"):
+        pm = np.ones((view.height, view.width), np.float32)  # clear to white
+        zp = smp.surface_depth
+        fin = np.isfinite(zp)
+        z_far = float(zp[fin].max()) * (1.0 + 1e-6) if fin.any() else float(view.far)
+        pyr = build_zmax_pyramid(zp) if early_reject else None
+        faces = flat.faces if flat.occluder.all() else flat.faces[flat.occluder]
+        cones = build_cones(view, flat.vertices[sil.vertices], light_radius, z_far, cone_segments, pyr)
+        sheets = build_sheets(view, flat.vertices, faces, sil, light_radius, z_far, sheet_tolerance,
+                              sheet_max_subdiv, pyr)
+        nv = len(cones.vertices)
+        verts = np.concatenate([cones.vertices, sheets.vertices])
+        tris = np.concatenate([cones.triangles, sheets.triangles + nv])
+        zattr = np.concatenate([cones.zv, sheets.zv])
+        prims = Primitives(verts, tris, zattr)
+        rview = View(view.origin, view.right, view.up, view.forward, view.window, view.near,
+                     max(z_far * (1.0 + 1e-4), view.near * 2), view.width, view.height, False)
+        fst = penumbra_fragment_program(rview, prims, len(cones.triangles), zp, bias, smoothstep == "bernstein", pm)
+    stats = {
+        "silhouette_edges": sil.n_edges,
+        "silhouette_vertices": sil.n_vertices,
+        "silhouette_max_degree": sil.max_degree,
+        "silhouette_vertices_degree3plus": sil.n_vertices_degree3,
+        "silhouette_boundary_edges": int(sil.boundary.sum()),
+        "cones": cones.n_objects - cones.n_rejected,
+        "cones_rejected": cones.n_rejected,
+        "sheets": sheets.n_objects - sheets.n_rejected,
+        "sheets_rejected": sheets.n_rejected,
+        "sheets_subdivided": sheets.n_subdivided,
+        "sheets_two_sided": sheets.n_two_sided,
+        "cone_triangles": int(len(cones.triangles)),
+        "sheet_triangles": int(len(sheets.triangles)),
+        **fst,
+        "penumbra_texels": int((pm < 1.0).sum()),
+        "z_far": z_far,
+    }
+    if t_build:
+        stats["adjacency_build_s"] = t_build
+    return PenumbraMap(view, pm, sil, z_far, stats)
+
+
+# ==============================================================================================
+# 3. the eye pass
+# ==============================================================================================
+@njit(parallel=True, **_JIT)
+def _eye_pass_kernel(vp, d_occ, pm, W, H, pad_l, pad_t, pts, nrm, bias, slope_bias, v_out, umbra_out):
+    """Shadow-map test exactly as ``hard`` (its view ``vp`` and W x H map ``d_occ``), else the
+    penumbra-map texel (the same texel grid, shifted by the border)."""
+    n = pts.shape[0]
+    PH, PW = pm.shape
+    for k in prange(n):
+        umbra_out[k] = False
+        sx, sy, z = _project(vp, pts[k, 0], pts[k, 1], pts[k, 2])
+        if not (z > 0.0):
+            v_out[k] = 1.0
+            continue
+        off = receiver_offset(vp, pts[k, 0], pts[k, 1], pts[k, 2], nrm[k, 0], nrm[k, 1], nrm[k, 2],
+                              z, bias, slope_bias)
+        zt = z - off
+        if not (math.isfinite(sx) and math.isfinite(sy)):
+            v_out[k] = 1.0
+            continue
+        fx = math.floor(sx)
+        fy = math.floor(sy)
+        if fx < -PW or fx > 2 * PW or fy < -PH or fy > 2 * PH:
+            v_out[k] = 1.0
+            continue
+        ci = int(fx)
+        ri = int(fy)
+        if 0 <= ri < H and 0 <= ci < W and d_occ[ri, ci] < zt:
+            v_out[k] = 0.0
+            umbra_out[k] = True
+            continue
+        r2 = ri + pad_t
+        c2 = ci + pad_l
+        if 0 <= r2 < PH and 0 <= c2 < PW:
+            v_out[k] = pm[r2, c2]
+        else:
+            v_out[k] = 1.0
+
+
+def eye_pass(smp: ShadowMapPass, pmap: PenumbraMap, points: np.ndarray, normals: np.ndarray, bias: float,
+             slope_bias: float) -> tuple[np.ndarray, np.ndarray]:
+    """Pass 3: (V (K,) float32, umbra (K,) bool) at world points with normals facing the viewer."""
+    pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+    nrm = np.ascontiguousarray(normals, dtype=np.float64).reshape(-1, 3)
+    v = np.empty(len(pts), np.float32)
+    um = np.empty(len(pts), np.bool_)
+    pl, _, pt, _ = smp.border
+    _eye_pass_kernel(smp.hard_view.params(), smp.occluder_depth, pmap.intensity, smp.hard_view.width,
+                     smp.hard_view.height, int(pl), int(pt), pts, nrm, float(bias), float(slope_bias), v, um)
+    return v, um
+
+
+# ==============================================================================================
+# the method
+# ==============================================================================================
+def light_radius_of(light) -> float:
+    """L_r: the sphere's radius, or a rectangle's equivalent (equal-area disk) radius."""
+    return float(light.equivalent_radius)
+
+
+@register
+class PenumbraMapMethod(Method):
+    name = "penumbra-map"
+    light_shapes = ("sphere", "rect")
+    summary = ("shadow map + penumbra map of cones and sheets at the silhouettes from the light center: "
+               "outer penumbra only")
+    paper = "Wyman & Hansen 2003, Penumbra Maps: Approximate Soft Shadows in Real-Time"
+    params = (
+        Param("map_size", 1024, "shadow/penumbra map resolution over the occluders (as hard); "
+              "the penumbra map adds a border for the outer penumbra", min=16, max=16384),
+        Param("bias", 1.0, "constant depth bias in texels at the receiver (as hard); also the "
+              "fragment discard tolerance", min=0.0),
+        Param("slope_bias", 1.0, "slope-scaled bias: texels x tan(angle to light) (as hard)", min=0.0),
+        Param("smoothstep", "bernstein", "intensity falloff: bernstein 3I^2-2I^3 (paper) or linear",
+              choices=("bernstein", "linear")),
+        Param("silhouettes", "brute", "silhouette extraction: brute (per frame, the paper) or "
+              "adjacency (edge table built once)", choices=("brute", "adjacency")),
+        Param("cone_segments", 16, "triangles per cone", min=3, max=256),
+        Param("sheet_tolerance", 0.005, "split a sheet into ceil(q / tolerance) strips, q = how far it is "
+              "from a parallelogram, |(F1 - V1) - (F0 - V0)| / length (0: always sheet_max_subdiv)", min=0.0),
+        Param("sheet_max_subdiv", 16, "most strips per sheet", min=1, max=256),
+        Param("early_reject", True, "shorten/drop cones and sheets that can only produce discarded "
+              "fragments (same result, faster)"),
+    )
+
+    def run(self, ctx, map_size, bias, slope_bias, smoothstep, silhouettes, cone_segments, sheet_tolerance,
+            sheet_max_subdiv, early_reject):
+        scene = ctx.scene
+        lr = light_radius_of(scene.light)
+        pts, nrm, idx = ctx.points()
+        nrm = facing_normals(nrm, pts, scene.camera.eye)
+        with ctx.timer.phase("shadow_map"):
+            smp = shadow_map_pass(scene, map_size, lr)
+        pmap = render_penumbra_map(scene, smp, lr, silhouettes=silhouettes, smoothstep=smoothstep, bias=bias,
+                                   cone_segments=cone_segments, sheet_tolerance=sheet_tolerance,
+                                   sheet_max_subdiv=sheet_max_subdiv, early_reject=early_reject,
+                                   timer=ctx.timer)
+        with ctx.timer.phase("eye_pass"):
+            v, umbra = eye_pass(smp, pmap, pts, nrm, bias, slope_bias)
+            out = scatter(ctx, v, idx)
+        st = dict(pmap.stats)
+        st.update({
+            "map_size": map_size,
+            "penumbra_map_width": smp.view.width,
+            "penumbra_map_height": smp.view.height,
+            "border_texels": list(smp.border),
+            "border_clipped": smp.border_clipped,
+            "light_radius": lr,
+            "light_radius_equivalent": scene.light.shape != "sphere",
+            "umbra_pixels": int(umbra.sum()),
+            "penumbra_pixels": int(((v > 0) & (v < 1)).sum()),
+        })
+        return MethodOutput(out, st)

@@ -1,0 +1,62 @@
+"""Fragment programs for :func:`~softshadows.raster.rasterize_min_blend` (the rasterizer's
+equivalent of a GPU fragment program followed by MIN blending / a depth test on the output).
+
+A program maps one fragment to a value, or NaN to discard it:
+``value = run_program(program, params, a, s, z)`` with
+
+* ``a`` the fragment's perspective-correct interpolation of a per-triangle-corner attribute,
+* ``s`` the value of a per-pixel input image at the fragment's pixel (a texture read),
+* ``z`` the fragment's view depth,
+* ``params`` a small float64 array of uniforms.
+
+Programs are selected by an integer so that the tile kernel stays cacheable (Numba cannot cache
+kernels that take functions as arguments). Add a program here, give it a code, and dispatch it in
+:func:`run_program`.
+"""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+_JIT = dict(cache=True, fastmath=False, error_model="numpy")
+
+#: value = a (MIN-blend of an interpolated attribute); params unused
+PROGRAM_ATTRIBUTE = 0
+#: Wyman & Hansen 2003 penumbra intensity; params = (bias_texels, texel_scale, bernstein 0/1)
+PROGRAM_PENUMBRA = 1
+
+
+@njit(**_JIT)
+def smoothstep_bernstein(i):
+    """Parker et al.'s Bernstein interpolant 3 I^2 - 2 I^3."""
+    return i * i * (3.0 - 2.0 * i)
+
+
+@njit(**_JIT)
+def penumbra_intensity(zf, zv, zp, eps, bernstein):
+    """The penumbra map's fragment program (Wyman & Hansen 2003, Sec. 3) for one fragment:
+    I = (Z_F - Z_V) / (Z_P - Z_V) with ``zf`` the fragment depth, ``zv`` the interpolated silhouette
+    depth and ``zp`` the shadow-map surface depth (world-space view depths); clamped to [0, 1] and
+    optionally smoothstepped. Fragments on or behind the surface (tolerance ``eps``) are discarded:
+    the return value is then NaN."""
+    if not (zf < zp - eps):  # behind (or on) the shadow-map surface; also zp = +inf/NaN
+        return np.nan
+    den = zp - zv
+    if not (den > 0.0):
+        return np.nan
+    i = (zf - zv) / den
+    if i < 0.0:
+        i = 0.0
+    elif i > 1.0:
+        i = 1.0
+    if bernstein:
+        i = smoothstep_bernstein(i)
+    return i
+
+
+@njit(**_JIT)
+def run_program(program, params, a, s, z):
+    if program == PROGRAM_PENUMBRA:
+        eps = params[0] * params[1] * s
+        return penumbra_intensity(z, a, s, eps, params[2] != 0.0)
+    return a
