@@ -124,6 +124,98 @@ def _assert_exact_cover(view, V, F):
     assert len(fr) == npx
 
 
+def _edge_test_coverage(view, V, F):
+    """Reference coverage: every pixel center of every piece's bounding box tested against the
+    piece's three edge functions, pixel by pixel (the float64 expressions and the top-left rule of
+    the tile kernel), from the setup data of the rasterizer. Sorted (tri, pixel) pairs."""
+    from softshadows.raster import rasterizer as R
+
+    vp, W, H, verts, fcs, code, near = R._prepare(view, V, F, "none")
+    T, ntx, nty, bstart, bins, CB, CE, CZ, PL, NW, near = R._front_end(vp, W, H, verts, fcs, code, near)
+    pairs = []
+    for ct in np.unique(bins):
+        i0, i1, j0, j1 = CB[ct]
+        i, j = np.mgrid[i0:i1 + 1, j0:j1 + 1]
+        py = i + 0.5
+        px = j + 0.5
+        cov = np.ones(i.shape, bool)
+        for k in range(3):
+            ax, ay, dx, dy, sg, inc = CE[ct, k, :6]
+            r = dx * (py - ay)
+            e = sg * (r - dy * (px - ax))
+            cov &= ~((e < 0) | ((e == 0) & (inc == 0)))
+        t = ct >> 1
+        pairs += [(t, p) for p in (i[cov] * W + j[cov])]
+    return sorted(pairs)
+
+
+def _random_screen_triangles(rng, n, W, H, kind):
+    """Screen-space triangles (sx, sy) of various kinds."""
+    if kind == "grid":  # corners on pixel centers and pixel corners: edge functions exactly 0
+        xy = rng.integers(-4, 2 * W + 4, size=(n, 3, 2)) * 0.5
+    elif kind == "axis":  # axis-aligned edges (dy == 0 or dx == 0) through pixel centers
+        a = rng.integers(0, 2 * W, size=(n, 2)) * 0.5
+        b = a + rng.integers(-20, 21, size=(n, 2)) * 0.5
+        xy = np.stack([a, np.stack([b[:, 0], a[:, 1]], 1), np.stack([a[:, 0], b[:, 1]], 1)], 1)
+    elif kind == "sliver":  # long thin triangles
+        a = rng.uniform(-W, 2 * W, size=(n, 2))
+        d = rng.normal(size=(n, 2)) * 3 * W
+        xy = np.stack([a, a + d, a + d * 1.001 + rng.normal(size=(n, 2)) * 0.3], 1)
+    elif kind == "huge":  # edge functions far beyond 2^53 (rounded)
+        xy = rng.uniform(-1e7, 1e7, size=(n, 3, 2))
+        xy[: n // 4] *= 1e5
+        xy[:, 0] = rng.uniform(0, W, size=(n, 2))
+    else:
+        xy = rng.uniform(-5, W + 5, size=(n, 3, 2))
+    return xy.reshape(-1, 2)
+
+
+@pytest.mark.parametrize("kind", ["grid", "axis", "sliver", "huge", "random"])
+@pytest.mark.parametrize("ortho", [True, False])
+def test_span_coverage_equals_pixel_edge_tests(kind, ortho):
+    """The tile kernel finds each row's covered columns as one span: it must cover exactly the
+    pixels the per-pixel edge tests (with the top-left rule) accept, bit for bit."""
+    rng = np.random.default_rng(5 + len(kind))
+    W, H = 83, 61
+    n = 300
+    xy = _random_screen_triangles(rng, n, W, H, kind)
+    z = rng.uniform(1.0, 3.0, size=len(xy))
+    if ortho:
+        # view along +z with up +y: right = -x; window (0, W, 0, H): x = -sx, y = H - sy
+        V = np.stack([-xy[:, 0], H - xy[:, 1], z], 1)
+        view = View.frame([0, 0, 0], [0, 0, 1], [0, 1, 0], (0, W, 0, H), 0.0, 10.0, W, H, ortho=True)
+    else:
+        V = np.stack([(1 - 2 * xy[:, 0] / W) * z, (1 - 2 * xy[:, 1] / H) * z, z], 1)
+        view = View.frame([0, 0, 0], [0, 0, 1], [0, 1, 0], (-1, 1, -1, 1), 0.5, 10.0, W, H)
+    F = np.arange(len(xy), dtype=np.int64).reshape(-1, 3)
+    fr = rasterize_fragments(view, V, F)
+    got = sorted(zip(fr.tri.tolist(), fr.pixel.tolist()))
+    assert len(got) > 0
+    ref = _edge_test_coverage(view, V, F)
+    assert got == ref
+    # the pixel-by-pixel path of the kernel (for pieces whose edge functions might overflow)
+    from softshadows.raster import rasterizer as R
+
+    vp, W_, H_, verts, fcs, code, near = R._prepare(view, V, F, "none")
+    fe = R._front_end(vp, W_, H_, verts, fcs, code, near)
+    fe[7][:, 2] = 0.0  # CZ[:, 2]: no piece is "robust"
+    ntiles = fe[1] * fe[2]
+    fcount = np.empty(ntiles, dtype=np.int64)
+    R._run_tiles(R._M_FCOUNT, vp, fe, fcount=fcount)
+    foff = np.zeros(ntiles + 1, dtype=np.int64)
+    np.cumsum(fcount, out=foff[1:])
+    K = int(foff[-1])
+    fpix, ftri = np.empty(K, np.int64), np.empty(K, np.int32)
+    R._run_tiles(R._M_FFILL, vp, fe, fcount=fcount, foff=foff, fpix=fpix, ftri=ftri,
+                 fbary=np.empty((K, 2), np.float32), fdepth=np.empty(K, np.float32))
+    assert sorted(zip(ftri.tolist(), fpix.tolist())) == ref
+    # the depth-test paths see the same coverage
+    depth, tri = rasterize_depth(view, V, F)
+    covered = np.zeros(W * H, bool)
+    covered[fr.pixel] = True
+    assert np.array_equal(tri.ravel() >= 0, covered)
+
+
 @pytest.mark.parametrize("jitter", [0.0, 0.2])
 def test_tessellated_plane_perspective_exact_cover(jitter):
     rng = np.random.default_rng(1)

@@ -13,15 +13,27 @@ Pipeline (all Numba kernels on plain arrays; the functions at the bottom only or
 2. **binning**: per (chunk, tile) counts (during setup), prefix sum, fill pass (parallel over the same
    chunks); each tile's bin lists its pieces in increasing triangle index, so the result does not
    depend on the thread count.
-3. **tiles** (parallel over ``TILE`` x ``TILE`` pixel tiles): each tile is rasterized by one thread into
-   its own region of the outputs (no atomics). Coverage: pixel centers ``(j+0.5, i+0.5)``, float64 edge
-   functions evaluated from the edge's canonically ordered endpoints (a shared edge gives exactly
-   opposite values for the two triangles, always) and a top-left fill rule: a pixel center on a shared
-   edge or vertex belongs to exactly one triangle. With the 1/4096 px snap the edge functions are
-   exact (no rounding at all) for every piece whose bounding box is under 16384 px, and coverage
-   differs from the true triangle by at most 1/8192 px, so the exact plane depth is never
-   extrapolated noticeably (a coarser snap, e.g. 1/256 px, let back faces win the depth test on some
-   silhouette pixels). Either winding is rasterized.
+3. **tiles** (parallel over ``TILE`` x ``TILE`` pixel tiles; one kernel per mode, see
+   :func:`_make_tiles_kernel`): each tile is rasterized by one thread into its own region of the
+   outputs (no atomics). Coverage: pixel centers ``(j+0.5, i+0.5)``, float64 edge functions evaluated
+   from the edge's canonically ordered endpoints (a shared edge gives exactly opposite values for the
+   two triangles, always) and a top-left fill rule: a pixel center on a shared edge or vertex belongs
+   to exactly one triangle. With the 1/4096 px snap the edge functions are exact (no rounding at all)
+   for every piece whose bounding box is under 16384 px, and coverage differs from the true triangle
+   by at most 1/8192 px, so the exact plane depth is never extrapolated noticeably (a coarser snap,
+   e.g. 1/256 px, let back faces win the depth test on some silhouette pixels). Either winding is
+   rasterized.
+
+   The coverage test is not evaluated pixel by pixel (but for pieces whose edge functions could
+   overflow, ``_scan_run``): each float64 edge function is monotonic along a row (``px - ax``, the
+   product and the difference round monotonically), so a row's covered columns
+   are one span, whose ends are the real zero crossings of the edge functions when these are farther
+   than a proven rounding margin from an integer column (``_fast_bound``, vectorized over the tile's
+   rows) and are otherwise found by evaluating the exact test at the boundary columns
+   (``_edge_span``): the coverage is bit for bit that of the per-pixel test. Depth, G-buffer and
+   count modes then evaluate the whole tile row at once (vectorized, masked to the span); the bins list
+   a tile's pieces in increasing triangle index, so the depth tie rule (equal depth: the smaller
+   index wins) is "strictly nearer wins".
 
 Depth is the view-space z (distance along ``forward``, world units) for both perspective and
 orthographic views; the depth test runs in float64 and the outputs are float32.
@@ -48,6 +60,7 @@ _CULL = {"none": 0, "back": 1, "front": 2}
 
 # modes of the tile kernel
 _M_DEPTH, _M_GBUF, _M_FCOUNT, _M_FFILL, _M_MINBLEND = 0, 1, 2, 3, 4
+_VEC4_MIN_SPAN = 6  #: min-blend: spans at least this long run the vectorized whole-row loop
 
 
 # ----------------------------------------------------------------------------------------------
@@ -66,27 +79,61 @@ def _clip_point(xi, yi, zi, xo, yo, zo, near):
     return xi + s * (xo - xi), yi + s * (yo - yi), near
 
 
+# CE[slot, k, :] per edge k of a piece: the edge function's data (ax, ay, dx, dy, sg, inK: see
+# _store_edge) and the data of the per-row span search (see _edge_span): 1/dy (0 if dy == 0),
+# ax - 0.5, the margin M of the fast path and the kind of bound (1: the edge bounds the covered
+# columns from above, -1: from below, 0: dy == 0, the edge passes or rejects whole rows).
+_CE_W = 10
+_U = 2.0 ** -53  # unit roundoff of float64
+_ROBUST = 1e150  # coordinates below this never overflow the edge functions (no inf - inf = NaN)
+
+
 @njit(**_JIT)
-def _store_edge(CE, slot, k, ax, ay, bx, by):
+def _store_edge(CE, slot, k, ax, ay, bx, by, ext_x, ext_y):
     """Directed edge a->b of a positively oriented piece; inside is E >= 0 with
-    E(p) = cross(b - a, p - a), evaluated from the canonically ordered endpoints."""
+    E(p) = cross(b - a, p - a), evaluated from the canonically ordered endpoints.
+    ext_x, ext_y: the extents of the piece's bounding box (for the span-search margin)."""
     if ax < bx or (ax == bx and ay < by):
-        CE[slot, k, 0] = ax
-        CE[slot, k, 1] = ay
-        CE[slot, k, 2] = bx - ax
-        CE[slot, k, 3] = by - ay
-        CE[slot, k, 4] = 1.0
+        cax = ax
+        cay = ay
+        cdx = bx - ax
+        cdy = by - ay
+        sg = 1.0
     else:
-        CE[slot, k, 0] = bx
-        CE[slot, k, 1] = by
-        CE[slot, k, 2] = ax - bx
-        CE[slot, k, 3] = ay - by
-        CE[slot, k, 4] = -1.0
+        cax = bx
+        cay = by
+        cdx = ax - bx
+        cdy = ay - by
+        sg = -1.0
+    CE[slot, k, 0] = cax
+    CE[slot, k, 1] = cay
+    CE[slot, k, 2] = cdx
+    CE[slot, k, 3] = cdy
+    CE[slot, k, 4] = sg
     ddx = bx - ax
     ddy = by - ay
     # top-left rule (y down): top edges (horizontal, going right) and left edges (going up) own
     # the pixel centers lying exactly on them. Opposite directions never both qualify.
     CE[slot, k, 5] = 1.0 if (ddy < 0.0 or (ddy == 0.0 and ddx > 0.0)) else 0.0
+    # span search: e(j) = sg * (r - dy * (j + 0.5 - ax)), r = dx * (i + 0.5 - ay), crosses zero at
+    # the real column j* = ax - 0.5 + r / dy, computed as x = (ax - 0.5) + r * (1/dy). With
+    # K = |dx| * (ext_y + 1) / |dy|, a = |j + 0.5 - ax| <= ext_x + 1 and b = |i + 0.5 - ay| <= ext_y + 1
+    # for the columns and rows searched: the rounding error of e (float64) is at most
+    # 3.01u (|dx| b + |dy| a), i.e. e has the sign of the exact value wherever
+    # |j - j*| > m = 3.01u (K + ext_x + 1), and |x - j*| <= 2.02u (|ax| + 0.5) + 5.03u K. So if the
+    # fraction of x is farther than M >= m + |x - j*| from 0 and 1, floor(x) is the exact boundary
+    # column of the float64 edge test; otherwise the kernel evaluates the test itself.
+    if cdy != 0.0:
+        inv = 1.0 / cdy
+        K = abs(cdx) * (ext_y + 1.0) * abs(inv)
+        CE[slot, k, 6] = inv
+        CE[slot, k, 8] = 16.0 * _U * (K + ext_x + 1.0 + abs(cax) + 1.0) + 1e-9
+        CE[slot, k, 9] = 1.0 if sg * cdy > 0.0 else -1.0
+    else:
+        CE[slot, k, 6] = 0.0
+        CE[slot, k, 8] = 1.0
+        CE[slot, k, 9] = 0.0
+    CE[slot, k, 7] = cax - 0.5
 
 
 @njit(**_JIT)
@@ -133,9 +180,18 @@ def _setup_piece(vp, slot, x0, y0, z0, x1, y1, z1, x2, y2, z2, far, CB, CE, CZ):
     CB[slot, 3] = int(fj1)
     CZ[slot, 0] = zmin
     CZ[slot, 1] = zmax
-    _store_edge(CE, slot, 0, sx0, sy0, sx1, sy1)
-    _store_edge(CE, slot, 1, sx1, sy1, sx2, sy2)
-    _store_edge(CE, slot, 2, sx2, sy2, sx0, sy0)
+    ext_x = xmax - xmin
+    ext_y = ymax - ymin
+    _store_edge(CE, slot, 0, sx0, sy0, sx1, sy1, ext_x, ext_y)
+    _store_edge(CE, slot, 1, sx1, sy1, sx2, sy2, ext_x, ext_y)
+    _store_edge(CE, slot, 2, sx2, sy2, sx0, sy0, ext_x, ext_y)
+    # robust: no edge function can overflow, so each is monotonic in the column (never NaN) and the
+    # covered columns of a row are one span; otherwise the tile kernel tests pixel by pixel
+    big = 0.0
+    for k in range(3):
+        for c in range(4):
+            big = max(big, abs(CE[slot, k, c]))
+    CZ[slot, 2] = 1.0 if big < _ROBUST else 0.0
     return 1
 
 
@@ -314,15 +370,16 @@ def _bin_fill(NC, CB, T, ntx, chunk, off, bins):
 # tiles
 # ----------------------------------------------------------------------------------------------
 @njit(**_JIT)
-def _bary(PL, t, xw, yw, z, ortho):
-    """Barycentrics (b1, b2) of the original triangle t at the plane point seen through window
-    coordinates (xw, yw) at depth z; clamped into the triangle (guards snapped-edge extrapolation)."""
+def _bary_c(q4, q5, q6, q7, q8, q9, q10, q11, xw, yw, z, ortho):
+    """Barycentrics (b1, b2) of the original triangle t (q4..q11 = PL[t, 4:12]) at the plane point
+    seen through window coordinates (xw, yw) at depth z; clamped into the triangle (guards
+    snapped-edge extrapolation)."""
     if ortho:
-        b1 = PL[t, 4] * xw + PL[t, 5] * yw + PL[t, 6] * z - PL[t, 7]
-        b2 = PL[t, 8] * xw + PL[t, 9] * yw + PL[t, 10] * z - PL[t, 11]
+        b1 = q4 * xw + q5 * yw + q6 * z - q7
+        b2 = q8 * xw + q9 * yw + q10 * z - q11
     else:
-        b1 = z * (PL[t, 4] * xw + PL[t, 5] * yw + PL[t, 6]) - PL[t, 7]
-        b2 = z * (PL[t, 8] * xw + PL[t, 9] * yw + PL[t, 10]) - PL[t, 11]
+        b1 = z * (q4 * xw + q5 * yw + q6) - q7
+        b2 = z * (q8 * xw + q9 * yw + q10) - q11
     if not (b1 > 0.0):
         b1 = 0.0
     if not (b2 > 0.0):
@@ -334,219 +391,557 @@ def _bary(PL, t, xw, yw, z, ortho):
     return b1, b2
 
 
-@njit(parallel=True, **_JIT)
-def _raster_tiles(mode, vp, near, T, ntx, nty, bstart, bins, CB, CE, CZ, PL, NW, scratch,
-                  depth_out, tri_out, pos_out, nrm_out, bary_out, mask_out,
-                  fcount, foff, fpix, ftri, fbary, fdepth,
-                  program, pparams, cattr, img, blend, bstats, split):
-    """mode 0: depth + tri; 1: full G-buffer; 2: count fragments per tile; 3: write fragments;
-    4: run a fragment program per fragment and MIN-blend its value into ``blend`` (bstats[tile] =
-    fragments and kept fragments for triangles below / from ``split``)."""
-    W = int(vp[18])
-    H = int(vp[19])
-    ortho = vp[20] != 0.0
-    far = vp[17]
-    wl = vp[12]
-    wt = vp[15]
-    wsx = (vp[13] - vp[12]) / vp[18]  # window units per pixel
-    wsy = (vp[15] - vp[14]) / vp[19]
-    ntiles = ntx * nty
-    for tile in prange(ntiles):
-        ty = tile // ntx
-        tx = tile - ty * ntx
-        y0 = ty * T
-        x0 = tx * T
-        y1 = min(y0 + T, H) - 1
-        x1 = min(x0 + T, W) - 1
-        zb = scratch[numba.get_thread_id()]
-        if mode <= 1:
-            for i in range(y0, y1 + 1):
-                for j in range(x0, x1 + 1):
-                    zb[i - y0, j - x0] = np.inf
-                    tri_out[i, j] = -1
-        nfrag = 0
-        w = 0
-        if mode == 3:
-            w = foff[tile]
-        elif mode == 4:
-            for i in range(y0, y1 + 1):
-                for j in range(x0, x1 + 1):
-                    zb[i - y0, j - x0] = blend[i, j]
-        for bi in range(bstart[tile], bstart[tile + 1]):
-            ct = bins[bi]
-            t = ct >> 1
-            i0 = max(CB[ct, 0], y0)
-            i1 = min(CB[ct, 1], y1)
-            j0 = max(CB[ct, 2], x0)
-            j1 = min(CB[ct, 3], x1)
-            if i0 > i1 or j0 > j1:
-                continue
-            ax0 = CE[ct, 0, 0]
-            ay0 = CE[ct, 0, 1]
-            dx0 = CE[ct, 0, 2]
-            dy0 = CE[ct, 0, 3]
-            sg0 = CE[ct, 0, 4]
-            in0 = CE[ct, 0, 5] != 0.0
-            ax1 = CE[ct, 1, 0]
-            ay1 = CE[ct, 1, 1]
-            dx1 = CE[ct, 1, 2]
-            dy1 = CE[ct, 1, 3]
-            sg1 = CE[ct, 1, 4]
-            in1 = CE[ct, 1, 5] != 0.0
-            ax2 = CE[ct, 2, 0]
-            ay2 = CE[ct, 2, 1]
-            dx2 = CE[ct, 2, 2]
-            dy2 = CE[ct, 2, 3]
-            sg2 = CE[ct, 2, 4]
-            in2 = CE[ct, 2, 5] != 0.0
-            # conservative whole-rectangle tests (edge functions are affine: extremes at corners)
-            full = False
-            if (i1 - i0 + 1) * (j1 - j0 + 1) > 16:
-                full = True
-                reject = False
-                pa = i0 + 0.5
-                pb = i1 + 0.5
-                qa = j0 + 0.5
-                qb = j1 + 0.5
-                for k in range(3):
-                    ax = CE[ct, k, 0]
-                    ay = CE[ct, k, 1]
-                    dx = CE[ct, k, 2]
-                    dy = CE[ct, k, 3]
-                    sg = CE[ct, k, 4]
-                    e00 = sg * (dx * (pa - ay) - dy * (qa - ax))
-                    e01 = sg * (dx * (pa - ay) - dy * (qb - ax))
-                    e10 = sg * (dx * (pb - ay) - dy * (qa - ax))
-                    e11 = sg * (dx * (pb - ay) - dy * (qb - ax))
-                    emin = min(min(e00, e01), min(e10, e11))
-                    emax = max(max(e00, e01), max(e10, e11))
-                    thr = 1e-12 * (abs(dx) + abs(dy)) * (abs(ax) + abs(ay) + W + H + 1.0)
-                    if emax < -thr:
-                        reject = True
-                        break
-                    if emin <= thr:
-                        full = False
-                if reject:
-                    continue
-            # sanity bounds for the plane depth of this piece's pixels: the snapped coverage may
-            # extrapolate the plane a fraction of a pixel beyond the true triangle, which near the
-            # plane's horizon or for edge-on triangles can give huge, negative or NaN depths
-            zmin = CZ[ct, 0]
-            zmax = CZ[ct, 1]
-            if ortho:
-                zlo = zmin - (zmax - zmin) - 1e-9 * (abs(zmin) + abs(zmax))
-                zhi = zmax + (zmax - zmin) + 1e-9 * (abs(zmin) + abs(zmax))
+@njit(**_JIT)
+def _edge_in(r, ax, dy, sg, inc, j):
+    """The coverage test of one edge at column j (r = dx * (i + 0.5 - ay) of the row): the pixel
+    center is outside if e < 0, or e == 0 on an edge that does not own it (top-left rule)."""
+    e = sg * (r - dy * ((j + 0.5) - ax))
+    return not (e < 0.0 or (e == 0.0 and not inc))
+
+
+@njit(**_JIT)
+def _covered(j, r0, ax0, dy0, sg0, in0, r1, ax1, dy1, sg1, in1, r2, ax2, dy2, sg2, in2):
+    return (_edge_in(r0, ax0, dy0, sg0, in0, j) and _edge_in(r1, ax1, dy1, sg1, in1, j)
+            and _edge_in(r2, ax2, dy2, sg2, in2, j))
+
+
+@njit(**_JIT)
+def _edge_span(lo, hi, j0, j1, r, ax, dy, sg, inc, inv, c0, M, kind):
+    """Intersect the column span [lo, hi] of a row with the columns of [j0, j1] that pass the test of
+    one edge, exactly as :func:`_edge_in` decides them (which is monotonic in j: px - ax, the product
+    and the difference are rounded monotonically, so the passing columns are a prefix (kind 1) or a
+    suffix (kind -1) of the row, or all or none of it (kind 0, dy == 0)). The boundary comes from
+    the real crossing x; when x lies within the margin M of an integer, the test itself is evaluated
+    at the boundary columns (stepping until exact)."""
+    if kind == 0.0:
+        if not _edge_in(r, ax, dy, sg, inc, j0):
+            return j1 + 1, j1
+        return lo, hi
+    x = c0 + r * inv
+    fx = np.floor(x)
+    f = x - fx
+    fast = f > M and f < 1.0 - M
+    if kind > 0.0:
+        # largest c in [j0 - 1, j1] such that every column of [j0, c] passes
+        if not (fx >= j0 - 1.0):
+            c = j0 - 1
+        elif fx > j1:
+            c = j1
+        else:
+            c = int(fx)
+        if not fast:
+            if c >= j0 and not _edge_in(r, ax, dy, sg, inc, c):
+                c -= 1
+                while c >= j0 and not _edge_in(r, ax, dy, sg, inc, c):
+                    c -= 1
             else:
-                zlo = 0.5 * zmin
-                zhi = 2.0 * zmax
-            if zlo < near:
-                zlo = near
-            pnx = PL[t, 0]
-            pny = PL[t, 1]
-            pnz = PL[t, 2]
-            pd = PL[t, 3]
-            for i in range(i0, i1 + 1):
-                py = i + 0.5
-                yw = wt - py * wsy
+                while c < j1 and _edge_in(r, ax, dy, sg, inc, c + 1):
+                    c += 1
+        if c < hi:
+            hi = c
+    else:
+        # smallest c in [j0, j1 + 1] such that every column of [c, j1] passes
+        fx += 1.0
+        if not (fx >= j0):
+            c = j0
+        elif fx > j1 + 1.0:
+            c = j1 + 1
+        else:
+            c = int(fx)
+        if not fast:
+            if c <= j1 and not _edge_in(r, ax, dy, sg, inc, c):
+                c += 1
+                while c <= j1 and not _edge_in(r, ax, dy, sg, inc, c):
+                    c += 1
+            else:
+                while c > j0 and _edge_in(r, ax, dy, sg, inc, c - 1):
+                    c -= 1
+        if c > lo:
+            lo = c
+    return lo, hi
+
+
+@njit(**_JIT)
+def _fast_bound(lo, hi, slow, py, j0, j1, ax, ay, dx, dy, sg, inc, inv, c0, M, kind):
+    """One edge's bound of the covered columns [lo, hi] of the row at py by the fast path of
+    :func:`_edge_span` (branch-free, so that the loop over a tile's rows vectorizes); slow is set
+    where the fast path does not apply (the row must then be searched with :func:`_edge_span`)."""
+    r = dx * (py - ay)
+    x = c0 + r * inv
+    fx = np.floor(x)
+    f = x - fx
+    near_int = not (f > M and f < 1.0 - M)
+    cu = int(min(max(fx, j0 - 1.0), j1 + 0.0))
+    cl = int(min(max(fx + 1.0, j0 + 0.0), j1 + 1.0))
+    e = sg * (r - dy * ((j0 + 0.5) - ax))  # kind 0 (dy == 0): the same test for every column
+    rej = e < 0.0 or (e == 0.0 and not inc)
+    if kind > 0.0:
+        hi = min(hi, cu)
+        slow = slow | near_int
+    elif kind < 0.0:
+        lo = max(lo, cl)
+        slow = slow | near_int
+    elif rej:
+        lo = j1 + 1
+    return lo, hi, slow
+
+
+@njit(**_JIT)
+def _scan_run(js, j1, r0, ax0, dy0, sg0, in0, r1, ax1, dy1, sg1, in1, r2, ax2, dy2, sg2, in2):
+    """Next run [lo, hi] of covered columns at or after js, testing pixel by pixel (lo > hi: none);
+    for the pieces whose edge functions might overflow."""
+    j = js
+    while j <= j1 and not _covered(j, r0, ax0, dy0, sg0, in0, r1, ax1, dy1, sg1, in1, r2, ax2, dy2, sg2, in2):
+        j += 1
+    lo = j
+    while j <= j1 and _covered(j, r0, ax0, dy0, sg0, in0, r1, ax1, dy1, sg1, in1, r2, ax2, dy2, sg2, in2):
+        j += 1
+    return lo, j - 1
+
+
+def _make_tiles_kernel(mode):
+    """The tile kernel for one mode (a constant of the closure: each kernel compiles only its own
+    mode's code, which keeps the register allocation of the hot loops clean)."""
+
+    @njit(parallel=True, **_JIT)
+    def tiles(vp, near, T, ntx, nty, bstart, bins, CB, CE, CZ, PL, NW, scratch, tscratch, iscratch, fscratch,
+               depth_out, tri_out, pos_out, nrm_out, bary_out, mask_out, fcount, foff, fpix, ftri, fbary,
+               fdepth, program, pparams, cattr, img, blend, bstats, split):
+        """mode 0: depth + tri; 1: full G-buffer; 2: count fragments per tile; 3: write fragments;
+        4: run a fragment program per fragment and MIN-blend its value into ``blend`` (bstats[tile] =
+        fragments and kept fragments for triangles below / from ``split``).
+
+        Per piece and row, the covered columns are one span [lo, hi], found exactly from the three edge
+        functions (:func:`_edge_span`); depth/G-buffer modes then run the depth of the whole tile row
+        (vectorized) and keep the span's columns that pass the depth test. Bins list a tile's pieces in
+        increasing triangle index, so the tie rule (equal depth: smaller index wins) is "strictly less
+        wins"."""
+        W = int(vp[18])
+        H = int(vp[19])
+        ortho = vp[20] != 0.0
+        far = vp[17]
+        wl = vp[12]
+        wt = vp[15]
+        wsx = (vp[13] - vp[12]) / vp[18]  # window units per pixel
+        wsy = (vp[15] - vp[14]) / vp[19]
+        for tile in prange(ntx * nty):
+            ty = tile // ntx
+            tx = tile - ty * ntx
+            y0 = ty * T
+            x0 = tx * T
+            y1 = min(y0 + T, H) - 1
+            x1 = min(x0 + T, W) - 1
+            tid = numba.get_thread_id()
+            zb = scratch[tid]
+            tb = tscratch[tid]
+            LO = iscratch[tid, 0]
+            HI = iscratch[tid, 1]
+            EX = iscratch[tid, 2]
+            ib = fscratch[tid]
+            if mode <= 1:
+                for li in range(T):
+                    zr = zb[li]
+                    tr = tb[li]
+                    for k in range(zr.shape[0]):
+                        zr[k] = np.inf
+                        tr[k] = -1
+            nfrag = 0
+            w = 0
+            na = 0
+            nb = 0
+            ka = 0
+            kb = 0
+            if mode == 3:
+                w = foff[tile]
+            elif mode == 4:
+                for i in range(y0, y1 + 1):
+                    zr = zb[i - y0]
+                    imr = ib[i - y0]
+                    brow = blend[i, x0:x1 + 1]
+                    irow = img[i, x0:x1 + 1]
+                    for k in range(brow.shape[0]):
+                        zr[k] = brow[k]
+                        imr[k] = irow[k]
+            for bi in range(bstart[tile], bstart[tile + 1]):
+                ct = bins[bi]
+                t = ct >> 1
+                i0 = max(CB[ct, 0], y0)
+                i1 = min(CB[ct, 1], y1)
+                j0 = max(CB[ct, 2], x0)
+                j1 = min(CB[ct, 3], x1)
+                if i0 > i1 or j0 > j1:
+                    continue
+                ax0 = CE[ct, 0, 0]
+                ay0 = CE[ct, 0, 1]
+                dx0 = CE[ct, 0, 2]
+                dy0 = CE[ct, 0, 3]
+                sg0 = CE[ct, 0, 4]
+                in0 = CE[ct, 0, 5] != 0.0
+                ax1 = CE[ct, 1, 0]
+                ay1 = CE[ct, 1, 1]
+                dx1 = CE[ct, 1, 2]
+                dy1 = CE[ct, 1, 3]
+                sg1 = CE[ct, 1, 4]
+                in1 = CE[ct, 1, 5] != 0.0
+                ax2 = CE[ct, 2, 0]
+                ay2 = CE[ct, 2, 1]
+                dx2 = CE[ct, 2, 2]
+                dy2 = CE[ct, 2, 3]
+                sg2 = CE[ct, 2, 4]
+                in2 = CE[ct, 2, 5] != 0.0
+                # conservative whole-rectangle tests (edge functions are affine: extremes at corners)
+                full = False
+                if (i1 - i0 + 1) * (j1 - j0 + 1) > 16:
+                    full = True
+                    reject = False
+                    pa = i0 + 0.5
+                    pb = i1 + 0.5
+                    qa = j0 + 0.5
+                    qb = j1 + 0.5
+                    for k in range(3):
+                        ax = CE[ct, k, 0]
+                        ay = CE[ct, k, 1]
+                        dx = CE[ct, k, 2]
+                        dy = CE[ct, k, 3]
+                        sg = CE[ct, k, 4]
+                        e00 = sg * (dx * (pa - ay) - dy * (qa - ax))
+                        e01 = sg * (dx * (pa - ay) - dy * (qb - ax))
+                        e10 = sg * (dx * (pb - ay) - dy * (qa - ax))
+                        e11 = sg * (dx * (pb - ay) - dy * (qb - ax))
+                        emin = min(min(e00, e01), min(e10, e11))
+                        emax = max(max(e00, e01), max(e10, e11))
+                        thr = 1e-12 * (abs(dx) + abs(dy)) * (abs(ax) + abs(ay) + W + H + 1.0)
+                        if emax < -thr:
+                            reject = True
+                            break
+                        if emin <= thr:
+                            full = False
+                    if reject:
+                        continue
+                robust = CZ[ct, 2] != 0.0
+                iv0 = CE[ct, 0, 6]
+                c00 = CE[ct, 0, 7]
+                M0 = CE[ct, 0, 8]
+                k0 = CE[ct, 0, 9]
+                iv1 = CE[ct, 1, 6]
+                c01 = CE[ct, 1, 7]
+                M1 = CE[ct, 1, 8]
+                k1 = CE[ct, 1, 9]
+                iv2 = CE[ct, 2, 6]
+                c02 = CE[ct, 2, 7]
+                M2 = CE[ct, 2, 8]
+                k2 = CE[ct, 2, 9]
+                # sanity bounds for the plane depth of this piece's pixels: the snapped coverage may
+                # extrapolate the plane a fraction of a pixel beyond the true triangle, which near the
+                # plane's horizon or for edge-on triangles can give huge, negative or NaN depths
+                zmin = CZ[ct, 0]
+                zmax = CZ[ct, 1]
                 if ortho:
-                    zrow = pd - pny * yw
+                    zlo = zmin - (zmax - zmin) - 1e-9 * (abs(zmin) + abs(zmax))
+                    zhi = zmax + (zmax - zmin) + 1e-9 * (abs(zmin) + abs(zmax))
                 else:
-                    zrow = pny * yw + pnz
-                r0 = dx0 * (py - ay0)
-                r1 = dx1 * (py - ay1)
-                r2 = dx2 * (py - ay2)
-                for j in range(j0, j1 + 1):
-                    px = j + 0.5
-                    if not full:
-                        e = sg0 * (r0 - dy0 * (px - ax0))
-                        if e < 0.0 or (e == 0.0 and not in0):
-                            continue
-                        e = sg1 * (r1 - dy1 * (px - ax1))
-                        if e < 0.0 or (e == 0.0 and not in1):
-                            continue
-                        e = sg2 * (r2 - dy2 * (px - ax2))
-                        if e < 0.0 or (e == 0.0 and not in2):
-                            continue
-                    xw = wl + px * wsx
+                    zlo = 0.5 * zmin
+                    zhi = 2.0 * zmax
+                if zlo < near:
+                    zlo = near
+                pnx = PL[t, 0]
+                pny = PL[t, 1]
+                pnz = PL[t, 2]
+                pd = PL[t, 3]
+                q4 = PL[t, 4]
+                q5 = PL[t, 5]
+                q6 = PL[t, 6]
+                q7 = PL[t, 7]
+                q8 = PL[t, 8]
+                q9 = PL[t, 9]
+                q10 = PL[t, 10]
+                q11 = PL[t, 11]
+                if robust and not full:
+                    # the spans of all the tile's rows at once (vectorizes)
+                    for k in range(LO.shape[0]):
+                        py = (y0 + k) + 0.5
+                        lo, hi, slow = _fast_bound(j0, j1, False, py, j0, j1, ax0, ay0, dx0, dy0, sg0, in0,
+                                                   iv0, c00, M0, k0)
+                        lo, hi, slow = _fast_bound(lo, hi, slow, py, j0, j1, ax1, ay1, dx1, dy1, sg1, in1,
+                                                   iv1, c01, M1, k1)
+                        lo, hi, slow = _fast_bound(lo, hi, slow, py, j0, j1, ax2, ay2, dx2, dy2, sg2, in2,
+                                                   iv2, c02, M2, k2)
+                        LO[k] = lo
+                        HI[k] = hi
+                        EX[k] = slow
+                r0 = 0.0
+                r1 = 0.0
+                r2 = 0.0
+                ca0 = 0.0
+                ca1 = 0.0
+                ca2 = 0.0
+                side_a = t < split
+                if mode == 4:
+                    ca0 = cattr[t, 0]
+                    ca1 = cattr[t, 1]
+                    ca2 = cattr[t, 2]
+                for i in range(i0, i1 + 1):
+                    py = i + 0.5
+                    yw = wt - py * wsy
                     if ortho:
-                        z = (zrow - pnx * xw) / pnz
+                        zrow = pd - pny * yw
                     else:
-                        z = pd / (pnx * xw + zrow)
-                    if not (z >= zlo):  # also catches NaN (edge-on planes)
-                        z = zlo
-                    elif z > zhi:
-                        z = zhi
-                    if z > far:
-                        continue
-                    if mode <= 1:
-                        li = i - y0
-                        lj = j - x0
-                        zc = zb[li, lj]
-                        if z < zc or (z == zc and t < tri_out[i, j]):
-                            zb[li, lj] = z
-                            tri_out[i, j] = t
-                    elif mode == 2:
-                        nfrag += 1
-                    elif mode == 4:
-                        b1, b2 = _bary(PL, t, xw, yw, z, ortho)
-                        a = (1.0 - b1 - b2) * cattr[t, 0] + b1 * cattr[t, 1] + b2 * cattr[t, 2]
-                        val = run_program(program, pparams, a, img[i, j], z)
-                        side = 0 if t < split else 1
-                        bstats[tile, side] += 1
-                        if val == val:  # not discarded (NaN)
-                            bstats[tile, 2 + side] += 1
-                            li = i - y0
-                            lj = j - x0
-                            if val < zb[li, lj]:
-                                zb[li, lj] = val
+                        zrow = pny * yw + pnz
+                    li = i - y0
+                    if full:
+                        lo = j0
+                        hi = j1
+                    elif robust:
+                        lo = LO[li]
+                        hi = HI[li]
+                        if EX[li] != 0:
+                            r0 = dx0 * (py - ay0)
+                            r1 = dx1 * (py - ay1)
+                            r2 = dx2 * (py - ay2)
+                            lo, hi = _edge_span(j0, j1, j0, j1, r0, ax0, dy0, sg0, in0, iv0, c00, M0, k0)
+                            lo, hi = _edge_span(lo, hi, j0, j1, r1, ax1, dy1, sg1, in1, iv1, c01, M1, k1)
+                            lo, hi = _edge_span(lo, hi, j0, j1, r2, ax2, dy2, sg2, in2, iv2, c02, M2, k2)
+                        if lo > hi:
+                            continue
                     else:
-                        b1, b2 = _bary(PL, t, xw, yw, z, ortho)
-                        fpix[w] = i * W + j
-                        ftri[w] = t
-                        fbary[w, 0] = b1
-                        fbary[w, 1] = b2
-                        fdepth[w] = z
-                        w += 1
-        if mode == 0:
-            for i in range(y0, y1 + 1):
-                for j in range(x0, x1 + 1):
-                    depth_out[i, j] = zb[i - y0, j - x0]
-        elif mode == 1:
-            for i in range(y0, y1 + 1):
-                yw = wt - (i + 0.5) * wsy
-                for j in range(x0, x1 + 1):
-                    t = tri_out[i, j]
-                    if t < 0:
-                        depth_out[i, j] = np.inf
-                        mask_out[i, j] = False
-                        for c in range(3):
-                            pos_out[i, j, c] = np.nan
-                            nrm_out[i, j, c] = np.nan
-                        bary_out[i, j, 0] = np.nan
-                        bary_out[i, j, 1] = np.nan
-                        continue
-                    z = zb[i - y0, j - x0]
-                    xw = wl + (j + 0.5) * wsx
-                    b1, b2 = _bary(PL, t, xw, yw, z, ortho)
+                        r0 = dx0 * (py - ay0)
+                        r1 = dx1 * (py - ay1)
+                        r2 = dx2 * (py - ay2)
+                        lo, hi = _scan_run(j0, j1, r0, ax0, dy0, sg0, in0, r1, ax1, dy1, sg1, in1,
+                                           r2, ax2, dy2, sg2, in2)
+                    while lo <= hi:
+                        if mode <= 2:
+                            # the whole tile row at once (vectorizes), masked to the span
+                            zr = zb[li]
+                            tr = tb[li]
+                            klo = lo - x0
+                            khi = hi - x0
+                            if mode == 2:
+                                cnt = 0
+                                if ortho:
+                                    for k in range(zr.shape[0]):
+                                        xw = wl + ((x0 + k) + 0.5) * wsx
+                                        z = (zrow - pnx * xw) / pnz
+                                        if not (z >= zlo):
+                                            z = zlo
+                                        elif z > zhi:
+                                            z = zhi
+                                        cnt += (k >= klo) & (k <= khi) & (not (z > far))
+                                else:
+                                    for k in range(zr.shape[0]):
+                                        xw = wl + ((x0 + k) + 0.5) * wsx
+                                        z = pd / (pnx * xw + zrow)
+                                        if not (z >= zlo):
+                                            z = zlo
+                                        elif z > zhi:
+                                            z = zhi
+                                        cnt += (k >= klo) & (k <= khi) & (not (z > far))
+                                nfrag += cnt
+                            elif ortho:
+                                for k in range(zr.shape[0]):
+                                    xw = wl + ((x0 + k) + 0.5) * wsx
+                                    z = (zrow - pnx * xw) / pnz
+                                    if not (z >= zlo):
+                                        z = zlo
+                                    elif z > zhi:
+                                        z = zhi
+                                    zc = zr[k]
+                                    take = (k >= klo) & (k <= khi) & (not (z > far)) & (z < zc)
+                                    zr[k] = z if take else zc
+                                    tr[k] = t if take else tr[k]
+                            else:
+                                for k in range(zr.shape[0]):
+                                    xw = wl + ((x0 + k) + 0.5) * wsx
+                                    z = pd / (pnx * xw + zrow)
+                                    if not (z >= zlo):
+                                        z = zlo
+                                    elif z > zhi:
+                                        z = zhi
+                                    zc = zr[k]
+                                    take = (k >= klo) & (k <= khi) & (not (z > far)) & (z < zc)
+                                    zr[k] = z if take else zc
+                                    tr[k] = t if take else tr[k]
+                        elif mode == 4 and hi - lo + 1 >= _VEC4_MIN_SPAN:
+                            # the whole tile row at once (vectorizes: no branches to mispredict); short
+                            # spans are cheaper pixel by pixel (below)
+                            zr = zb[li]
+                            imr = ib[li]
+                            klo = lo - x0
+                            khi = hi - x0
+                            nf = 0
+                            nk = 0
+                            if ortho:
+                                for k in range(zr.shape[0]):
+                                    xw = wl + ((x0 + k) + 0.5) * wsx
+                                    z = (zrow - pnx * xw) / pnz
+                                    if not (z >= zlo):
+                                        z = zlo
+                                    elif z > zhi:
+                                        z = zhi
+                                    b1, b2 = _bary_c(q4, q5, q6, q7, q8, q9, q10, q11, xw, yw, z, True)
+                                    a = (1.0 - b1 - b2) * ca0 + b1 * ca1 + b2 * ca2
+                                    val = run_program(program, pparams, a, imr[k], z)
+                                    inside = (k >= klo) & (k <= khi) & (not (z > far))
+                                    kept = inside & (val == val)
+                                    nf += inside
+                                    nk += kept
+                                    zc = zr[k]
+                                    zr[k] = val if (kept & (val < zc)) else zc
+                            else:
+                                for k in range(zr.shape[0]):
+                                    xw = wl + ((x0 + k) + 0.5) * wsx
+                                    z = pd / (pnx * xw + zrow)
+                                    if not (z >= zlo):
+                                        z = zlo
+                                    elif z > zhi:
+                                        z = zhi
+                                    b1, b2 = _bary_c(q4, q5, q6, q7, q8, q9, q10, q11, xw, yw, z, False)
+                                    a = (1.0 - b1 - b2) * ca0 + b1 * ca1 + b2 * ca2
+                                    val = run_program(program, pparams, a, imr[k], z)
+                                    inside = (k >= klo) & (k <= khi) & (not (z > far))
+                                    kept = inside & (val == val)
+                                    nf += inside
+                                    nk += kept
+                                    zc = zr[k]
+                                    zr[k] = val if (kept & (val < zc)) else zc
+                            if side_a:
+                                na += nf
+                                ka += nk
+                            else:
+                                nb += nf
+                                kb += nk
+                        else:
+                            for j in range(lo, hi + 1):
+                                xw = wl + (j + 0.5) * wsx
+                                if ortho:
+                                    z = (zrow - pnx * xw) / pnz
+                                else:
+                                    z = pd / (pnx * xw + zrow)
+                                if not (z >= zlo):  # also catches NaN (edge-on planes)
+                                    z = zlo
+                                elif z > zhi:
+                                    z = zhi
+                                if z > far:
+                                    continue
+                                b1, b2 = _bary_c(q4, q5, q6, q7, q8, q9, q10, q11, xw, yw, z, ortho)
+                                if mode == 4:
+                                    a = (1.0 - b1 - b2) * ca0 + b1 * ca1 + b2 * ca2
+                                    val = run_program(program, pparams, a, img[i, j], z)
+                                    kept = val == val  # not discarded (NaN)
+                                    if side_a:
+                                        na += 1
+                                        ka += kept
+                                    else:
+                                        nb += 1
+                                        kb += kept
+                                    lj = j - x0
+                                    if kept and val < zb[li, lj]:
+                                        zb[li, lj] = val
+                                else:
+                                    fpix[w] = i * W + j
+                                    ftri[w] = t
+                                    fbary[w, 0] = b1
+                                    fbary[w, 1] = b2
+                                    fdepth[w] = z
+                                    w += 1
+                        if full or robust:
+                            break
+                        lo, hi = _scan_run(hi + 1, j1, r0, ax0, dy0, sg0, in0, r1, ax1, dy1, sg1, in1,
+                                           r2, ax2, dy2, sg2, in2)
+            if mode == 0:
+                for i in range(y0, y1 + 1):
+                    zr = zb[i - y0]
+                    tr = tb[i - y0]
+                    drow = depth_out[i, x0:x1 + 1]
+                    trow = tri_out[i, x0:x1 + 1]
+                    for k in range(drow.shape[0]):
+                        drow[k] = zr[k]
+                        trow[k] = tr[k]
+            elif mode == 1:
+                # G-buffer of the tile from the winners (branch-free per pixel, so that it vectorizes)
+                o0 = vp[0]
+                o1 = vp[1]
+                o2 = vp[2]
+                rx = vp[3]
+                ry = vp[4]
+                rz = vp[5]
+                ux = vp[6]
+                uy = vp[7]
+                uz = vp[8]
+                fx = vp[9]
+                fy = vp[10]
+                fz = vp[11]
+                for i in range(y0, y1 + 1):
+                    yw = wt - (i + 0.5) * wsy
+                    zr = zb[i - y0]
+                    tr = tb[i - y0]
+                    trow = tri_out[i, x0:x1 + 1]
+                    drow = depth_out[i, x0:x1 + 1]
+                    mrow = mask_out[i, x0:x1 + 1]
+                    prow = pos_out[i, x0:x1 + 1]
+                    nrow = nrm_out[i, x0:x1 + 1]
+                    brow = bary_out[i, x0:x1 + 1]
                     if ortho:
-                        vx = xw
-                        vy = yw
+                        for k in range(drow.shape[0]):
+                            t = tr[k]
+                            hit = t >= 0
+                            tt = max(t, 0)  # PL, NW have a row 0 (read, then discarded, where no hit)
+                            z = zr[k]  # +inf where no hit
+                            xw = wl + ((x0 + k) + 0.5) * wsx
+                            b1, b2 = _bary_c(PL[tt, 4], PL[tt, 5], PL[tt, 6], PL[tt, 7], PL[tt, 8], PL[tt, 9],
+                                             PL[tt, 10], PL[tt, 11], xw, yw, z, True)
+                            vx = xw
+                            vy = yw
+                            trow[k] = t
+                            drow[k] = z
+                            mrow[k] = hit
+                            prow[k, 0] = (o0 + vx * rx + vy * ux + z * fx) if hit else np.nan
+                            prow[k, 1] = (o1 + vx * ry + vy * uy + z * fy) if hit else np.nan
+                            prow[k, 2] = (o2 + vx * rz + vy * uz + z * fz) if hit else np.nan
+                            nrow[k, 0] = NW[tt, 0] if hit else np.nan
+                            nrow[k, 1] = NW[tt, 1] if hit else np.nan
+                            nrow[k, 2] = NW[tt, 2] if hit else np.nan
+                            brow[k, 0] = b1 if hit else np.nan
+                            brow[k, 1] = b2 if hit else np.nan
                     else:
-                        vx = xw * z
-                        vy = yw * z
-                    for c in range(3):
-                        pos_out[i, j, c] = vp[c] + vx * vp[3 + c] + vy * vp[6 + c] + z * vp[9 + c]
-                        nrm_out[i, j, c] = NW[t, c]
-                    depth_out[i, j] = z
-                    mask_out[i, j] = True
-                    bary_out[i, j, 0] = b1
-                    bary_out[i, j, 1] = b2
-        elif mode == 2:
-            fcount[tile] = nfrag
-        elif mode == 4:
-            for i in range(y0, y1 + 1):
-                for j in range(x0, x1 + 1):
-                    blend[i, j] = zb[i - y0, j - x0]
+                        for k in range(drow.shape[0]):
+                            t = tr[k]
+                            hit = t >= 0
+                            tt = max(t, 0)  # PL, NW have a row 0 (read, then discarded, where no hit)
+                            z = zr[k]  # +inf where no hit
+                            xw = wl + ((x0 + k) + 0.5) * wsx
+                            b1, b2 = _bary_c(PL[tt, 4], PL[tt, 5], PL[tt, 6], PL[tt, 7], PL[tt, 8], PL[tt, 9],
+                                             PL[tt, 10], PL[tt, 11], xw, yw, z, False)
+                            vx = xw * z
+                            vy = yw * z
+                            trow[k] = t
+                            drow[k] = z
+                            mrow[k] = hit
+                            prow[k, 0] = (o0 + vx * rx + vy * ux + z * fx) if hit else np.nan
+                            prow[k, 1] = (o1 + vx * ry + vy * uy + z * fy) if hit else np.nan
+                            prow[k, 2] = (o2 + vx * rz + vy * uz + z * fz) if hit else np.nan
+                            nrow[k, 0] = NW[tt, 0] if hit else np.nan
+                            nrow[k, 1] = NW[tt, 1] if hit else np.nan
+                            nrow[k, 2] = NW[tt, 2] if hit else np.nan
+                            brow[k, 0] = b1 if hit else np.nan
+                            brow[k, 1] = b2 if hit else np.nan
+            elif mode == 2:
+                fcount[tile] = nfrag
+            elif mode == 4:
+                bstats[tile, 0] += na
+                bstats[tile, 1] += nb
+                bstats[tile, 2] += ka
+                bstats[tile, 3] += kb
+                for i in range(y0, y1 + 1):
+                    zr = zb[i - y0]
+                    brow = blend[i, x0:x1 + 1]
+                    for k in range(brow.shape[0]):
+                        brow[k] = zr[k]
+
+    return tiles
+
+
+_KERNELS = tuple(_make_tiles_kernel(m) for m in range(5))  # indexed by mode
 
 
 # ----------------------------------------------------------------------------------------------
@@ -618,10 +1013,10 @@ def _front_end(vp, W, H, verts, fcs, code, near):
     F = len(fcs)
     NC = np.empty(F, dtype=np.int32)
     CB = np.empty((2 * F, 4), dtype=np.int32)
-    CE = np.empty((2 * F, 3, 6), dtype=np.float64)
-    CZ = np.empty((2 * F, 2), dtype=np.float64)
-    PL = np.empty((F, 12), dtype=np.float64)
-    NW = np.empty((F, 3), dtype=np.float32)
+    CE = np.empty((2 * F, 3, _CE_W), dtype=np.float64)
+    CZ = np.empty((2 * F, 3), dtype=np.float64)
+    PL = np.zeros((max(F, 1), 12), dtype=np.float64)  # row 0 exists (the G-buffer pass reads it)
+    NW = np.zeros((max(F, 1), 3), dtype=np.float32)
     T = TILE
     ntx = (W + T - 1) // T
     nty = (H + T - 1) // T
@@ -658,12 +1053,15 @@ def _run_tiles(mode, vp, fe, depth=_E2F, tri=_E2I, pos=_E3F, nrm=_E3F, bary=_E3F
     T, ntx, nty, bstart, bins, CB, CE, CZ, PL, NW, near = fe
     nthreads = numba.config.NUMBA_NUM_THREADS
     scratch = np.empty((nthreads, T, T), dtype=np.float64)
+    tscratch = np.empty((nthreads, T, T), dtype=np.int32)
+    iscratch = np.empty((nthreads, 3, T), dtype=np.int64)
+    fscratch = np.zeros((nthreads, T, T), dtype=np.float32)
     ntiles = ntx * nty
     old = numba.set_parallel_chunksize(max(1, ntiles // (8 * numba.get_num_threads())))
     try:
-        _raster_tiles(mode, vp, near, T, ntx, nty, bstart, bins, CB, CE, CZ, PL, NW, scratch,
-                      depth, tri, pos, nrm, bary, mask, fcount, foff, fpix, ftri, fbary, fdepth,
-                      program, pparams, cattr, img, blend, bstats, split)
+        _KERNELS[mode](vp, near, T, ntx, nty, bstart, bins, CB, CE, CZ, PL, NW, scratch, tscratch, iscratch,
+                       fscratch, depth, tri, pos, nrm, bary, mask, fcount, foff, fpix, ftri, fbary, fdepth,
+                       program, pparams, cattr, img, blend, bstats, split)
     finally:
         numba.set_parallel_chunksize(old)
 
