@@ -46,7 +46,7 @@ first and last slice planes), ``nbuffer_levels`` / ``mip_levels``, ``slicing_s``
 ``prefilter_s_<filter>``, ``eye_pass_s`` (the same as the timer phases ``slicing``, ``prefilter``,
 ``eye_pass``).
 
-Deviations from the paper (honest differences; also in docs/occlusion-textures.md):
+Deviations from the paper (honest differences; also in the README):
 
 * Slicing range: the slices cover the depth range (along the light normal) of the geometry that
   casts shadows -- every mesh with role ``both`` or ``occluder`` -- split uniformly. With roles all

@@ -84,7 +84,7 @@ Deviations and implementation choices (none changes the paper's result except wh
   to (almost) a point gets no sheet (its cones cover it).
 * Lookups are nearest-texel (the paper's texture lookup filter is not stated).
 
-Known limits (the paper's own, shown not hidden; see ``docs/penumbra-map.md``):
+Known limits (the paper's own, shown not hidden; see the README):
 
 * Outer penumbra only: the hard shadow is taken as the umbra, so the umbra is overestimated (too
   large and too dark), increasingly with light size and occluder-receiver distance; there is no

@@ -59,7 +59,7 @@ Statistics: ``micro_patches`` (all passes), ``micro_patches_front``/``_back``, `
 Eq. 4 holds for every micro-patch over the farthest receiver), and per-phase times
 ``occluder_map``, ``receiver_map``, ``penumbra_extents``, ``soft_shadow_map``, ``eye_projection``.
 
-Deviations from the paper (see docs/soft-shadow-map.md):
+Deviations from the paper (see the README):
 
 * CPU/Numba instead of GPU fragment programs; blending is the banded, ordered sum above.
 * The paper intersects the pyramid with *one* virtual plane. Receivers have different depths, so

@@ -1,0 +1,76 @@
+"""The README's summary tables, from one command:
+
+    python benchmarks/summary.py [--out DIR] [--size 256x192] [--samples 256] [--repeats 7]
+
+1. Error against ground truth of every method on square, spheres, bunny (rect and sphere light),
+   through ``softshadows.compare`` (one report per scene/light under --out).
+2. Frame time at 512x512 on bunny (rect and sphere light), medians after warm-up, with the ratio
+   to ``hard`` measured in the same run (``softshadows.bench``).
+Writes DIR/summary.md and prints it.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import time
+
+from softshadows.bench import bench
+from softshadows.compare import compare
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--out", default="summary-out")
+    ap.add_argument("--size", default="256x192")
+    ap.add_argument("--samples", type=int, default=256)
+    ap.add_argument("--repeats", type=int, default=7)
+    a = ap.parse_args()
+    w, h = (int(x) for x in a.size.split("x"))
+    os.makedirs(a.out, exist_ok=True)
+    t0 = time.time()
+    lines = [f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores. "
+             f"Command: `python benchmarks/summary.py --size {a.size} --samples {a.samples}`", ""]
+    err = {}
+    names = None
+    for scene in ("square", "spheres", "bunny"):
+        for light in ("rect", "sphere"):
+            r = compare(scene, "all", w, h, os.path.join(a.out, f"{scene}-{light}"), gt_samples=a.samples,
+                        light=light, verbose=False)
+            for m, met in r["metrics"].items():
+                err.setdefault(m, {})[(scene, light)] = met
+            names = names or list(r["metrics"])
+    cols = [(s, l) for s in ("square", "spheres", "bunny") for l in ("rect", "sphere")]
+    lines.append(f"Error against ground truth ({a.samples} samples), {w}x{h}: MAE / ssm_error "
+                 "(mean |dV| over umbra+penumbra); '-' = light shape not supported")
+    lines.append("")
+    lines.append("| method | " + " | ".join(f"{s} {l}" for s, l in cols) + " |")
+    lines.append("|---|" + "---|" * len(cols))
+    for m in err:
+        cells = []
+        for c in cols:
+            met = err[m].get(c)
+            cells.append("-" if met is None else f"{met['mae']:.4f} / {met['ssm_error']:.3f}")
+        lines.append(f"| {m} | " + " | ".join(cells) + " |")
+    lines.append("")
+    for light in ("rect", "sphere"):
+        b = bench("bunny", "all", sizes=(512,), repeats=a.repeats, warmup=1, light=light, verbose=False)
+        lines.append(f"Frame time, bunny {light} light, 512x512, median of {a.repeats} after warm-up:")
+        lines.append("")
+        lines.append("| method | total ms | x hard | slowest phase |")
+        lines.append("|---|---|---|---|")
+        for rm in b["results"]:
+            ph = {k: v["median"] for k, v in rm["timings"].items() if k != "total"}
+            slow = max(ph, key=ph.get) if ph else ""
+            lines.append(f"| {rm['method']} | {rm['timings']['total']['median'] * 1e3:.1f} | {rm['ratio_to_hard']:.2f} | "
+                         f"{slow} ({ph.get(slow, 0) * 1e3:.1f} ms) |")
+        lines.append("")
+    lines.append(f"(wall time {time.time() - t0:.0f} s)")
+    text = "\n".join(lines)
+    with open(os.path.join(a.out, "summary.md"), "w") as f:
+        f.write(text + "\n")
+    print(text)
+
+
+if __name__ == "__main__":
+    main()
