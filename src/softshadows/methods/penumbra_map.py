@@ -115,7 +115,7 @@ from ..raster.programs import PROGRAM_PENUMBRA, penumbra_intensity, smoothstep_b
 from ..raster.rasterizer import TILE
 from ..shading import facing_normals
 from .base import Method, MethodOutput, Param, register
-from .shadowmap import _project, fit_light_view, receiver_offset, scatter
+from .shadowmap import biased_light_depth, fit_light_view, scatter
 
 _JIT = dict(cache=True)
 
@@ -763,14 +763,9 @@ def _eye_pass_kernel(vp, d_occ, pm, W, H, pad_l, pad_t, pts, nrm, bias, slope_bi
     PH, PW = pm.shape
     for k in prange(n):
         umbra_out[k] = False
-        sx, sy, z = _project(vp, pts[k, 0], pts[k, 1], pts[k, 2])
-        if not (z > 0.0):
-            v_out[k] = 1.0
-            continue
-        off = receiver_offset(vp, pts[k, 0], pts[k, 1], pts[k, 2], nrm[k, 0], nrm[k, 1], nrm[k, 2],
-                              z, bias, slope_bias)
-        zt = z - off
-        if not (math.isfinite(sx) and math.isfinite(sy)):
+        ok, sx, sy, zt = biased_light_depth(vp, pts[k, 0], pts[k, 1], pts[k, 2], nrm[k, 0], nrm[k, 1],
+                                            nrm[k, 2], bias, slope_bias)
+        if not ok:
             v_out[k] = 1.0
             continue
         fx = math.floor(sx)

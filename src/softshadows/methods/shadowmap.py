@@ -24,7 +24,6 @@ from ..raster import View, rasterize_depth
 from ..raster.kernels import view_project
 from ..raster.view import light_view
 
-_project = view_project  # old name, kept for callers
 
 
 @dataclass
@@ -89,6 +88,19 @@ def receiver_offset(vp, px, py, pz, nx, ny, nz, depth, bias, slope_bias):
     return texel_world_size(vp, depth) * (bias + slope_bias * tan)
 
 
+@njit(cache=True, inline="always")
+def biased_light_depth(vp, px, py, pz, nx, ny, nz, bias, slope_bias):
+    """The shadow test's lookup for one point: (ok, sx, sy, zt) with (sx, sy) its continuous texel
+    coordinates in the map of ``vp`` and ``zt`` its depth minus the bias; ``ok`` is False when the
+    point is behind the light's view or projects to a non-finite texel (such a point is lit).
+    A texel shadows the point when its stored depth is < zt. Shared by every shadow-map method."""
+    sx, sy, z = view_project(vp, px, py, pz)
+    if not (z > 0.0) or not (np.isfinite(sx) and np.isfinite(sy)):
+        return False, 0.0, 0.0, 0.0
+    off = receiver_offset(vp, px, py, pz, nx, ny, nz, z, bias, slope_bias)
+    return True, sx, sy, z - off
+
+
 @njit(parallel=True, cache=True)
 def shadow_lookup(vp, depth_map, pts, nrm, bias, slope_bias, pcf_radius):
     """V per point: 1 lit, 0 shadowed; with ``pcf_radius`` r > 0, the fraction of lit tests over
@@ -97,13 +109,11 @@ def shadow_lookup(vp, depth_map, pts, nrm, bias, slope_bias, pcf_radius):
     H, W = depth_map.shape
     out = np.empty(n, np.float32)
     for k in prange(n):
-        sx, sy, z = view_project(vp, pts[k, 0], pts[k, 1], pts[k, 2])
-        if not (z > 0.0):
+        ok, sx, sy, zt = biased_light_depth(vp, pts[k, 0], pts[k, 1], pts[k, 2], nrm[k, 0], nrm[k, 1],
+                                            nrm[k, 2], bias, slope_bias)
+        if not ok:
             out[k] = 1.0
             continue
-        off = receiver_offset(vp, pts[k, 0], pts[k, 1], pts[k, 2], nrm[k, 0], nrm[k, 1], nrm[k, 2],
-                              z, bias, slope_bias)
-        zt = z - off
         ci = int(np.floor(sx))
         ri = int(np.floor(sy))
         lit = 0
