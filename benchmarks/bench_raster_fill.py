@@ -107,7 +107,7 @@ def compute():
         st = rasterize_min_blend(view, V, F, PROGRAM_ATTRIBUTE, ca, np.zeros((H, W), np.float32), np.zeros(1),
                                  blend, cull=cull, split=len(F) // 2)
         out[f"{name}|minblend.attr"] = blend
-        out[f"{name}|minblend.attr.stats"] = np.array([st[k] for k in sorted(st)])
+        out[f"{name}|minblend.attr.stats"] = np.array([st[k] for k in _BLEND_STATS])
         # penumbra program: attribute ~ a depth, image = a depth map (the scene's own, pushed back)
         zs = float(d[np.isfinite(d)].max()) if np.isfinite(d).any() else 1.0
         za = rng.uniform(0.0, 2.0, size=(len(F), 3)) * zs
@@ -116,13 +116,24 @@ def compute():
         st = rasterize_min_blend(view, V, F, PROGRAM_PENUMBRA, za, img, np.array([0.5, 0.001, 1.0]), blend2,
                                  cull=cull, split=len(F) // 3)
         out[f"{name}|minblend.pen"] = blend2
-        out[f"{name}|minblend.pen.stats"] = np.array([st[k] for k in sorted(st)])
+        out[f"{name}|minblend.pen.stats"] = np.array([st[k] for k in _BLEND_STATS])
+        # hierarchical culling of discarded fragments must not change the output (compared with the
+        # reference of the unculled pass) nor the kept counts
+        blend3 = np.ones((H, W), np.float32)
+        st3 = rasterize_min_blend(view, V, F, PROGRAM_PENUMBRA, za, img, np.array([0.5, 0.001, 1.0]), blend3,
+                                  cull=cull, split=len(F) // 3, cull_discarded=True)
+        out[f"{name}|minblend.pen"] = blend3 if np.array_equal(blend2, blend3) else np.full_like(blend3, -1.0)
+        if (st3["kept_a"], st3["kept_b"]) != (st["kept_a"], st["kept_b"]):
+            out[f"{name}|minblend.pen.stats"] = -out[f"{name}|minblend.pen.stats"]
     for sc_name, light in (("bunny", "sphere"), ("plant", "rect")):
         sc = softshadows.load_scene(sc_name, light=light)
         for m in ("hard", "penumbra-map"):
             r = softshadows.render(sc, m, 160, 120)
             out[f"render/{sc_name}/{m}|visibility"] = r.visibility
     return out
+
+
+_BLEND_STATS = ("fragments_a", "fragments_b", "kept_a", "kept_b")
 
 
 def check(ref_path):

@@ -673,21 +673,24 @@ fragment_intensity = penumbra_intensity
 
 
 def penumbra_fragment_program(view: View, prims: Primitives, n_cone_tris: int, zp: np.ndarray, bias: float,
-                              bernstein: bool, pm: np.ndarray) -> dict:
+                              bernstein: bool, pm: np.ndarray, cull_discarded: bool = True) -> dict:
     """Pass 2d: rasterize cones and sheets with the shared rasterizer and run the fragment program
     on every fragment, MIN-blending into the penumbra map ``pm`` (H,W) float32 in place
-    (``rasterize_min_blend``: fused, nothing is written per fragment)."""
+    (``rasterize_min_blend``: fused, nothing is written per fragment). ``cull_discarded``: skip the
+    pieces of triangles (per tile) and rows whose every fragment the program would discard."""
     l, r, _, _ = view.window
     tex_scale = (r - l) / view.width  # world size of a texel at depth z = tex_scale * z
     zpf = np.ascontiguousarray(zp, dtype=np.float32)
     zattr = np.ascontiguousarray(prims.zv, dtype=np.float64)
     if len(prims.triangles) == 0:
-        return {"cone_fragments": 0, "sheet_fragments": 0, "cone_fragments_kept": 0, "sheet_fragments_kept": 0}
+        return {"cone_fragments": 0, "sheet_fragments": 0, "cone_fragments_kept": 0, "sheet_fragments_kept": 0,
+                "culled_tile_pieces": 0, "culled_rows": 0}
     c = rasterize_min_blend(view, prims.vertices, prims.triangles, PROGRAM_PENUMBRA, zattr, zpf,
                             (float(bias), tex_scale, 1.0 if bernstein else 0.0), pm, cull="none",
-                            split=n_cone_tris)
+                            split=n_cone_tris, cull_discarded=cull_discarded)
     return {"cone_fragments": c["fragments_a"], "sheet_fragments": c["fragments_b"],
-            "cone_fragments_kept": c["kept_a"], "sheet_fragments_kept": c["kept_b"]}
+            "cone_fragments_kept": c["kept_a"], "sheet_fragments_kept": c["kept_b"],
+            "culled_tile_pieces": c["culled_pieces"], "culled_rows": c["culled_rows"]}
 
 
 @dataclass
@@ -728,7 +731,8 @@ def render_penumbra_map(scene, smp: ShadowMapPass, light_radius: float, *, silho
         prims = Primitives(verts, tris, zattr)
         rview = View(view.origin, view.right, view.up, view.forward, view.window, view.near,
                      max(z_far * (1.0 + 1e-4), view.near * 2), view.width, view.height, False)
-        fst = penumbra_fragment_program(rview, prims, len(cones.triangles), zp, bias, smoothstep == "bernstein", pm)
+        fst = penumbra_fragment_program(rview, prims, len(cones.triangles), zp, bias, smoothstep == "bernstein", pm,
+                                        cull_discarded=early_reject)
     stats = {
         "silhouette_edges": sil.n_edges,
         "silhouette_vertices": sil.n_vertices,

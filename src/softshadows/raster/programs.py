@@ -24,6 +24,8 @@ _JIT = dict(cache=True, fastmath=False, error_model="numpy")
 PROGRAM_ATTRIBUTE = 0
 #: Wyman & Hansen 2003 penumbra intensity; params = (bias_texels, texel_scale, bernstein 0/1)
 PROGRAM_PENUMBRA = 1
+#: every program code (the rasterizer compiles one min-blend kernel per program)
+PROGRAMS = (PROGRAM_ATTRIBUTE, PROGRAM_PENUMBRA)
 
 
 @njit(**_JIT)
@@ -38,20 +40,27 @@ def penumbra_intensity(zf, zv, zp, eps, bernstein):
     I = (Z_F - Z_V) / (Z_P - Z_V) with ``zf`` the fragment depth, ``zv`` the interpolated silhouette
     depth and ``zp`` the shadow-map surface depth (world-space view depths); clamped to [0, 1] and
     optionally smoothstepped. Fragments on or behind the surface (tolerance ``eps``) are discarded:
-    the return value is then NaN."""
-    if not (zf < zp - eps):  # behind (or on) the shadow-map surface; also zp = +inf/NaN
-        return np.nan
+    the return value is then NaN. Written without branches (selects only), so that the rasterizer's
+    row loop vectorizes."""
     den = zp - zv
-    if not (den > 0.0):
-        return np.nan
-    i = (zf - zv) / den
-    if i < 0.0:
-        i = 0.0
-    elif i > 1.0:
-        i = 1.0
-    if bernstein:
-        i = smoothstep_bernstein(i)
-    return i
+    # kept: in front of the surface (tolerance eps; False for zp = +inf/NaN) with Z_P beyond Z_V
+    kept = (zf < zp - eps) & (den > 0.0)
+    i = (zf - zv) / (den if kept else 1.0)
+    i = i if i > 0.0 else 0.0
+    i = i if i < 1.0 else 1.0
+    i = smoothstep_bernstein(i) if bernstein else i
+    return i if kept else np.nan
+
+
+@njit(**_JIT)
+def discard_depth(program, params, s):
+    """The depth from which ``program`` discards every fragment at a pixel whose input image value is
+    ``s``: a fragment with ``z >= discard_depth(...)`` is discarded there (-inf or NaN: every fragment
+    is; +inf: no depth is known to discard). The rasterizer's hierarchical culling takes the max over
+    a tile or a row. For the penumbra program this is exactly its test ``z < Z_P - eps``."""
+    if program == PROGRAM_PENUMBRA:
+        return s - params[0] * params[1] * s
+    return np.inf
 
 
 @njit(**_JIT)

@@ -48,7 +48,7 @@ from numba import njit, prange
 
 from .gbuffer import Fragments, GBuffer
 from .kernels import view_coords, view_coords_to_screen
-from .programs import run_program
+from .programs import PROGRAMS, discard_depth, run_program
 
 TILE = 16  #: tile size in pixels (square)
 SUBPIXEL = 4096.0  #: screen coordinates are snapped to 1/SUBPIXEL px before coverage
@@ -499,17 +499,63 @@ def _scan_run(js, j1, r0, ax0, dy0, sg0, in0, r1, ax1, dy1, sg1, in1, r2, ax2, d
     return lo, j - 1
 
 
-def _make_tiles_kernel(mode):
-    """The tile kernel for one mode (a constant of the closure: each kernel compiles only its own
-    mode's code, which keeps the register allocation of the hot loops clean)."""
+@njit(**_JIT)
+def _plane_depth(ortho, pnx, pny, pnz, pd, xw, yw):
+    """The view depth of a triangle's plane seen through window point (xw, yw), written exactly as
+    the tile kernel's per-fragment depth (same operations in the same order, so the same rounding);
+    NaN where the view ray is parallel to the plane."""
+    if ortho:
+        zrow = pd - pny * yw
+        return (zrow - pnx * xw) / pnz
+    zrow = pny * yw + pnz
+    return pd / (pnx * xw + zrow)
+
+
+@njit(**_JIT)
+def _rect_min_depth(ortho, pnx, pny, pnz, pd, wl, wt, wsx, wsy, i0, i1, j0, j1):
+    """A lower bound of the plane depth (as :func:`_plane_depth`) over the pixel centers of rows
+    i0..i1 and columns j0..j1, or -inf where there is none (the denominator may vanish). The
+    denominator is an affine function of (xw, yw) whose floating-point evaluation is monotonic in
+    each, so its extremes are at the four corner pixel centers; where it keeps one sign there the
+    depth is monotonic too and the minimum of the four corner depths is exact."""
+    xa = wl + (j0 + 0.5) * wsx
+    xb = wl + (j1 + 0.5) * wsx
+    ya = wt - (i0 + 0.5) * wsy
+    yb = wt - (i1 + 0.5) * wsy
+    if ortho:
+        if not (pnz != 0.0):
+            return -np.inf
+    else:
+        da = pny * ya + pnz
+        db = pny * yb + pnz
+        d00 = pnx * xa + da
+        d01 = pnx * xb + da
+        d10 = pnx * xa + db
+        d11 = pnx * xb + db
+        pos = (d00 > 0.0) & (d01 > 0.0) & (d10 > 0.0) & (d11 > 0.0)
+        neg = (d00 < 0.0) & (d01 < 0.0) & (d10 < 0.0) & (d11 < 0.0)
+        if not (pos or neg):
+            return -np.inf
+    z = min(min(_plane_depth(ortho, pnx, pny, pnz, pd, xa, ya), _plane_depth(ortho, pnx, pny, pnz, pd, xb, ya)),
+            min(_plane_depth(ortho, pnx, pny, pnz, pd, xa, yb), _plane_depth(ortho, pnx, pny, pnz, pd, xb, yb)))
+    return z if z == z else -np.inf
+
+
+def _make_tiles_kernel(mode, prog=0):
+    """The tile kernel for one mode and, for mode 4, one fragment program (constants of the closure:
+    each kernel compiles only its own mode's and program's code, which keeps the hot loops free of
+    branches, so that they vectorize, and their register allocation clean)."""
 
     @njit(parallel=True, **_JIT)
     def tiles(vp, near, T, ntx, nty, bstart, bins, CB, CE, CZ, PL, NW, scratch, tscratch, iscratch, fscratch,
                depth_out, tri_out, pos_out, nrm_out, bary_out, mask_out, fcount, foff, fpix, ftri, fbary,
-               fdepth, program, pparams, cattr, img, blend, bstats, split):
+               fdepth, program, pparams, cattr, img, blend, bstats, split, cull_discarded, rscratch):
         """mode 0: depth + tri; 1: full G-buffer; 2: count fragments per tile; 3: write fragments;
         4: run a fragment program per fragment and MIN-blend its value into ``blend`` (bstats[tile] =
-        fragments and kept fragments for triangles below / from ``split``).
+        fragments and kept fragments for triangles below / from ``split``, pieces and rows culled).
+        With ``cull_discarded`` (mode 4), pieces (per tile) and rows (per piece) whose every fragment
+        lies at or beyond the depth where the program discards (``discard_depth``: max over the
+        tile / row) are skipped; the result is the same.
 
         Per piece and row, the covered columns are one span [lo, hi], found exactly from the three edge
         functions (:func:`_edge_span`); depth/G-buffer modes then run the depth of the whole tile row
@@ -546,6 +592,8 @@ def _make_tiles_kernel(mode):
                         zr[k] = np.inf
                         tr[k] = -1
             nfrag = 0
+            nculled = 0
+            nrows_culled = 0
             w = 0
             na = 0
             nb = 0
@@ -554,14 +602,21 @@ def _make_tiles_kernel(mode):
             if mode == 3:
                 w = foff[tile]
             elif mode == 4:
+                rthr = rscratch[tid]
+                tthr = -np.inf
                 for i in range(y0, y1 + 1):
                     zr = zb[i - y0]
                     imr = ib[i - y0]
                     brow = blend[i, x0:x1 + 1]
                     irow = img[i, x0:x1 + 1]
+                    rt = -np.inf
                     for k in range(brow.shape[0]):
                         zr[k] = brow[k]
                         imr[k] = irow[k]
+                        d = discard_depth(prog, pparams, irow[k])
+                        rt = d if d > rt else rt  # NaN: the program discards there whatever the depth
+                    rthr[i - y0] = rt
+                    tthr = rt if rt > tthr else tthr
             for bi in range(bstart[tile], bstart[tile + 1]):
                 ct = bins[bi]
                 t = ct >> 1
@@ -571,6 +626,41 @@ def _make_tiles_kernel(mode):
                 j1 = min(CB[ct, 3], x1)
                 if i0 > i1 or j0 > j1:
                     continue
+                # sanity bounds for the plane depth of this piece's pixels: the snapped coverage may
+                # extrapolate the plane a fraction of a pixel beyond the true triangle, which near the
+                # plane's horizon or for edge-on triangles can give huge, negative or NaN depths
+                zmin = CZ[ct, 0]
+                zmax = CZ[ct, 1]
+                if ortho:
+                    zlo = zmin - (zmax - zmin) - 1e-9 * (abs(zmin) + abs(zmax))
+                    zhi = zmax + (zmax - zmin) + 1e-9 * (abs(zmin) + abs(zmax))
+                else:
+                    zlo = 0.5 * zmin
+                    zhi = 2.0 * zmax
+                if zlo < near:
+                    zlo = near
+                pnx = PL[t, 0]
+                pny = PL[t, 1]
+                pnz = PL[t, 2]
+                pd = PL[t, 3]
+                q4 = PL[t, 4]
+                q5 = PL[t, 5]
+                q6 = PL[t, 6]
+                q7 = PL[t, 7]
+                q8 = PL[t, 8]
+                q9 = PL[t, 9]
+                q10 = PL[t, 10]
+                q11 = PL[t, 11]
+                if mode == 4 and cull_discarded:
+                    # hierarchical culling (the equivalent of a GPU's coarse depth test): the nearest
+                    # fragment of the piece in this tile; if the program discards at that depth on
+                    # every pixel of the tile, skip the piece. The depth is evaluated exactly as per
+                    # fragment; its rounding is monotonic in x and in y, so the minimum over the
+                    # pixel centers is at a corner of the rectangle: exact, no margin needed.
+                    zc_min = _rect_min_depth(ortho, pnx, pny, pnz, pd, wl, wt, wsx, wsy, i0, i1, j0, j1)
+                    if min(max(zc_min, zlo), zhi) >= tthr:
+                        nculled += 1
+                        continue
                 ax0 = CE[ct, 0, 0]
                 ay0 = CE[ct, 0, 1]
                 dx0 = CE[ct, 0, 2]
@@ -631,31 +721,6 @@ def _make_tiles_kernel(mode):
                 c02 = CE[ct, 2, 7]
                 M2 = CE[ct, 2, 8]
                 k2 = CE[ct, 2, 9]
-                # sanity bounds for the plane depth of this piece's pixels: the snapped coverage may
-                # extrapolate the plane a fraction of a pixel beyond the true triangle, which near the
-                # plane's horizon or for edge-on triangles can give huge, negative or NaN depths
-                zmin = CZ[ct, 0]
-                zmax = CZ[ct, 1]
-                if ortho:
-                    zlo = zmin - (zmax - zmin) - 1e-9 * (abs(zmin) + abs(zmax))
-                    zhi = zmax + (zmax - zmin) + 1e-9 * (abs(zmin) + abs(zmax))
-                else:
-                    zlo = 0.5 * zmin
-                    zhi = 2.0 * zmax
-                if zlo < near:
-                    zlo = near
-                pnx = PL[t, 0]
-                pny = PL[t, 1]
-                pnz = PL[t, 2]
-                pd = PL[t, 3]
-                q4 = PL[t, 4]
-                q5 = PL[t, 5]
-                q6 = PL[t, 6]
-                q7 = PL[t, 7]
-                q8 = PL[t, 8]
-                q9 = PL[t, 9]
-                q10 = PL[t, 10]
-                q11 = PL[t, 11]
                 if robust and not full:
                     # the spans of all the tile's rows at once (vectorizes)
                     for k in range(LO.shape[0]):
@@ -709,17 +774,21 @@ def _make_tiles_kernel(mode):
                         r2 = dx2 * (py - ay2)
                         lo, hi = _scan_run(j0, j1, r0, ax0, dy0, sg0, in0, r1, ax1, dy1, sg1, in1,
                                            r2, ax2, dy2, sg2, in2)
+                    if mode == 4 and cull_discarded and (full or robust):
+                        # the same culling for the row's span (one span: its ends bound the depth)
+                        zs_min = _rect_min_depth(ortho, pnx, pny, pnz, pd, wl, wt, wsx, wsy, i, i, lo, hi)
+                        if min(max(zs_min, zlo), zhi) >= rthr[li]:
+                            nrows_culled += 1
+                            continue
                     while lo <= hi:
                         if mode <= 2:
                             # the whole tile row at once (vectorizes), masked to the span
-                            zr = zb[li]
-                            tr = tb[li]
                             klo = lo - x0
                             khi = hi - x0
                             if mode == 2:
                                 cnt = 0
                                 if ortho:
-                                    for k in range(zr.shape[0]):
+                                    for k in range(T):
                                         xw = wl + ((x0 + k) + 0.5) * wsx
                                         z = (zrow - pnx * xw) / pnz
                                         if not (z >= zlo):
@@ -728,7 +797,7 @@ def _make_tiles_kernel(mode):
                                             z = zhi
                                         cnt += (k >= klo) & (k <= khi) & (not (z > far))
                                 else:
-                                    for k in range(zr.shape[0]):
+                                    for k in range(T):
                                         xw = wl + ((x0 + k) + 0.5) * wsx
                                         z = pd / (pnx * xw + zrow)
                                         if not (z >= zlo):
@@ -738,40 +807,38 @@ def _make_tiles_kernel(mode):
                                         cnt += (k >= klo) & (k <= khi) & (not (z > far))
                                 nfrag += cnt
                             elif ortho:
-                                for k in range(zr.shape[0]):
+                                for k in range(T):
                                     xw = wl + ((x0 + k) + 0.5) * wsx
                                     z = (zrow - pnx * xw) / pnz
                                     if not (z >= zlo):
                                         z = zlo
                                     elif z > zhi:
                                         z = zhi
-                                    zc = zr[k]
+                                    zc = zb[li, k]
                                     take = (k >= klo) & (k <= khi) & (not (z > far)) & (z < zc)
-                                    zr[k] = z if take else zc
-                                    tr[k] = t if take else tr[k]
+                                    zb[li, k] = z if take else zc
+                                    tb[li, k] = t if take else tb[li, k]
                             else:
-                                for k in range(zr.shape[0]):
+                                for k in range(T):
                                     xw = wl + ((x0 + k) + 0.5) * wsx
                                     z = pd / (pnx * xw + zrow)
                                     if not (z >= zlo):
                                         z = zlo
                                     elif z > zhi:
                                         z = zhi
-                                    zc = zr[k]
+                                    zc = zb[li, k]
                                     take = (k >= klo) & (k <= khi) & (not (z > far)) & (z < zc)
-                                    zr[k] = z if take else zc
-                                    tr[k] = t if take else tr[k]
+                                    zb[li, k] = z if take else zc
+                                    tb[li, k] = t if take else tb[li, k]
                         elif mode == 4 and hi - lo + 1 >= _VEC4_MIN_SPAN:
                             # the whole tile row at once (vectorizes: no branches to mispredict); short
                             # spans are cheaper pixel by pixel (below)
-                            zr = zb[li]
-                            imr = ib[li]
                             klo = lo - x0
                             khi = hi - x0
                             nf = 0
                             nk = 0
                             if ortho:
-                                for k in range(zr.shape[0]):
+                                for k in range(T):
                                     xw = wl + ((x0 + k) + 0.5) * wsx
                                     z = (zrow - pnx * xw) / pnz
                                     if not (z >= zlo):
@@ -780,15 +847,15 @@ def _make_tiles_kernel(mode):
                                         z = zhi
                                     b1, b2 = _bary_c(q4, q5, q6, q7, q8, q9, q10, q11, xw, yw, z, True)
                                     a = (1.0 - b1 - b2) * ca0 + b1 * ca1 + b2 * ca2
-                                    val = run_program(program, pparams, a, imr[k], z)
+                                    val = run_program(prog, pparams, a, ib[li, k], z)
                                     inside = (k >= klo) & (k <= khi) & (not (z > far))
                                     kept = inside & (val == val)
                                     nf += inside
                                     nk += kept
-                                    zc = zr[k]
-                                    zr[k] = val if (kept & (val < zc)) else zc
+                                    zc = zb[li, k]
+                                    zb[li, k] = val if (kept & (val < zc)) else zc
                             else:
-                                for k in range(zr.shape[0]):
+                                for k in range(T):
                                     xw = wl + ((x0 + k) + 0.5) * wsx
                                     z = pd / (pnx * xw + zrow)
                                     if not (z >= zlo):
@@ -797,13 +864,13 @@ def _make_tiles_kernel(mode):
                                         z = zhi
                                     b1, b2 = _bary_c(q4, q5, q6, q7, q8, q9, q10, q11, xw, yw, z, False)
                                     a = (1.0 - b1 - b2) * ca0 + b1 * ca1 + b2 * ca2
-                                    val = run_program(program, pparams, a, imr[k], z)
+                                    val = run_program(prog, pparams, a, ib[li, k], z)
                                     inside = (k >= klo) & (k <= khi) & (not (z > far))
                                     kept = inside & (val == val)
                                     nf += inside
                                     nk += kept
-                                    zc = zr[k]
-                                    zr[k] = val if (kept & (val < zc)) else zc
+                                    zc = zb[li, k]
+                                    zb[li, k] = val if (kept & (val < zc)) else zc
                             if side_a:
                                 na += nf
                                 ka += nk
@@ -826,7 +893,7 @@ def _make_tiles_kernel(mode):
                                 b1, b2 = _bary_c(q4, q5, q6, q7, q8, q9, q10, q11, xw, yw, z, ortho)
                                 if mode == 4:
                                     a = (1.0 - b1 - b2) * ca0 + b1 * ca1 + b2 * ca2
-                                    val = run_program(program, pparams, a, img[i, j], z)
+                                    val = run_program(prog, pparams, a, img[i, j], z)
                                     kept = val == val  # not discarded (NaN)
                                     if side_a:
                                         na += 1
@@ -932,6 +999,8 @@ def _make_tiles_kernel(mode):
                 bstats[tile, 1] += nb
                 bstats[tile, 2] += ka
                 bstats[tile, 3] += kb
+                bstats[tile, 4] += nculled
+                bstats[tile, 5] += nrows_culled
                 for i in range(y0, y1 + 1):
                     zr = zb[i - y0]
                     brow = blend[i, x0:x1 + 1]
@@ -941,7 +1010,8 @@ def _make_tiles_kernel(mode):
     return tiles
 
 
-_KERNELS = tuple(_make_tiles_kernel(m) for m in range(5))  # indexed by mode
+_KERNELS = {(m, 0): _make_tiles_kernel(m) for m in range(4)}  # indexed by (mode, program)
+_KERNELS.update({(_M_MINBLEND, p): _make_tiles_kernel(_M_MINBLEND, p) for p in PROGRAMS})
 
 
 # ----------------------------------------------------------------------------------------------
@@ -1044,24 +1114,26 @@ _EFB = np.empty((0, 2), dtype=np.float32)
 
 _EP = np.empty(0, dtype=np.float64)
 _ECA = np.empty((0, 3), dtype=np.float64)
-_EBS = np.empty((0, 4), dtype=np.int64)
+_EBS = np.empty((0, 6), dtype=np.int64)
 
 
 def _run_tiles(mode, vp, fe, depth=_E2F, tri=_E2I, pos=_E3F, nrm=_E3F, bary=_E3F, mask=_E2B,
                fcount=_E1, foff=_E1, fpix=_E1, ftri=_E1I, fbary=_EFB, fdepth=_E1F,
-               program=0, pparams=_EP, cattr=_ECA, img=_E2F, blend=_E2F, bstats=_EBS, split=0):
+               program=0, pparams=_EP, cattr=_ECA, img=_E2F, blend=_E2F, bstats=_EBS, split=0,
+               cull_discarded=False):
     T, ntx, nty, bstart, bins, CB, CE, CZ, PL, NW, near = fe
     nthreads = numba.config.NUMBA_NUM_THREADS
     scratch = np.empty((nthreads, T, T), dtype=np.float64)
     tscratch = np.empty((nthreads, T, T), dtype=np.int32)
     iscratch = np.empty((nthreads, 3, T), dtype=np.int64)
     fscratch = np.zeros((nthreads, T, T), dtype=np.float32)
+    rscratch = np.empty((nthreads, T), dtype=np.float64)
     ntiles = ntx * nty
     old = numba.set_parallel_chunksize(max(1, ntiles // (8 * numba.get_num_threads())))
     try:
-        _KERNELS[mode](vp, near, T, ntx, nty, bstart, bins, CB, CE, CZ, PL, NW, scratch, tscratch, iscratch,
+        _KERNELS[(mode, program if mode == _M_MINBLEND else 0)](vp, near, T, ntx, nty, bstart, bins, CB, CE, CZ, PL, NW, scratch, tscratch, iscratch,
                        fscratch, depth, tri, pos, nrm, bary, mask, fcount, foff, fpix, ftri, fbary, fdepth,
-                       program, pparams, cattr, img, blend, bstats, split)
+                       program, pparams, cattr, img, blend, bstats, split, bool(cull_discarded), rscratch)
     finally:
         numba.set_parallel_chunksize(old)
 
@@ -1123,7 +1195,7 @@ def rasterize_fragments(view, vertices, faces, cull: str = "none") -> Fragments:
 
 
 def rasterize_min_blend(view, vertices, faces, program: int, corner_attr, image, params, out,
-                        cull: str = "none", split: int = 0) -> dict:
+                        cull: str = "none", split: int = 0, cull_discarded: bool = False) -> dict:
     """Run a fragment program on every fragment and MIN-blend its value into ``out`` (H,W) float32
     in place: the equivalent of a GPU fragment program with MIN blending (or of writing the value
     as depth with a LESS depth test). No depth test on the geometry itself.
@@ -1133,6 +1205,12 @@ def rasterize_min_blend(view, vertices, faces, program: int, corner_attr, image,
     fragment's pixel; params: float64 uniforms. Fragments for which the program returns NaN are
     discarded. Returns counts of fragments and kept fragments for triangles with index below
     ``split`` and from ``split`` on (e.g. two kinds of primitives drawn in one call).
+
+    ``cull_discarded``: hierarchical culling, the equivalent of a GPU's coarse (per-tile) depth
+    test. A piece of a triangle in one tile, and then a row of it, is skipped when its nearest
+    fragment lies at or beyond the depth from which the program discards on every pixel there
+    (``programs.discard_depth``; exact bounds, so the output is identical). Skipped fragments are
+    not counted in ``fragments_*``; ``culled_pieces`` and ``culled_rows`` count the skips.
     """
     vp, W, H, verts, fcs, code, near = _prepare(view, vertices, faces, cull)
     if out.shape != (H, W) or out.dtype != np.float32:
@@ -1144,8 +1222,9 @@ def rasterize_min_blend(view, vertices, faces, program: int, corner_attr, image,
     if im.shape != (H, W):
         raise ValueError(f"image must have shape {(H, W)}, got {im.shape}")
     fe = _front_end(vp, W, H, verts, fcs, code, near)
-    bstats = np.zeros((fe[1] * fe[2], 4), dtype=np.int64)
+    bstats = np.zeros((fe[1] * fe[2], 6), dtype=np.int64)
     _run_tiles(_M_MINBLEND, vp, fe, program=int(program), pparams=np.asarray(params, dtype=np.float64),
-               cattr=ca, img=im, blend=out, bstats=bstats, split=int(split))
+               cattr=ca, img=im, blend=out, bstats=bstats, split=int(split), cull_discarded=cull_discarded)
     tot = bstats.sum(axis=0)
-    return {"fragments_a": int(tot[0]), "fragments_b": int(tot[1]), "kept_a": int(tot[2]), "kept_b": int(tot[3])}
+    return {"fragments_a": int(tot[0]), "fragments_b": int(tot[1]), "kept_a": int(tot[2]), "kept_b": int(tot[3]),
+            "culled_pieces": int(tot[4]), "culled_rows": int(tot[5])}
