@@ -86,7 +86,6 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from ..shading import facing_normals
 from .base import Method, MethodOutput, Param, register
 from ..raster.kernels import view_project, view_ray
 from .shadowmap import build_shadow_map, fit_light_view, receiver_offset, scatter
@@ -419,7 +418,6 @@ class PCSS(Method):
         light = ctx.light
         disk = light.shape != "rect"
         pts, nrm, idx = ctx.points()
-        nrm = facing_normals(nrm, pts, ctx.scene.camera.eye)
         pts = np.ascontiguousarray(pts)
         nrm = np.ascontiguousarray(nrm)
         search_pat = sample_pattern(search_samples, pattern, disk)

@@ -113,7 +113,6 @@ from ..geometry.silhouette import Silhouette, cached_adjacency, silhouette_adjac
 from ..raster import View, rasterize_depth, rasterize_min_blend
 from ..raster.programs import PROGRAM_PENUMBRA, penumbra_intensity, smoothstep_bernstein  # noqa: F401
 from ..raster.rasterizer import TILE
-from ..shading import facing_normals
 from .base import Method, MethodOutput, Param, register
 from .shadowmap import biased_light_depth, fit_light_view, scatter
 
@@ -842,7 +841,6 @@ class PenumbraMapMethod(Method):
         scene = ctx.scene
         lr = light_radius_of(scene.light)
         pts, nrm, idx = ctx.points()
-        nrm = facing_normals(nrm, pts, scene.camera.eye)
         with ctx.timer.phase("shadow_map"):
             smp = shadow_map_pass(scene, map_size, lr)
         pmap = render_penumbra_map(scene, smp, lr, silhouettes=silhouettes, smoothstep=smoothstep, bias=bias,

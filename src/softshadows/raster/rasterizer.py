@@ -60,7 +60,6 @@ _CULL = {"none": 0, "back": 1, "front": 2}
 
 # modes of the tile kernel
 _M_DEPTH, _M_GBUF, _M_FCOUNT, _M_FFILL, _M_MINBLEND = 0, 1, 2, 3, 4
-_VEC4_MIN_SPAN = 6  #: min-blend: spans at least this long run the vectorized whole-row loop
 
 
 # ----------------------------------------------------------------------------------------------
@@ -741,10 +740,12 @@ def _make_tiles_kernel(mode, prog=0):
                 ca1 = 0.0
                 ca2 = 0.0
                 side_a = t < split
+                cconst = False
                 if mode == 4:
                     ca0 = cattr[t, 0]
                     ca1 = cattr[t, 1]
                     ca2 = cattr[t, 2]
+                    cconst = (ca0 == ca1) & (ca0 == ca2)
                 for i in range(i0, i1 + 1):
                     py = i + 0.5
                     yw = wt - py * wsy
@@ -830,9 +831,9 @@ def _make_tiles_kernel(mode, prog=0):
                                     take = (k >= klo) & (k <= khi) & (not (z > far)) & (z < zc)
                                     zb[li, k] = z if take else zc
                                     tb[li, k] = t if take else tb[li, k]
-                        elif mode == 4 and hi - lo + 1 >= _VEC4_MIN_SPAN:
-                            # the whole tile row at once (vectorizes: no branches to mispredict); short
-                            # spans are cheaper pixel by pixel (below)
+                        elif mode == 4:
+                            # the whole tile row at once, masked to the span (a branch-free loop of T
+                            # columns: it vectorizes; cheaper than pixel by pixel even for short spans)
                             klo = lo - x0
                             khi = hi - x0
                             nf = 0
@@ -841,13 +842,26 @@ def _make_tiles_kernel(mode, prog=0):
                                 for k in range(T):
                                     xw = wl + ((x0 + k) + 0.5) * wsx
                                     z = (zrow - pnx * xw) / pnz
-                                    if not (z >= zlo):
-                                        z = zlo
-                                    elif z > zhi:
-                                        z = zhi
+                                    z = z if z >= zlo else zlo
+                                    z = zhi if z > zhi else z
                                     b1, b2 = _bary_c(q4, q5, q6, q7, q8, q9, q10, q11, xw, yw, z, True)
                                     a = (1.0 - b1 - b2) * ca0 + b1 * ca1 + b2 * ca2
                                     val = run_program(prog, pparams, a, ib[li, k], z)
+                                    inside = (k >= klo) & (k <= khi) & (not (z > far))
+                                    kept = inside & (val == val)
+                                    nf += inside
+                                    nk += kept
+                                    zc = zb[li, k]
+                                    zb[li, k] = val if (kept & (val < zc)) else zc
+                            elif cconst:
+                                # the same attribute at the three corners (e.g. a cone's Z_v): no
+                                # barycentrics needed
+                                for k in range(T):
+                                    xw = wl + ((x0 + k) + 0.5) * wsx
+                                    z = pd / (pnx * xw + zrow)
+                                    z = z if z >= zlo else zlo
+                                    z = zhi if z > zhi else z
+                                    val = run_program(prog, pparams, ca0, ib[li, k], z)
                                     inside = (k >= klo) & (k <= khi) & (not (z > far))
                                     kept = inside & (val == val)
                                     nf += inside
@@ -858,10 +872,8 @@ def _make_tiles_kernel(mode, prog=0):
                                 for k in range(T):
                                     xw = wl + ((x0 + k) + 0.5) * wsx
                                     z = pd / (pnx * xw + zrow)
-                                    if not (z >= zlo):
-                                        z = zlo
-                                    elif z > zhi:
-                                        z = zhi
+                                    z = z if z >= zlo else zlo
+                                    z = zhi if z > zhi else z
                                     b1, b2 = _bary_c(q4, q5, q6, q7, q8, q9, q10, q11, xw, yw, z, False)
                                     a = (1.0 - b1 - b2) * ca0 + b1 * ca1 + b2 * ca2
                                     val = run_program(prog, pparams, a, ib[li, k], z)
@@ -890,27 +902,14 @@ def _make_tiles_kernel(mode, prog=0):
                                     z = zhi
                                 if z > far:
                                     continue
+                                # mode 3: write the fragment
                                 b1, b2 = _bary_c(q4, q5, q6, q7, q8, q9, q10, q11, xw, yw, z, ortho)
-                                if mode == 4:
-                                    a = (1.0 - b1 - b2) * ca0 + b1 * ca1 + b2 * ca2
-                                    val = run_program(prog, pparams, a, img[i, j], z)
-                                    kept = val == val  # not discarded (NaN)
-                                    if side_a:
-                                        na += 1
-                                        ka += kept
-                                    else:
-                                        nb += 1
-                                        kb += kept
-                                    lj = j - x0
-                                    if kept and val < zb[li, lj]:
-                                        zb[li, lj] = val
-                                else:
-                                    fpix[w] = i * W + j
-                                    ftri[w] = t
-                                    fbary[w, 0] = b1
-                                    fbary[w, 1] = b2
-                                    fdepth[w] = z
-                                    w += 1
+                                fpix[w] = i * W + j
+                                ftri[w] = t
+                                fbary[w, 0] = b1
+                                fbary[w, 1] = b2
+                                fdepth[w] = z
+                                w += 1
                         if full or robust:
                             break
                         lo, hi = _scan_run(hi + 1, j1, r0, ax0, dy0, sg0, in0, r1, ax1, dy1, sg1, in1,
