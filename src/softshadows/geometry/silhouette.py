@@ -17,8 +17,8 @@ must not assume closed loops.
 Two paths return identical results (same facing arithmetic, same canonical edge order):
 
 * :func:`silhouette_brute` — no precomputation: every call welds the vertices, lists the three
-  edges of every triangle, matches them by sorting and tests every edge (what a per-frame
-  "brute force" extraction does; O(F log F)).
+  edges of every triangle, matches them (a hash table of edges, Numba) and tests every edge (what
+  a per-frame "brute force" extraction does; O(F), plus sorting the silhouette edges).
 * :func:`silhouette_adjacency` — from an :class:`EdgeAdjacency` built once per mesh
   (:func:`build_adjacency`: welded edges, their adjacent faces in CSR form, face planes); a call
   is one plane test per face and one segmented sum per edge (O(F), no sorting).
@@ -26,7 +26,7 @@ Two paths return identical results (same facing arithmetic, same canonical edge 
 :func:`find_silhouette` dispatches on ``method`` and caches the adjacency of a mesh (by array
 identity) so that repeated frames of the same geometry pay the build once.
 
-All functions are vectorized numpy and take plain arrays: ``vertices`` (V,3) float64,
+The functions are vectorized numpy or Numba and take plain arrays: ``vertices`` (V,3) float64,
 ``faces`` (F,3) int64, ``point`` (3,).
 """
 from __future__ import annotations
@@ -35,6 +35,7 @@ import weakref
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from ..errors import SoftShadowsError
 
@@ -127,13 +128,96 @@ class EdgeAdjacency:
 # ---------------------------------------------------------------------------------------------
 def weld_vertices(vertices: np.ndarray) -> np.ndarray:
     """(V,) representative index of every vertex: the lowest index with exactly the same position
-    (meshes with per-face vertices, like flat-shaded boxes, share edges only after welding)."""
-    v = np.ascontiguousarray(vertices, dtype=np.float64)
+    (meshes with per-face vertices, like flat-shaded boxes, share edges only after welding).
+    ``-0.0`` and ``0.0`` are the same position."""
+    v = np.ascontiguousarray(vertices, dtype=np.float64).reshape(-1, 3)
     if len(v) == 0:
         return np.zeros(0, np.int64)
-    _, first, inverse = np.unique(v, axis=0, return_index=True, return_inverse=True)
-    # np.unique's return_index gives the first occurrence: the lowest index
-    return first[inverse.reshape(-1)].astype(np.int64)
+    bits = (v + 0.0).view(np.int64)  # + 0.0 turns -0.0 into 0.0; then compare bit patterns
+    return _weld_kernel(bits)
+
+
+
+
+@njit(cache=True)
+def _mix(a, b, c):
+    h = a * np.int64(-7046029254386353131) + b
+    h = (h ^ (h >> np.int64(29))) * np.int64(-4658895280553007687) + c
+    h = (h ^ (h >> np.int64(32))) * np.int64(-7046029254386353131)
+    return h ^ (h >> np.int64(29))
+
+
+@njit(cache=True)
+def _weld_kernel(bits):
+    n = bits.shape[0]
+    size = 16
+    while size < 2 * n:
+        size *= 2
+    mask = size - 1
+    table = np.full(size, -1, np.int64)
+    rep = np.empty(n, np.int64)
+    for i in range(n):
+        a = bits[i, 0]
+        b = bits[i, 1]
+        c = bits[i, 2]
+        h = _mix(a, b, c) & mask
+        while True:
+            j = table[h]
+            if j < 0:
+                table[h] = i
+                rep[i] = i
+                break
+            if bits[j, 0] == a and bits[j, 1] == b and bits[j, 2] == c:
+                rep[i] = j  # the first (lowest) index inserted with this position
+                break
+            h = (h + 1) & mask
+    return rep
+
+
+@njit(cache=True)
+def _edge_table(rep, faces, fr):
+    """Every welded edge of the triangles once, in order of first appearance: (lo, hi, count of
+    triangles, count of facing ones, lowest facing triangle, highest non-facing triangle)."""
+    F = faces.shape[0]
+    size = 16
+    while size < 6 * F:
+        size *= 2
+    mask = size - 1
+    table = np.full(size, -1, np.int64)
+    lo = np.empty(3 * F, np.int64)
+    hi = np.empty(3 * F, np.int64)
+    ca = np.zeros(3 * F, np.int64)
+    cf = np.zeros(3 * F, np.int64)
+    first = np.full(3 * F, -1, np.int64)
+    last = np.full(3 * F, -1, np.int64)
+    n = 0
+    for f in range(F):
+        for e in range(3):
+            u = rep[faces[f, e]]
+            w = rep[faces[f, (e + 1) % 3]]
+            a = min(u, w)
+            b = max(u, w)
+            h = _mix(a, b, np.int64(0)) & mask
+            while True:
+                k = table[h]
+                if k < 0:
+                    k = n
+                    table[h] = k
+                    lo[k] = a
+                    hi[k] = b
+                    n += 1
+                    break
+                if lo[k] == a and hi[k] == b:
+                    break
+                h = (h + 1) & mask
+            ca[k] += 1
+            if fr[f]:
+                cf[k] += 1
+                if first[k] < 0:
+                    first[k] = f
+            else:
+                last[k] = f
+    return lo[:n], hi[:n], ca[:n], cf[:n], first[:n], last[:n]
 
 
 def _face_planes(vertices, faces) -> tuple[np.ndarray, np.ndarray]:
@@ -177,7 +261,7 @@ def _finish(edges, edge_faces, boundary, point) -> Silhouette:
 # ---------------------------------------------------------------------------------------------
 def silhouette_brute(vertices: np.ndarray, faces: np.ndarray, point, weld: bool = True) -> Silhouette:
     """Silhouette seen from ``point`` with no precomputed connectivity: weld, list the 3F edges
-    of all triangles, group equal edges by sorting, test each group's facing mix."""
+    of all triangles, group equal edges in a hash table, test each group's facing mix."""
     faces = np.asarray(faces, np.int64)
     F = len(faces)
     if F == 0:
@@ -185,22 +269,13 @@ def silhouette_brute(vertices: np.ndarray, faces: np.ndarray, point, weld: bool 
     rep = weld_vertices(vertices) if weld else np.arange(len(vertices), dtype=np.int64)
     n, a = _face_planes(vertices, faces)
     fr = _facing_from_planes(n, a, point)
-    lo, hi, key = _edge_keys(rep, faces)
-    fr3 = np.repeat(fr, 3)
-    face_of = np.repeat(np.arange(F, dtype=np.int64), 3)
-    order = np.lexsort((~fr3, key))  # by edge, facing triangles first within an edge
-    ks = key[order]
-    start = np.flatnonzero(np.r_[True, ks[1:] != ks[:-1]])
-    ca = np.diff(np.r_[start, len(ks)])
-    cf = np.add.reduceat(fr3[order].astype(np.int64), start)
+    lo, hi, ca, cf, first, last = _edge_table(rep, faces, fr)
     sil = (ca == 1) | ((cf > 0) & (cf < ca))
-    g = start[sil]
-    edges = np.stack([lo[order][g], hi[order][g]], axis=1)
-    fo = face_of[order]
-    first = fo[g]
-    last = fo[g + ca[sil] - 1]
-    ef = np.stack([np.where(cf[sil] > 0, first, -1), np.where(cf[sil] < ca[sil], last, -1)], axis=1)
-    return _finish(edges, ef, ca[sil] == 1, point)
+    g = np.flatnonzero(sil)
+    g = g[np.lexsort((hi[g], lo[g]))]  # canonical order: by (lo, hi)
+    edges = np.stack([lo[g], hi[g]], axis=1)
+    ef = np.stack([np.where(cf[g] > 0, first[g], -1), np.where(cf[g] < ca[g], last[g], -1)], axis=1)
+    return _finish(edges, ef, ca[g] == 1, point)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -155,7 +155,7 @@ def penumbra_map_view(scene, map_size: int, light_radius: float,
     hv = fit_light_view(scene, map_size) if base_view is None else base_view
     flat = scene.flat
     q = hv.to_view(flat.vertices)
-    occ_idx = np.unique(flat.faces[flat.occluder]) if flat.occluder.any() else np.arange(len(q))
+    occ_idx = flat.face_vertices("occluder") if flat.occluder.any() else np.arange(len(q))
     zo = q[occ_idx, 2]
     zo = zo[zo > 1e-9]
     front = q[q[:, 2] > 1e-9]
@@ -432,62 +432,87 @@ def build_sheets(view: View, scene_vertices: np.ndarray, faces: np.ndarray, sil:
 
 # ---- early rejection: a max-depth pyramid of Z_P ----------------------------------------------
 @njit(parallel=True, **_JIT)
-def _pyramid_level0(zp, out):
+def _pyramid_level1(zp, data, w2):
+    """Level 1 (2x2 max of ``Z_P``; empty texels count as 0) straight from the map."""
     H, W = zp.shape
-    for i in prange(H):
-        for j in range(W):
-            z = zp[i, j]
-            out[i * W + j] = z if math.isfinite(z) else 0.0
-
-
-@njit(parallel=True, **_JIT)
-def _pyramid_down(data, src_off, h, w, dst_off, h2, w2):
+    h2 = (H + 1) // 2
     for i in prange(h2):
         for j in range(w2):
             m = 0.0
             for di in range(2):
                 ii = 2 * i + di
-                if ii < h:
+                if ii < H:
                     for dj in range(2):
                         jj = 2 * j + dj
-                        if jj < w:
-                            v = data[src_off + ii * w + jj]
-                            if v > m:
+                        if jj < W:
+                            v = zp[ii, jj]
+                            if v > m and v < np.inf:
                                 m = v
-            data[dst_off + i * w2 + j] = m
+            data[i * w2 + j] = m
+
+
+@njit(**_JIT)
+def _pyramid_coarser(data, offs, ws, hs):
+    """Levels 2.. (small: one serial pass)."""
+    for L in range(2, len(offs)):
+        h, w = hs[L - 1], ws[L - 1]
+        src = offs[L - 1]
+        dst = offs[L]
+        for i in range(hs[L]):
+            for j in range(ws[L]):
+                m = 0.0
+                for di in range(2):
+                    ii = 2 * i + di
+                    if ii < h:
+                        for dj in range(2):
+                            jj = 2 * j + dj
+                            if jj < w:
+                                v = data[src + ii * w + jj]
+                                if v > m:
+                                    m = v
+                data[dst + i * ws[L] + j] = m
 
 
 def build_zmax_pyramid(zp: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Max-depth mip pyramid of ``Z_P`` (empty texels count as 0: nothing behind them), as flat
-    float32 data, level offsets, widths, heights (level 0 = ``Z_P``)."""
+    float32 data, level offsets, widths, heights. Level 0 (``Z_P`` itself) is not stored (offset
+    -1): queries start at level 1. The last level is one texel, the largest finite ``Z_P``."""
     h, w = zp.shape
-    ws, hs, offs = [w], [h], [0]
-    total = w * h
+    ws, hs, offs = [w], [h], [-1]
+    total = 0
     while ws[-1] > 1 or hs[-1] > 1:
         offs.append(total)
         ws.append((ws[-1] + 1) // 2)
         hs.append((hs[-1] + 1) // 2)
         total += ws[-1] * hs[-1]
-    data = np.empty(total, np.float32)
-    _pyramid_level0(np.ascontiguousarray(zp, dtype=np.float32), data)
-    for L in range(1, len(ws)):
-        _pyramid_down(data, offs[L - 1], hs[L - 1], ws[L - 1], offs[L], hs[L], ws[L])
-    return data, np.array(offs, np.int64), np.array(ws, np.int64), np.array(hs, np.int64)
+    data = np.zeros(max(total, 1), np.float32)
+    offs, ws, hs = np.array(offs, np.int64), np.array(ws, np.int64), np.array(hs, np.int64)
+    if len(offs) > 1:
+        _pyramid_level1(np.ascontiguousarray(zp, dtype=np.float32), data, ws[1])
+        _pyramid_coarser(data, offs, ws, hs)
+    return data, offs, ws, hs
+
+
+def pyramid_max(pyr) -> float:
+    """The largest finite value of the map (0 if none): the pyramid's last level."""
+    data, offs, _, _ = pyr
+    return float(data[offs[-1]]) if len(offs) > 1 else 0.0
 
 
 @njit(**_JIT)
 def _zmax_rect(data, offs, ws, hs, x0, y0, x1, y1):
-    """Max of level-0 texels [x0..x1] x [y0..y1] (inclusive, clamped) through the pyramid."""
+    """Max of level-0 texels [x0..x1] x [y0..y1] (inclusive, clamped) through the pyramid (an upper
+    bound: read at a level >= 1 whose cells cover the rectangle in at most ~9 x 9)."""
     W0 = ws[0]
     H0 = hs[0]
-    if x1 < 0 or y1 < 0 or x0 >= W0 or y0 >= H0:
+    if x1 < 0 or y1 < 0 or x0 >= W0 or y0 >= H0 or len(offs) < 2:
         return 0.0
     x0 = max(x0, 0)
     y0 = max(y0, 0)
     x1 = min(x1, W0 - 1)
     y1 = min(y1, H0 - 1)
     span = max(x1 - x0 + 1, y1 - y0 + 1)
-    L = 0
+    L = 1
     while (1 << (L + 3)) < span and L + 1 < len(offs):
         L += 1
     m = 0.0
@@ -556,7 +581,7 @@ def _cone_reject_kernel(wl, wt, sx_scale, sy_scale, qx, qy, zv, bx, by, z_far, i
             if z > zv[i] + eps and pieces > 1:
                 fhi = (iz - 1.0 / z) / (iz - izf)
                 zlast = zv[i]
-                for m in range(pieces):
+                for m in range(pieces - 1, -1, -1):  # the last qualifying slice: search from the end
                     fa = fhi * m / pieces
                     fb = fhi * (m + 1) / pieces
                     za = 1.0 / (iz - fa * (iz - izf))
@@ -565,6 +590,7 @@ def _cone_reject_kernel(wl, wt, sx_scale, sy_scale, qx, qy, zv, bx, by, z_far, i
                                      ws, hs)
                     if zm > za + eps:
                         zlast = min(zb, zm)
+                        break
                 z = zlast
             zlim[k] = z
             if z > zv[i] + eps:
@@ -616,13 +642,14 @@ def _sheet_reject_kernel(sx, sy, zc, z_far, iters, pieces, eps, data, offs, ws, 
                 break
         if u > eps and pieces > 1:
             last = 0.0
-            for m in range(pieces):
+            for m in range(pieces - 1, -1, -1):  # the last qualifying slice: search from the end
                 ua = u * m / pieces
                 ub = u * (m + 1) / pieces
                 zm = _sheet_zmax(sx[i], sy[i], zc[i], z_far, ua, ub, data, offs, ws, hs)
                 za = (1.0 - ua) * zmin + ua * z_far
                 if zm > za + eps * z_far:
                     last = min(ub, (zm - zmin) / (z_far - zmin))
+                    break
             u = last
         ucut[i] = u if u > eps else 0.0
 
@@ -676,20 +703,29 @@ def penumbra_fragment_program(view: View, prims: Primitives, n_cone_tris: int, z
     """Pass 2d: rasterize cones and sheets with the shared rasterizer and run the fragment program
     on every fragment, MIN-blending into the penumbra map ``pm`` (H,W) float32 in place
     (``rasterize_min_blend``: fused, nothing is written per fragment). ``cull_discarded``: skip the
-    pieces of triangles (per tile) and rows whose every fragment the program would discard."""
+    pieces of triangles, per tile, whose every fragment the program would discard."""
     l, r, _, _ = view.window
     tex_scale = (r - l) / view.width  # world size of a texel at depth z = tex_scale * z
     zpf = np.ascontiguousarray(zp, dtype=np.float32)
     zattr = np.ascontiguousarray(prims.zv, dtype=np.float64)
     if len(prims.triangles) == 0:
         return {"cone_fragments": 0, "sheet_fragments": 0, "cone_fragments_kept": 0, "sheet_fragments_kept": 0,
-                "culled_tile_pieces": 0, "culled_rows": 0}
+                "culled_tile_pieces": 0}
     c = rasterize_min_blend(view, prims.vertices, prims.triangles, PROGRAM_PENUMBRA, zattr, zpf,
                             (float(bias), tex_scale, 1.0 if bernstein else 0.0), pm, cull="none",
                             split=n_cone_tris, cull_discarded=cull_discarded)
     return {"cone_fragments": c["fragments_a"], "sheet_fragments": c["fragments_b"],
             "cone_fragments_kept": c["kept_a"], "sheet_fragments_kept": c["kept_b"],
-            "culled_tile_pieces": c["culled_pieces"], "culled_rows": c["culled_rows"]}
+            "culled_tile_pieces": c["culled_pieces"]}
+
+
+@njit(parallel=True, **_JIT)
+def _count_below(a, v):
+    n = 0
+    for i in prange(a.shape[0]):
+        for j in range(a.shape[1]):
+            n += a[i, j] < v
+    return n
 
 
 @dataclass
@@ -716,9 +752,11 @@ def render_penumbra_map(scene, smp: ShadowMapPass, light_radius: float, *, silho
     with phase("penumbra_map"):
         pm = np.ones((view.height, view.width), np.float32)  # clear to white
         zp = smp.surface_depth
-        fin = np.isfinite(zp)
-        z_far = float(zp[fin].max()) * (1.0 + 1e-6) if fin.any() else float(view.far)
-        pyr = build_zmax_pyramid(zp) if early_reject else None
+        pyr = build_zmax_pyramid(zp)  # its last level is the farthest Z_P
+        zmax = pyramid_max(pyr)
+        z_far = zmax * (1.0 + 1e-6) if zmax > 0.0 else float(view.far)
+        if not early_reject:
+            pyr = None
         faces = flat.faces if flat.occluder.all() else flat.faces[flat.occluder]
         cones = build_cones(view, flat.vertices[sil.vertices], light_radius, z_far, cone_segments, pyr)
         sheets = build_sheets(view, flat.vertices, faces, sil, light_radius, z_far, sheet_tolerance,
@@ -731,7 +769,7 @@ def render_penumbra_map(scene, smp: ShadowMapPass, light_radius: float, *, silho
         rview = View(view.origin, view.right, view.up, view.forward, view.window, view.near,
                      max(z_far * (1.0 + 1e-4), view.near * 2), view.width, view.height, False)
         fst = penumbra_fragment_program(rview, prims, len(cones.triangles), zp, bias, smoothstep == "bernstein", pm,
-                                        cull_discarded=early_reject)
+                                        cull_discarded=True)
     stats = {
         "silhouette_edges": sil.n_edges,
         "silhouette_vertices": sil.n_vertices,
@@ -747,7 +785,7 @@ def render_penumbra_map(scene, smp: ShadowMapPass, light_radius: float, *, silho
         "cone_triangles": int(len(cones.triangles)),
         "sheet_triangles": int(len(sheets.triangles)),
         **fst,
-        "penumbra_texels": int((pm < 1.0).sum()),
+        "penumbra_texels": _count_below(pm, 1.0),
         "z_far": z_far,
     }
     if t_build:

@@ -52,9 +52,7 @@ def fit_light_view(scene, size: int, which: str = "occluder", ortho: bool = Fals
     """View from the light's center covering the vertices of the selected faces (square pixels)."""
     flat = scene.flat
     mask = occluder_faces(scene, which)
-    if not mask.any():
-        mask = np.ones(len(flat.faces), bool)
-    pts = flat.vertices[np.unique(flat.faces[mask])]
+    pts = flat.vertices[flat.face_vertices(which if mask.any() else "all")]
     return light_view(scene.light, pts, size, height or size, ortho=ortho, margin=margin, square_pixels=True)
 
 

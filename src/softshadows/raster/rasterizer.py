@@ -548,13 +548,13 @@ def _make_tiles_kernel(mode, prog=0):
     @njit(parallel=True, **_JIT)
     def tiles(vp, near, T, ntx, nty, bstart, bins, CB, CE, CZ, PL, NW, scratch, tscratch, iscratch, fscratch,
                depth_out, tri_out, pos_out, nrm_out, bary_out, mask_out, fcount, foff, fpix, ftri, fbary,
-               fdepth, program, pparams, cattr, img, blend, bstats, split, cull_discarded, rscratch):
+               fdepth, program, pparams, cattr, img, blend, bstats, split, cull_discarded):
         """mode 0: depth + tri; 1: full G-buffer; 2: count fragments per tile; 3: write fragments;
         4: run a fragment program per fragment and MIN-blend its value into ``blend`` (bstats[tile] =
-        fragments and kept fragments for triangles below / from ``split``, pieces and rows culled).
-        With ``cull_discarded`` (mode 4), pieces (per tile) and rows (per piece) whose every fragment
-        lies at or beyond the depth where the program discards (``discard_depth``: max over the
-        tile / row) are skipped; the result is the same.
+        fragments and kept fragments for triangles below / from ``split``, pieces culled). With
+        ``cull_discarded`` (mode 4), the pieces of a tile whose every fragment lies at or beyond the
+        depth where the program discards (``discard_depth``, max over the tile) are skipped; the
+        result is the same.
 
         Per piece and row, the covered columns are one span [lo, hi], found exactly from the three edge
         functions (:func:`_edge_span`); depth/G-buffer modes then run the depth of the whole tile row
@@ -570,6 +570,8 @@ def _make_tiles_kernel(mode, prog=0):
         wsx = (vp[13] - vp[12]) / vp[18]  # window units per pixel
         wsy = (vp[15] - vp[14]) / vp[19]
         for tile in prange(ntx * nty):
+            if mode >= 2 and bstart[tile] == bstart[tile + 1]:
+                continue  # nothing binned here: no fragments, ``blend`` unchanged (modes 2-4)
             ty = tile // ntx
             tx = tile - ty * ntx
             y0 = ty * T
@@ -592,7 +594,6 @@ def _make_tiles_kernel(mode, prog=0):
                         tr[k] = -1
             nfrag = 0
             nculled = 0
-            nrows_culled = 0
             w = 0
             na = 0
             nb = 0
@@ -601,21 +602,17 @@ def _make_tiles_kernel(mode, prog=0):
             if mode == 3:
                 w = foff[tile]
             elif mode == 4:
-                rthr = rscratch[tid]
                 tthr = -np.inf
                 for i in range(y0, y1 + 1):
                     zr = zb[i - y0]
                     imr = ib[i - y0]
                     brow = blend[i, x0:x1 + 1]
                     irow = img[i, x0:x1 + 1]
-                    rt = -np.inf
                     for k in range(brow.shape[0]):
                         zr[k] = brow[k]
                         imr[k] = irow[k]
                         d = discard_depth(prog, pparams, irow[k])
-                        rt = d if d > rt else rt  # NaN: the program discards there whatever the depth
-                    rthr[i - y0] = rt
-                    tthr = rt if rt > tthr else tthr
+                        tthr = d if d > tthr else tthr  # NaN: the program discards there whatever the depth
             for bi in range(bstart[tile], bstart[tile + 1]):
                 ct = bins[bi]
                 t = ct >> 1
@@ -775,12 +772,6 @@ def _make_tiles_kernel(mode, prog=0):
                         r2 = dx2 * (py - ay2)
                         lo, hi = _scan_run(j0, j1, r0, ax0, dy0, sg0, in0, r1, ax1, dy1, sg1, in1,
                                            r2, ax2, dy2, sg2, in2)
-                    if mode == 4 and cull_discarded and (full or robust):
-                        # the same culling for the row's span (one span: its ends bound the depth)
-                        zs_min = _rect_min_depth(ortho, pnx, pny, pnz, pd, wl, wt, wsx, wsy, i, i, lo, hi)
-                        if min(max(zs_min, zlo), zhi) >= rthr[li]:
-                            nrows_culled += 1
-                            continue
                     while lo <= hi:
                         if mode <= 2:
                             # the whole tile row at once (vectorizes), masked to the span
@@ -999,7 +990,6 @@ def _make_tiles_kernel(mode, prog=0):
                 bstats[tile, 2] += ka
                 bstats[tile, 3] += kb
                 bstats[tile, 4] += nculled
-                bstats[tile, 5] += nrows_culled
                 for i in range(y0, y1 + 1):
                     zr = zb[i - y0]
                     brow = blend[i, x0:x1 + 1]
@@ -1113,7 +1103,7 @@ _EFB = np.empty((0, 2), dtype=np.float32)
 
 _EP = np.empty(0, dtype=np.float64)
 _ECA = np.empty((0, 3), dtype=np.float64)
-_EBS = np.empty((0, 6), dtype=np.int64)
+_EBS = np.empty((0, 5), dtype=np.int64)
 
 
 def _run_tiles(mode, vp, fe, depth=_E2F, tri=_E2I, pos=_E3F, nrm=_E3F, bary=_E3F, mask=_E2B,
@@ -1126,13 +1116,12 @@ def _run_tiles(mode, vp, fe, depth=_E2F, tri=_E2I, pos=_E3F, nrm=_E3F, bary=_E3F
     tscratch = np.empty((nthreads, T, T), dtype=np.int32)
     iscratch = np.empty((nthreads, 3, T), dtype=np.int64)
     fscratch = np.zeros((nthreads, T, T), dtype=np.float32)
-    rscratch = np.empty((nthreads, T), dtype=np.float64)
     ntiles = ntx * nty
     old = numba.set_parallel_chunksize(max(1, ntiles // (8 * numba.get_num_threads())))
     try:
         _KERNELS[(mode, program if mode == _M_MINBLEND else 0)](vp, near, T, ntx, nty, bstart, bins, CB, CE, CZ, PL, NW, scratch, tscratch, iscratch,
                        fscratch, depth, tri, pos, nrm, bary, mask, fcount, foff, fpix, ftri, fbary, fdepth,
-                       program, pparams, cattr, img, blend, bstats, split, bool(cull_discarded), rscratch)
+                       program, pparams, cattr, img, blend, bstats, split, bool(cull_discarded))
     finally:
         numba.set_parallel_chunksize(old)
 
@@ -1179,7 +1168,7 @@ def rasterize_fragments(view, vertices, faces, cull: str = "none") -> Fragments:
     vp, W, H, verts, fcs, code, near = _prepare(view, vertices, faces, cull)
     fe = _front_end(vp, W, H, verts, fcs, code, near)
     ntiles = fe[1] * fe[2]
-    fcount = np.empty(ntiles, dtype=np.int64)
+    fcount = np.zeros(ntiles, dtype=np.int64)  # tiles with no bins are skipped
     _run_tiles(_M_FCOUNT, vp, fe, fcount=fcount)
     foff = np.zeros(ntiles + 1, dtype=np.int64)
     np.cumsum(fcount, out=foff[1:])
@@ -1206,10 +1195,10 @@ def rasterize_min_blend(view, vertices, faces, program: int, corner_attr, image,
     ``split`` and from ``split`` on (e.g. two kinds of primitives drawn in one call).
 
     ``cull_discarded``: hierarchical culling, the equivalent of a GPU's coarse (per-tile) depth
-    test. A piece of a triangle in one tile, and then a row of it, is skipped when its nearest
-    fragment lies at or beyond the depth from which the program discards on every pixel there
-    (``programs.discard_depth``; exact bounds, so the output is identical). Skipped fragments are
-    not counted in ``fragments_*``; ``culled_pieces`` and ``culled_rows`` count the skips.
+    test. A piece of a triangle in one tile is skipped when its nearest fragment there lies at or
+    beyond the depth from which the program discards on every pixel of the tile
+    (``programs.discard_depth``; an exact bound, so the output is identical). Skipped fragments are
+    not counted in ``fragments_*``; ``culled_pieces`` counts the skipped (piece, tile) pairs.
     """
     vp, W, H, verts, fcs, code, near = _prepare(view, vertices, faces, cull)
     if out.shape != (H, W) or out.dtype != np.float32:
@@ -1221,9 +1210,9 @@ def rasterize_min_blend(view, vertices, faces, program: int, corner_attr, image,
     if im.shape != (H, W):
         raise ValueError(f"image must have shape {(H, W)}, got {im.shape}")
     fe = _front_end(vp, W, H, verts, fcs, code, near)
-    bstats = np.zeros((fe[1] * fe[2], 6), dtype=np.int64)
+    bstats = np.zeros((fe[1] * fe[2], 5), dtype=np.int64)
     _run_tiles(_M_MINBLEND, vp, fe, program=int(program), pparams=np.asarray(params, dtype=np.float64),
                cattr=ca, img=im, blend=out, bstats=bstats, split=int(split), cull_discarded=cull_discarded)
     tot = bstats.sum(axis=0)
     return {"fragments_a": int(tot[0]), "fragments_b": int(tot[1]), "kept_a": int(tot[2]), "kept_b": int(tot[3]),
-            "culled_pieces": int(tot[4]), "culled_rows": int(tot[5])}
+            "culled_pieces": int(tot[4])}

@@ -203,6 +203,17 @@ class FlatGeometry:
     occluder: np.ndarray  # (F,) bool: casts shadows (role both|occluder)
     receiver: np.ndarray  # (F,) bool: receives shadows (role both|receiver)
     albedo: np.ndarray  # (n_meshes,3) float64
+    _cache: dict = field(default_factory=dict, repr=False, compare=False)
+
+    def face_vertices(self, which: str = "occluder") -> np.ndarray:
+        """Sorted indices of the vertices used by the ``occluder``, ``receiver`` or ``all`` faces
+        (computed once: the arrays of a scene's flat geometry are not modified in place)."""
+        hit = self._cache.get(("face_vertices", which))
+        if hit is None:
+            mask = {"occluder": self.occluder, "receiver": self.receiver}.get(which)
+            hit = np.unique(self.faces if mask is None else self.faces[mask])
+            self._cache[("face_vertices", which)] = hit
+        return hit
 
     def subset(self, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(vertices, faces, original face index) for the faces in ``mask``."""
