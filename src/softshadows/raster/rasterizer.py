@@ -315,22 +315,24 @@ def _setup_one(t, verts, faces, vp, near, cull, NC, CB, CE, CZ, PL, NW):
 # binning
 # ----------------------------------------------------------------------------------------------
 @njit(parallel=True, **_JIT)
-def _setup_count(verts, faces, vp, near, cull, NC, CB, CE, CZ, PL, NW, T, ntx, chunk, cnt):
-    """Setup of every triangle (parallel over chunks of triangles) and per (chunk, tile) bin counts."""
+def _setup_count(verts, faces, vp, near, cull, NC, CB, CE, CZ, PL, NW, T, ntx, chunk, cnt, nslot):
+    """Setup of every triangle (parallel over chunks of triangles, dealt round-robin to ``nslot``
+    slots: see ``_run_tiles``) and per (chunk, tile) bin counts."""
     nchunk = cnt.shape[0]
     ntiles = cnt.shape[1]
     F = NC.shape[0]
-    for c in prange(nchunk):
-        for tt in range(ntiles):
-            cnt[c, tt] = 0
-        t1 = min(F, (c + 1) * chunk)
-        for t in range(c * chunk, t1):
-            _setup_one(t, verts, faces, vp, near, cull, NC, CB, CE, CZ, PL, NW)
-            for k in range(NC[t]):
-                ct = 2 * t + k
-                for ty in range(CB[ct, 0] // T, CB[ct, 1] // T + 1):
-                    for tx in range(CB[ct, 2] // T, CB[ct, 3] // T + 1):
-                        cnt[c, ty * ntx + tx] += 1
+    for slot in prange(nslot):
+        for c in range(slot, nchunk, nslot):
+            for tt in range(ntiles):
+                cnt[c, tt] = 0
+            t1 = min(F, (c + 1) * chunk)
+            for t in range(c * chunk, t1):
+                _setup_one(t, verts, faces, vp, near, cull, NC, CB, CE, CZ, PL, NW)
+                for k in range(NC[t]):
+                    ct = 2 * t + k
+                    for ty in range(CB[ct, 0] // T, CB[ct, 1] // T + 1):
+                        for tx in range(CB[ct, 2] // T, CB[ct, 3] // T + 1):
+                            cnt[c, ty * ntx + tx] += 1
 
 
 @njit(**_JIT)
@@ -350,19 +352,20 @@ def _bin_offsets(cnt, bstart):
 
 
 @njit(parallel=True, **_JIT)
-def _bin_fill(NC, CB, T, ntx, chunk, off, bins):
+def _bin_fill(NC, CB, T, ntx, chunk, off, bins, nslot):
     nchunk = off.shape[0]
     F = NC.shape[0]
-    for c in prange(nchunk):
-        t1 = min(F, (c + 1) * chunk)
-        for t in range(c * chunk, t1):
-            for k in range(NC[t]):
-                ct = 2 * t + k
-                for ty in range(CB[ct, 0] // T, CB[ct, 1] // T + 1):
-                    for tx in range(CB[ct, 2] // T, CB[ct, 3] // T + 1):
-                        tile = ty * ntx + tx
-                        bins[off[c, tile]] = ct
-                        off[c, tile] += 1
+    for slot in prange(nslot):
+        for c in range(slot, nchunk, nslot):
+            t1 = min(F, (c + 1) * chunk)
+            for t in range(c * chunk, t1):
+                for k in range(NC[t]):
+                    ct = 2 * t + k
+                    for ty in range(CB[ct, 0] // T, CB[ct, 1] // T + 1):
+                        for tx in range(CB[ct, 2] // T, CB[ct, 3] // T + 1):
+                            tile = ty * ntx + tx
+                            bins[off[c, tile]] = ct
+                            off[c, tile] += 1
 
 
 # ----------------------------------------------------------------------------------------------
@@ -548,7 +551,7 @@ def _make_tiles_kernel(mode, prog=0):
     @njit(parallel=True, **_JIT)
     def tiles(vp, near, T, ntx, nty, bstart, bins, CB, CE, CZ, PL, NW, scratch, tscratch, iscratch, fscratch,
                depth_out, tri_out, pos_out, nrm_out, bary_out, mask_out, fcount, foff, fpix, ftri, fbary,
-               fdepth, program, pparams, cattr, img, blend, bstats, split, cull_discarded):
+               fdepth, program, pparams, cattr, img, blend, bstats, split, cull_discarded, slots):
         """mode 0: depth + tri; 1: full G-buffer; 2: count fragments per tile; 3: write fragments;
         4: run a fragment program per fragment and MIN-blend its value into ``blend`` (bstats[tile] =
         fragments and kept fragments for triangles below / from ``split``, pieces culled). With
@@ -569,217 +572,239 @@ def _make_tiles_kernel(mode, prog=0):
         wt = vp[15]
         wsx = (vp[13] - vp[12]) / vp[18]  # window units per pixel
         wsy = (vp[15] - vp[14]) / vp[19]
-        for tile in prange(ntx * nty):
-            if mode >= 2 and bstart[tile] == bstart[tile + 1]:
-                continue  # nothing binned here: no fragments, ``blend`` unchanged (modes 2-4)
-            ty = tile // ntx
-            tx = tile - ty * ntx
-            y0 = ty * T
-            x0 = tx * T
-            y1 = min(y0 + T, H) - 1
-            x1 = min(x0 + T, W) - 1
-            tid = numba.get_thread_id()
-            zb = scratch[tid]
-            tb = tscratch[tid]
-            LO = iscratch[tid, 0]
-            HI = iscratch[tid, 1]
-            EX = iscratch[tid, 2]
-            ib = fscratch[tid]
-            if mode <= 1:
-                for li in range(T):
-                    zr = zb[li]
-                    tr = tb[li]
-                    for k in range(zr.shape[0]):
-                        zr[k] = np.inf
-                        tr[k] = -1
-            nfrag = 0
-            nculled = 0
-            w = 0
-            na = 0
-            nb = 0
-            ka = 0
-            kb = 0
-            if mode == 3:
-                w = foff[tile]
-            elif mode == 4:
-                tthr = -np.inf
-                for i in range(y0, y1 + 1):
-                    zr = zb[i - y0]
-                    imr = ib[i - y0]
-                    brow = blend[i, x0:x1 + 1]
-                    irow = img[i, x0:x1 + 1]
-                    for k in range(brow.shape[0]):
-                        zr[k] = brow[k]
-                        imr[k] = irow[k]
-                        d = discard_depth(prog, pparams, irow[k])
-                        tthr = d if d > tthr else tthr  # NaN: the program discards there whatever the depth
-            for bi in range(bstart[tile], bstart[tile + 1]):
-                ct = bins[bi]
-                t = ct >> 1
-                i0 = max(CB[ct, 0], y0)
-                i1 = min(CB[ct, 1], y1)
-                j0 = max(CB[ct, 2], x0)
-                j1 = min(CB[ct, 3], x1)
-                if i0 > i1 or j0 > j1:
-                    continue
-                # sanity bounds for the plane depth of this piece's pixels: the snapped coverage may
-                # extrapolate the plane a fraction of a pixel beyond the true triangle, which near the
-                # plane's horizon or for edge-on triangles can give huge, negative or NaN depths
-                zmin = CZ[ct, 0]
-                zmax = CZ[ct, 1]
-                if ortho:
-                    zlo = zmin - (zmax - zmin) - 1e-9 * (abs(zmin) + abs(zmax))
-                    zhi = zmax + (zmax - zmin) + 1e-9 * (abs(zmin) + abs(zmax))
-                else:
-                    zlo = 0.5 * zmin
-                    zhi = 2.0 * zmax
-                if zlo < near:
-                    zlo = near
-                pnx = PL[t, 0]
-                pny = PL[t, 1]
-                pnz = PL[t, 2]
-                pd = PL[t, 3]
-                q4 = PL[t, 4]
-                q5 = PL[t, 5]
-                q6 = PL[t, 6]
-                q7 = PL[t, 7]
-                q8 = PL[t, 8]
-                q9 = PL[t, 9]
-                q10 = PL[t, 10]
-                q11 = PL[t, 11]
-                if mode == 4 and cull_discarded:
-                    # hierarchical culling (the equivalent of a GPU's coarse depth test): the nearest
-                    # fragment of the piece in this tile; if the program discards at that depth on
-                    # every pixel of the tile, skip the piece. The depth is evaluated exactly as per
-                    # fragment; its rounding is monotonic in x and in y, so the minimum over the
-                    # pixel centers is at a corner of the rectangle: exact, no margin needed.
-                    zc_min = _rect_min_depth(ortho, pnx, pny, pnz, pd, wl, wt, wsx, wsy, i0, i1, j0, j1)
-                    if min(max(zc_min, zlo), zhi) >= tthr:
-                        nculled += 1
+        ntiles = ntx * nty
+        nslot = slots.shape[0]
+        for slot in prange(nslot):
+            for tile in range(slot, ntiles, nslot):
+                if mode >= 2 and bstart[tile] == bstart[tile + 1]:
+                    continue  # nothing binned here: no fragments, ``blend`` unchanged (modes 2-4)
+                ty = tile // ntx
+                tx = tile - ty * ntx
+                y0 = ty * T
+                x0 = tx * T
+                y1 = min(y0 + T, H) - 1
+                x1 = min(x0 + T, W) - 1
+                tid = numba.get_thread_id()
+                zb = scratch[tid]
+                tb = tscratch[tid]
+                LO = iscratch[tid, 0]
+                HI = iscratch[tid, 1]
+                EX = iscratch[tid, 2]
+                ib = fscratch[tid]
+                if mode <= 1:
+                    for li in range(T):
+                        zr = zb[li]
+                        tr = tb[li]
+                        for k in range(zr.shape[0]):
+                            zr[k] = np.inf
+                            tr[k] = -1
+                nfrag = 0
+                nculled = 0
+                w = 0
+                na = 0
+                nb = 0
+                ka = 0
+                kb = 0
+                if mode == 3:
+                    w = foff[tile]
+                elif mode == 4:
+                    tthr = -np.inf
+                    for i in range(y0, y1 + 1):
+                        zr = zb[i - y0]
+                        imr = ib[i - y0]
+                        brow = blend[i, x0:x1 + 1]
+                        irow = img[i, x0:x1 + 1]
+                        for k in range(brow.shape[0]):
+                            zr[k] = brow[k]
+                            imr[k] = irow[k]
+                            d = discard_depth(prog, pparams, irow[k])
+                            tthr = d if d > tthr else tthr  # NaN: the program discards there whatever the depth
+                for bi in range(bstart[tile], bstart[tile + 1]):
+                    ct = bins[bi]
+                    t = ct >> 1
+                    i0 = max(CB[ct, 0], y0)
+                    i1 = min(CB[ct, 1], y1)
+                    j0 = max(CB[ct, 2], x0)
+                    j1 = min(CB[ct, 3], x1)
+                    if i0 > i1 or j0 > j1:
                         continue
-                ax0 = CE[ct, 0, 0]
-                ay0 = CE[ct, 0, 1]
-                dx0 = CE[ct, 0, 2]
-                dy0 = CE[ct, 0, 3]
-                sg0 = CE[ct, 0, 4]
-                in0 = CE[ct, 0, 5] != 0.0
-                ax1 = CE[ct, 1, 0]
-                ay1 = CE[ct, 1, 1]
-                dx1 = CE[ct, 1, 2]
-                dy1 = CE[ct, 1, 3]
-                sg1 = CE[ct, 1, 4]
-                in1 = CE[ct, 1, 5] != 0.0
-                ax2 = CE[ct, 2, 0]
-                ay2 = CE[ct, 2, 1]
-                dx2 = CE[ct, 2, 2]
-                dy2 = CE[ct, 2, 3]
-                sg2 = CE[ct, 2, 4]
-                in2 = CE[ct, 2, 5] != 0.0
-                # conservative whole-rectangle tests (edge functions are affine: extremes at corners)
-                full = False
-                if (i1 - i0 + 1) * (j1 - j0 + 1) > 16:
-                    full = True
-                    reject = False
-                    pa = i0 + 0.5
-                    pb = i1 + 0.5
-                    qa = j0 + 0.5
-                    qb = j1 + 0.5
-                    for k in range(3):
-                        ax = CE[ct, k, 0]
-                        ay = CE[ct, k, 1]
-                        dx = CE[ct, k, 2]
-                        dy = CE[ct, k, 3]
-                        sg = CE[ct, k, 4]
-                        e00 = sg * (dx * (pa - ay) - dy * (qa - ax))
-                        e01 = sg * (dx * (pa - ay) - dy * (qb - ax))
-                        e10 = sg * (dx * (pb - ay) - dy * (qa - ax))
-                        e11 = sg * (dx * (pb - ay) - dy * (qb - ax))
-                        emin = min(min(e00, e01), min(e10, e11))
-                        emax = max(max(e00, e01), max(e10, e11))
-                        thr = 1e-12 * (abs(dx) + abs(dy)) * (abs(ax) + abs(ay) + W + H + 1.0)
-                        if emax < -thr:
-                            reject = True
-                            break
-                        if emin <= thr:
-                            full = False
-                    if reject:
-                        continue
-                robust = CZ[ct, 2] != 0.0
-                iv0 = CE[ct, 0, 6]
-                c00 = CE[ct, 0, 7]
-                M0 = CE[ct, 0, 8]
-                k0 = CE[ct, 0, 9]
-                iv1 = CE[ct, 1, 6]
-                c01 = CE[ct, 1, 7]
-                M1 = CE[ct, 1, 8]
-                k1 = CE[ct, 1, 9]
-                iv2 = CE[ct, 2, 6]
-                c02 = CE[ct, 2, 7]
-                M2 = CE[ct, 2, 8]
-                k2 = CE[ct, 2, 9]
-                if robust and not full:
-                    # the spans of all the tile's rows at once (vectorizes)
-                    for k in range(LO.shape[0]):
-                        py = (y0 + k) + 0.5
-                        lo, hi, slow = _fast_bound(j0, j1, False, py, j0, j1, ax0, ay0, dx0, dy0, sg0, in0,
-                                                   iv0, c00, M0, k0)
-                        lo, hi, slow = _fast_bound(lo, hi, slow, py, j0, j1, ax1, ay1, dx1, dy1, sg1, in1,
-                                                   iv1, c01, M1, k1)
-                        lo, hi, slow = _fast_bound(lo, hi, slow, py, j0, j1, ax2, ay2, dx2, dy2, sg2, in2,
-                                                   iv2, c02, M2, k2)
-                        LO[k] = lo
-                        HI[k] = hi
-                        EX[k] = slow
-                r0 = 0.0
-                r1 = 0.0
-                r2 = 0.0
-                ca0 = 0.0
-                ca1 = 0.0
-                ca2 = 0.0
-                side_a = t < split
-                cconst = False
-                if mode == 4:
-                    ca0 = cattr[t, 0]
-                    ca1 = cattr[t, 1]
-                    ca2 = cattr[t, 2]
-                    cconst = (ca0 == ca1) & (ca0 == ca2)
-                for i in range(i0, i1 + 1):
-                    py = i + 0.5
-                    yw = wt - py * wsy
+                    # sanity bounds for the plane depth of this piece's pixels: the snapped coverage may
+                    # extrapolate the plane a fraction of a pixel beyond the true triangle, which near the
+                    # plane's horizon or for edge-on triangles can give huge, negative or NaN depths
+                    zmin = CZ[ct, 0]
+                    zmax = CZ[ct, 1]
                     if ortho:
-                        zrow = pd - pny * yw
+                        zlo = zmin - (zmax - zmin) - 1e-9 * (abs(zmin) + abs(zmax))
+                        zhi = zmax + (zmax - zmin) + 1e-9 * (abs(zmin) + abs(zmax))
                     else:
-                        zrow = pny * yw + pnz
-                    li = i - y0
-                    if full:
-                        lo = j0
-                        hi = j1
-                    elif robust:
-                        lo = LO[li]
-                        hi = HI[li]
-                        if EX[li] != 0:
+                        zlo = 0.5 * zmin
+                        zhi = 2.0 * zmax
+                    if zlo < near:
+                        zlo = near
+                    pnx = PL[t, 0]
+                    pny = PL[t, 1]
+                    pnz = PL[t, 2]
+                    pd = PL[t, 3]
+                    q4 = PL[t, 4]
+                    q5 = PL[t, 5]
+                    q6 = PL[t, 6]
+                    q7 = PL[t, 7]
+                    q8 = PL[t, 8]
+                    q9 = PL[t, 9]
+                    q10 = PL[t, 10]
+                    q11 = PL[t, 11]
+                    if mode == 4 and cull_discarded:
+                        # hierarchical culling (the equivalent of a GPU's coarse depth test): the nearest
+                        # fragment of the piece in this tile; if the program discards at that depth on
+                        # every pixel of the tile, skip the piece. The depth is evaluated exactly as per
+                        # fragment; its rounding is monotonic in x and in y, so the minimum over the
+                        # pixel centers is at a corner of the rectangle: exact, no margin needed.
+                        zc_min = _rect_min_depth(ortho, pnx, pny, pnz, pd, wl, wt, wsx, wsy, i0, i1, j0, j1)
+                        if min(max(zc_min, zlo), zhi) >= tthr:
+                            nculled += 1
+                            continue
+                    ax0 = CE[ct, 0, 0]
+                    ay0 = CE[ct, 0, 1]
+                    dx0 = CE[ct, 0, 2]
+                    dy0 = CE[ct, 0, 3]
+                    sg0 = CE[ct, 0, 4]
+                    in0 = CE[ct, 0, 5] != 0.0
+                    ax1 = CE[ct, 1, 0]
+                    ay1 = CE[ct, 1, 1]
+                    dx1 = CE[ct, 1, 2]
+                    dy1 = CE[ct, 1, 3]
+                    sg1 = CE[ct, 1, 4]
+                    in1 = CE[ct, 1, 5] != 0.0
+                    ax2 = CE[ct, 2, 0]
+                    ay2 = CE[ct, 2, 1]
+                    dx2 = CE[ct, 2, 2]
+                    dy2 = CE[ct, 2, 3]
+                    sg2 = CE[ct, 2, 4]
+                    in2 = CE[ct, 2, 5] != 0.0
+                    # conservative whole-rectangle tests (edge functions are affine: extremes at corners)
+                    full = False
+                    if (i1 - i0 + 1) * (j1 - j0 + 1) > 16:
+                        full = True
+                        reject = False
+                        pa = i0 + 0.5
+                        pb = i1 + 0.5
+                        qa = j0 + 0.5
+                        qb = j1 + 0.5
+                        for k in range(3):
+                            ax = CE[ct, k, 0]
+                            ay = CE[ct, k, 1]
+                            dx = CE[ct, k, 2]
+                            dy = CE[ct, k, 3]
+                            sg = CE[ct, k, 4]
+                            e00 = sg * (dx * (pa - ay) - dy * (qa - ax))
+                            e01 = sg * (dx * (pa - ay) - dy * (qb - ax))
+                            e10 = sg * (dx * (pb - ay) - dy * (qa - ax))
+                            e11 = sg * (dx * (pb - ay) - dy * (qb - ax))
+                            emin = min(min(e00, e01), min(e10, e11))
+                            emax = max(max(e00, e01), max(e10, e11))
+                            thr = 1e-12 * (abs(dx) + abs(dy)) * (abs(ax) + abs(ay) + W + H + 1.0)
+                            if emax < -thr:
+                                reject = True
+                                break
+                            if emin <= thr:
+                                full = False
+                        if reject:
+                            continue
+                    robust = CZ[ct, 2] != 0.0
+                    iv0 = CE[ct, 0, 6]
+                    c00 = CE[ct, 0, 7]
+                    M0 = CE[ct, 0, 8]
+                    k0 = CE[ct, 0, 9]
+                    iv1 = CE[ct, 1, 6]
+                    c01 = CE[ct, 1, 7]
+                    M1 = CE[ct, 1, 8]
+                    k1 = CE[ct, 1, 9]
+                    iv2 = CE[ct, 2, 6]
+                    c02 = CE[ct, 2, 7]
+                    M2 = CE[ct, 2, 8]
+                    k2 = CE[ct, 2, 9]
+                    if robust and not full:
+                        # the spans of all the tile's rows at once (vectorizes)
+                        for k in range(LO.shape[0]):
+                            py = (y0 + k) + 0.5
+                            lo, hi, slow = _fast_bound(j0, j1, False, py, j0, j1, ax0, ay0, dx0, dy0, sg0, in0,
+                                                       iv0, c00, M0, k0)
+                            lo, hi, slow = _fast_bound(lo, hi, slow, py, j0, j1, ax1, ay1, dx1, dy1, sg1, in1,
+                                                       iv1, c01, M1, k1)
+                            lo, hi, slow = _fast_bound(lo, hi, slow, py, j0, j1, ax2, ay2, dx2, dy2, sg2, in2,
+                                                       iv2, c02, M2, k2)
+                            LO[k] = lo
+                            HI[k] = hi
+                            EX[k] = slow
+                    r0 = 0.0
+                    r1 = 0.0
+                    r2 = 0.0
+                    ca0 = 0.0
+                    ca1 = 0.0
+                    ca2 = 0.0
+                    side_a = t < split
+                    cconst = False
+                    if mode == 4:
+                        ca0 = cattr[t, 0]
+                        ca1 = cattr[t, 1]
+                        ca2 = cattr[t, 2]
+                        cconst = (ca0 == ca1) & (ca0 == ca2)
+                    for i in range(i0, i1 + 1):
+                        py = i + 0.5
+                        yw = wt - py * wsy
+                        if ortho:
+                            zrow = pd - pny * yw
+                        else:
+                            zrow = pny * yw + pnz
+                        li = i - y0
+                        if full:
+                            lo = j0
+                            hi = j1
+                        elif robust:
+                            lo = LO[li]
+                            hi = HI[li]
+                            if EX[li] != 0:
+                                r0 = dx0 * (py - ay0)
+                                r1 = dx1 * (py - ay1)
+                                r2 = dx2 * (py - ay2)
+                                lo, hi = _edge_span(j0, j1, j0, j1, r0, ax0, dy0, sg0, in0, iv0, c00, M0, k0)
+                                lo, hi = _edge_span(lo, hi, j0, j1, r1, ax1, dy1, sg1, in1, iv1, c01, M1, k1)
+                                lo, hi = _edge_span(lo, hi, j0, j1, r2, ax2, dy2, sg2, in2, iv2, c02, M2, k2)
+                            if lo > hi:
+                                continue
+                        else:
                             r0 = dx0 * (py - ay0)
                             r1 = dx1 * (py - ay1)
                             r2 = dx2 * (py - ay2)
-                            lo, hi = _edge_span(j0, j1, j0, j1, r0, ax0, dy0, sg0, in0, iv0, c00, M0, k0)
-                            lo, hi = _edge_span(lo, hi, j0, j1, r1, ax1, dy1, sg1, in1, iv1, c01, M1, k1)
-                            lo, hi = _edge_span(lo, hi, j0, j1, r2, ax2, dy2, sg2, in2, iv2, c02, M2, k2)
-                        if lo > hi:
-                            continue
-                    else:
-                        r0 = dx0 * (py - ay0)
-                        r1 = dx1 * (py - ay1)
-                        r2 = dx2 * (py - ay2)
-                        lo, hi = _scan_run(j0, j1, r0, ax0, dy0, sg0, in0, r1, ax1, dy1, sg1, in1,
-                                           r2, ax2, dy2, sg2, in2)
-                    while lo <= hi:
-                        if mode <= 2:
-                            # the whole tile row at once (vectorizes), masked to the span
-                            klo = lo - x0
-                            khi = hi - x0
-                            if mode == 2:
-                                cnt = 0
-                                if ortho:
+                            lo, hi = _scan_run(j0, j1, r0, ax0, dy0, sg0, in0, r1, ax1, dy1, sg1, in1,
+                                               r2, ax2, dy2, sg2, in2)
+                        while lo <= hi:
+                            if mode <= 2:
+                                # the whole tile row at once (vectorizes), masked to the span
+                                klo = lo - x0
+                                khi = hi - x0
+                                if mode == 2:
+                                    cnt = 0
+                                    if ortho:
+                                        for k in range(T):
+                                            xw = wl + ((x0 + k) + 0.5) * wsx
+                                            z = (zrow - pnx * xw) / pnz
+                                            if not (z >= zlo):
+                                                z = zlo
+                                            elif z > zhi:
+                                                z = zhi
+                                            cnt += (k >= klo) & (k <= khi) & (not (z > far))
+                                    else:
+                                        for k in range(T):
+                                            xw = wl + ((x0 + k) + 0.5) * wsx
+                                            z = pd / (pnx * xw + zrow)
+                                            if not (z >= zlo):
+                                                z = zlo
+                                            elif z > zhi:
+                                                z = zhi
+                                            cnt += (k >= klo) & (k <= khi) & (not (z > far))
+                                    nfrag += cnt
+                                elif ortho:
                                     for k in range(T):
                                         xw = wl + ((x0 + k) + 0.5) * wsx
                                         z = (zrow - pnx * xw) / pnz
@@ -787,7 +812,10 @@ def _make_tiles_kernel(mode, prog=0):
                                             z = zlo
                                         elif z > zhi:
                                             z = zhi
-                                        cnt += (k >= klo) & (k <= khi) & (not (z > far))
+                                        zc = zb[li, k]
+                                        take = (k >= klo) & (k <= khi) & (not (z > far)) & (z < zc)
+                                        zb[li, k] = z if take else zc
+                                        tb[li, k] = t if take else tb[li, k]
                                 else:
                                     for k in range(T):
                                         xw = wl + ((x0 + k) + 0.5) * wsx
@@ -796,205 +824,183 @@ def _make_tiles_kernel(mode, prog=0):
                                             z = zlo
                                         elif z > zhi:
                                             z = zhi
-                                        cnt += (k >= klo) & (k <= khi) & (not (z > far))
-                                nfrag += cnt
-                            elif ortho:
-                                for k in range(T):
-                                    xw = wl + ((x0 + k) + 0.5) * wsx
-                                    z = (zrow - pnx * xw) / pnz
-                                    if not (z >= zlo):
-                                        z = zlo
-                                    elif z > zhi:
-                                        z = zhi
-                                    zc = zb[li, k]
-                                    take = (k >= klo) & (k <= khi) & (not (z > far)) & (z < zc)
-                                    zb[li, k] = z if take else zc
-                                    tb[li, k] = t if take else tb[li, k]
-                            else:
-                                for k in range(T):
-                                    xw = wl + ((x0 + k) + 0.5) * wsx
-                                    z = pd / (pnx * xw + zrow)
-                                    if not (z >= zlo):
-                                        z = zlo
-                                    elif z > zhi:
-                                        z = zhi
-                                    zc = zb[li, k]
-                                    take = (k >= klo) & (k <= khi) & (not (z > far)) & (z < zc)
-                                    zb[li, k] = z if take else zc
-                                    tb[li, k] = t if take else tb[li, k]
-                        elif mode == 4:
-                            # the whole tile row at once, masked to the span (a branch-free loop of T
-                            # columns: it vectorizes; cheaper than pixel by pixel even for short spans)
-                            klo = lo - x0
-                            khi = hi - x0
-                            nf = 0
-                            nk = 0
-                            if ortho:
-                                for k in range(T):
-                                    xw = wl + ((x0 + k) + 0.5) * wsx
-                                    z = (zrow - pnx * xw) / pnz
-                                    z = z if z >= zlo else zlo
-                                    z = zhi if z > zhi else z
-                                    b1, b2 = _bary_c(q4, q5, q6, q7, q8, q9, q10, q11, xw, yw, z, True)
-                                    a = (1.0 - b1 - b2) * ca0 + b1 * ca1 + b2 * ca2
-                                    val = run_program(prog, pparams, a, ib[li, k], z)
-                                    inside = (k >= klo) & (k <= khi) & (not (z > far))
-                                    kept = inside & (val == val)
-                                    nf += inside
-                                    nk += kept
-                                    zc = zb[li, k]
-                                    zb[li, k] = val if (kept & (val < zc)) else zc
-                            elif cconst:
-                                # the same attribute at the three corners (e.g. a cone's Z_v): no
-                                # barycentrics needed
-                                for k in range(T):
-                                    xw = wl + ((x0 + k) + 0.5) * wsx
-                                    z = pd / (pnx * xw + zrow)
-                                    z = z if z >= zlo else zlo
-                                    z = zhi if z > zhi else z
-                                    val = run_program(prog, pparams, ca0, ib[li, k], z)
-                                    inside = (k >= klo) & (k <= khi) & (not (z > far))
-                                    kept = inside & (val == val)
-                                    nf += inside
-                                    nk += kept
-                                    zc = zb[li, k]
-                                    zb[li, k] = val if (kept & (val < zc)) else zc
-                            else:
-                                for k in range(T):
-                                    xw = wl + ((x0 + k) + 0.5) * wsx
-                                    z = pd / (pnx * xw + zrow)
-                                    z = z if z >= zlo else zlo
-                                    z = zhi if z > zhi else z
-                                    b1, b2 = _bary_c(q4, q5, q6, q7, q8, q9, q10, q11, xw, yw, z, False)
-                                    a = (1.0 - b1 - b2) * ca0 + b1 * ca1 + b2 * ca2
-                                    val = run_program(prog, pparams, a, ib[li, k], z)
-                                    inside = (k >= klo) & (k <= khi) & (not (z > far))
-                                    kept = inside & (val == val)
-                                    nf += inside
-                                    nk += kept
-                                    zc = zb[li, k]
-                                    zb[li, k] = val if (kept & (val < zc)) else zc
-                            if side_a:
-                                na += nf
-                                ka += nk
-                            else:
-                                nb += nf
-                                kb += nk
-                        else:
-                            for j in range(lo, hi + 1):
-                                xw = wl + (j + 0.5) * wsx
+                                        zc = zb[li, k]
+                                        take = (k >= klo) & (k <= khi) & (not (z > far)) & (z < zc)
+                                        zb[li, k] = z if take else zc
+                                        tb[li, k] = t if take else tb[li, k]
+                            elif mode == 4:
+                                # the whole tile row at once, masked to the span (a branch-free loop of T
+                                # columns: it vectorizes; cheaper than pixel by pixel even for short spans)
+                                klo = lo - x0
+                                khi = hi - x0
+                                nf = 0
+                                nk = 0
                                 if ortho:
-                                    z = (zrow - pnx * xw) / pnz
+                                    for k in range(T):
+                                        xw = wl + ((x0 + k) + 0.5) * wsx
+                                        z = (zrow - pnx * xw) / pnz
+                                        z = z if z >= zlo else zlo
+                                        z = zhi if z > zhi else z
+                                        b1, b2 = _bary_c(q4, q5, q6, q7, q8, q9, q10, q11, xw, yw, z, True)
+                                        a = (1.0 - b1 - b2) * ca0 + b1 * ca1 + b2 * ca2
+                                        val = run_program(prog, pparams, a, ib[li, k], z)
+                                        inside = (k >= klo) & (k <= khi) & (not (z > far))
+                                        kept = inside & (val == val)
+                                        nf += inside
+                                        nk += kept
+                                        zc = zb[li, k]
+                                        zb[li, k] = val if (kept & (val < zc)) else zc
+                                elif cconst:
+                                    # the same attribute at the three corners (e.g. a cone's Z_v): no
+                                    # barycentrics needed
+                                    for k in range(T):
+                                        xw = wl + ((x0 + k) + 0.5) * wsx
+                                        z = pd / (pnx * xw + zrow)
+                                        z = z if z >= zlo else zlo
+                                        z = zhi if z > zhi else z
+                                        val = run_program(prog, pparams, ca0, ib[li, k], z)
+                                        inside = (k >= klo) & (k <= khi) & (not (z > far))
+                                        kept = inside & (val == val)
+                                        nf += inside
+                                        nk += kept
+                                        zc = zb[li, k]
+                                        zb[li, k] = val if (kept & (val < zc)) else zc
                                 else:
-                                    z = pd / (pnx * xw + zrow)
-                                if not (z >= zlo):  # also catches NaN (edge-on planes)
-                                    z = zlo
-                                elif z > zhi:
-                                    z = zhi
-                                if z > far:
-                                    continue
-                                # mode 3: write the fragment
-                                b1, b2 = _bary_c(q4, q5, q6, q7, q8, q9, q10, q11, xw, yw, z, ortho)
-                                fpix[w] = i * W + j
-                                ftri[w] = t
-                                fbary[w, 0] = b1
-                                fbary[w, 1] = b2
-                                fdepth[w] = z
-                                w += 1
-                        if full or robust:
-                            break
-                        lo, hi = _scan_run(hi + 1, j1, r0, ax0, dy0, sg0, in0, r1, ax1, dy1, sg1, in1,
-                                           r2, ax2, dy2, sg2, in2)
-            if mode == 0:
-                for i in range(y0, y1 + 1):
-                    zr = zb[i - y0]
-                    tr = tb[i - y0]
-                    drow = depth_out[i, x0:x1 + 1]
-                    trow = tri_out[i, x0:x1 + 1]
-                    for k in range(drow.shape[0]):
-                        drow[k] = zr[k]
-                        trow[k] = tr[k]
-            elif mode == 1:
-                # G-buffer of the tile from the winners (branch-free per pixel, so that it vectorizes)
-                o0 = vp[0]
-                o1 = vp[1]
-                o2 = vp[2]
-                rx = vp[3]
-                ry = vp[4]
-                rz = vp[5]
-                ux = vp[6]
-                uy = vp[7]
-                uz = vp[8]
-                fx = vp[9]
-                fy = vp[10]
-                fz = vp[11]
-                for i in range(y0, y1 + 1):
-                    yw = wt - (i + 0.5) * wsy
-                    zr = zb[i - y0]
-                    tr = tb[i - y0]
-                    trow = tri_out[i, x0:x1 + 1]
-                    drow = depth_out[i, x0:x1 + 1]
-                    mrow = mask_out[i, x0:x1 + 1]
-                    prow = pos_out[i, x0:x1 + 1]
-                    nrow = nrm_out[i, x0:x1 + 1]
-                    brow = bary_out[i, x0:x1 + 1]
-                    if ortho:
+                                    for k in range(T):
+                                        xw = wl + ((x0 + k) + 0.5) * wsx
+                                        z = pd / (pnx * xw + zrow)
+                                        z = z if z >= zlo else zlo
+                                        z = zhi if z > zhi else z
+                                        b1, b2 = _bary_c(q4, q5, q6, q7, q8, q9, q10, q11, xw, yw, z, False)
+                                        a = (1.0 - b1 - b2) * ca0 + b1 * ca1 + b2 * ca2
+                                        val = run_program(prog, pparams, a, ib[li, k], z)
+                                        inside = (k >= klo) & (k <= khi) & (not (z > far))
+                                        kept = inside & (val == val)
+                                        nf += inside
+                                        nk += kept
+                                        zc = zb[li, k]
+                                        zb[li, k] = val if (kept & (val < zc)) else zc
+                                if side_a:
+                                    na += nf
+                                    ka += nk
+                                else:
+                                    nb += nf
+                                    kb += nk
+                            else:
+                                for j in range(lo, hi + 1):
+                                    xw = wl + (j + 0.5) * wsx
+                                    if ortho:
+                                        z = (zrow - pnx * xw) / pnz
+                                    else:
+                                        z = pd / (pnx * xw + zrow)
+                                    if not (z >= zlo):  # also catches NaN (edge-on planes)
+                                        z = zlo
+                                    elif z > zhi:
+                                        z = zhi
+                                    if z > far:
+                                        continue
+                                    # mode 3: write the fragment
+                                    b1, b2 = _bary_c(q4, q5, q6, q7, q8, q9, q10, q11, xw, yw, z, ortho)
+                                    fpix[w] = i * W + j
+                                    ftri[w] = t
+                                    fbary[w, 0] = b1
+                                    fbary[w, 1] = b2
+                                    fdepth[w] = z
+                                    w += 1
+                            if full or robust:
+                                break
+                            lo, hi = _scan_run(hi + 1, j1, r0, ax0, dy0, sg0, in0, r1, ax1, dy1, sg1, in1,
+                                               r2, ax2, dy2, sg2, in2)
+                if mode == 0:
+                    for i in range(y0, y1 + 1):
+                        zr = zb[i - y0]
+                        tr = tb[i - y0]
+                        drow = depth_out[i, x0:x1 + 1]
+                        trow = tri_out[i, x0:x1 + 1]
                         for k in range(drow.shape[0]):
-                            t = tr[k]
-                            hit = t >= 0
-                            tt = max(t, 0)  # PL, NW have a row 0 (read, then discarded, where no hit)
-                            z = zr[k]  # +inf where no hit
-                            xw = wl + ((x0 + k) + 0.5) * wsx
-                            b1, b2 = _bary_c(PL[tt, 4], PL[tt, 5], PL[tt, 6], PL[tt, 7], PL[tt, 8], PL[tt, 9],
-                                             PL[tt, 10], PL[tt, 11], xw, yw, z, True)
-                            vx = xw
-                            vy = yw
-                            trow[k] = t
-                            drow[k] = z
-                            mrow[k] = hit
-                            prow[k, 0] = (o0 + vx * rx + vy * ux + z * fx) if hit else np.nan
-                            prow[k, 1] = (o1 + vx * ry + vy * uy + z * fy) if hit else np.nan
-                            prow[k, 2] = (o2 + vx * rz + vy * uz + z * fz) if hit else np.nan
-                            nrow[k, 0] = NW[tt, 0] if hit else np.nan
-                            nrow[k, 1] = NW[tt, 1] if hit else np.nan
-                            nrow[k, 2] = NW[tt, 2] if hit else np.nan
-                            brow[k, 0] = b1 if hit else np.nan
-                            brow[k, 1] = b2 if hit else np.nan
-                    else:
-                        for k in range(drow.shape[0]):
-                            t = tr[k]
-                            hit = t >= 0
-                            tt = max(t, 0)  # PL, NW have a row 0 (read, then discarded, where no hit)
-                            z = zr[k]  # +inf where no hit
-                            xw = wl + ((x0 + k) + 0.5) * wsx
-                            b1, b2 = _bary_c(PL[tt, 4], PL[tt, 5], PL[tt, 6], PL[tt, 7], PL[tt, 8], PL[tt, 9],
-                                             PL[tt, 10], PL[tt, 11], xw, yw, z, False)
-                            vx = xw * z
-                            vy = yw * z
-                            trow[k] = t
-                            drow[k] = z
-                            mrow[k] = hit
-                            prow[k, 0] = (o0 + vx * rx + vy * ux + z * fx) if hit else np.nan
-                            prow[k, 1] = (o1 + vx * ry + vy * uy + z * fy) if hit else np.nan
-                            prow[k, 2] = (o2 + vx * rz + vy * uz + z * fz) if hit else np.nan
-                            nrow[k, 0] = NW[tt, 0] if hit else np.nan
-                            nrow[k, 1] = NW[tt, 1] if hit else np.nan
-                            nrow[k, 2] = NW[tt, 2] if hit else np.nan
-                            brow[k, 0] = b1 if hit else np.nan
-                            brow[k, 1] = b2 if hit else np.nan
-            elif mode == 2:
-                fcount[tile] = nfrag
-            elif mode == 4:
-                bstats[tile, 0] += na
-                bstats[tile, 1] += nb
-                bstats[tile, 2] += ka
-                bstats[tile, 3] += kb
-                bstats[tile, 4] += nculled
-                for i in range(y0, y1 + 1):
-                    zr = zb[i - y0]
-                    brow = blend[i, x0:x1 + 1]
-                    for k in range(brow.shape[0]):
-                        brow[k] = zr[k]
+                            drow[k] = zr[k]
+                            trow[k] = tr[k]
+                elif mode == 1:
+                    # G-buffer of the tile from the winners (branch-free per pixel, so that it vectorizes)
+                    o0 = vp[0]
+                    o1 = vp[1]
+                    o2 = vp[2]
+                    rx = vp[3]
+                    ry = vp[4]
+                    rz = vp[5]
+                    ux = vp[6]
+                    uy = vp[7]
+                    uz = vp[8]
+                    fx = vp[9]
+                    fy = vp[10]
+                    fz = vp[11]
+                    for i in range(y0, y1 + 1):
+                        yw = wt - (i + 0.5) * wsy
+                        zr = zb[i - y0]
+                        tr = tb[i - y0]
+                        trow = tri_out[i, x0:x1 + 1]
+                        drow = depth_out[i, x0:x1 + 1]
+                        mrow = mask_out[i, x0:x1 + 1]
+                        prow = pos_out[i, x0:x1 + 1]
+                        nrow = nrm_out[i, x0:x1 + 1]
+                        brow = bary_out[i, x0:x1 + 1]
+                        if ortho:
+                            for k in range(drow.shape[0]):
+                                t = tr[k]
+                                hit = t >= 0
+                                tt = max(t, 0)  # PL, NW have a row 0 (read, then discarded, where no hit)
+                                z = zr[k]  # +inf where no hit
+                                xw = wl + ((x0 + k) + 0.5) * wsx
+                                b1, b2 = _bary_c(PL[tt, 4], PL[tt, 5], PL[tt, 6], PL[tt, 7], PL[tt, 8], PL[tt, 9],
+                                                 PL[tt, 10], PL[tt, 11], xw, yw, z, True)
+                                vx = xw
+                                vy = yw
+                                trow[k] = t
+                                drow[k] = z
+                                mrow[k] = hit
+                                prow[k, 0] = (o0 + vx * rx + vy * ux + z * fx) if hit else np.nan
+                                prow[k, 1] = (o1 + vx * ry + vy * uy + z * fy) if hit else np.nan
+                                prow[k, 2] = (o2 + vx * rz + vy * uz + z * fz) if hit else np.nan
+                                nrow[k, 0] = NW[tt, 0] if hit else np.nan
+                                nrow[k, 1] = NW[tt, 1] if hit else np.nan
+                                nrow[k, 2] = NW[tt, 2] if hit else np.nan
+                                brow[k, 0] = b1 if hit else np.nan
+                                brow[k, 1] = b2 if hit else np.nan
+                        else:
+                            for k in range(drow.shape[0]):
+                                t = tr[k]
+                                hit = t >= 0
+                                tt = max(t, 0)  # PL, NW have a row 0 (read, then discarded, where no hit)
+                                z = zr[k]  # +inf where no hit
+                                xw = wl + ((x0 + k) + 0.5) * wsx
+                                b1, b2 = _bary_c(PL[tt, 4], PL[tt, 5], PL[tt, 6], PL[tt, 7], PL[tt, 8], PL[tt, 9],
+                                                 PL[tt, 10], PL[tt, 11], xw, yw, z, False)
+                                vx = xw * z
+                                vy = yw * z
+                                trow[k] = t
+                                drow[k] = z
+                                mrow[k] = hit
+                                prow[k, 0] = (o0 + vx * rx + vy * ux + z * fx) if hit else np.nan
+                                prow[k, 1] = (o1 + vx * ry + vy * uy + z * fy) if hit else np.nan
+                                prow[k, 2] = (o2 + vx * rz + vy * uz + z * fz) if hit else np.nan
+                                nrow[k, 0] = NW[tt, 0] if hit else np.nan
+                                nrow[k, 1] = NW[tt, 1] if hit else np.nan
+                                nrow[k, 2] = NW[tt, 2] if hit else np.nan
+                                brow[k, 0] = b1 if hit else np.nan
+                                brow[k, 1] = b2 if hit else np.nan
+                elif mode == 2:
+                    fcount[tile] = nfrag
+                elif mode == 4:
+                    bstats[tile, 0] += na
+                    bstats[tile, 1] += nb
+                    bstats[tile, 2] += ka
+                    bstats[tile, 3] += kb
+                    bstats[tile, 4] += nculled
+                    for i in range(y0, y1 + 1):
+                        zr = zb[i - y0]
+                        brow = blend[i, x0:x1 + 1]
+                        for k in range(brow.shape[0]):
+                            brow[k] = zr[k]
 
     return tiles
 
@@ -1084,10 +1090,10 @@ def _front_end(vp, W, H, verts, fcs, code, near):
     chunk = (F + nchunk - 1) // nchunk if F else 1
     cnt = np.empty((nchunk, ntx * nty), dtype=np.int64)
     bstart = np.empty(ntx * nty + 1, dtype=np.int64)
-    _setup_count(verts, fcs, vp, near, code, NC, CB, CE, CZ, PL, NW, T, ntx, chunk, cnt)
+    _setup_count(verts, fcs, vp, near, code, NC, CB, CE, CZ, PL, NW, T, ntx, chunk, cnt, nthreads)
     _bin_offsets(cnt, bstart)
     bins = np.empty(int(bstart[-1]), dtype=np.int32)
-    _bin_fill(NC, CB, T, ntx, chunk, cnt, bins)
+    _bin_fill(NC, CB, T, ntx, chunk, cnt, bins, nthreads)
     return T, ntx, nty, bstart, bins, CB, CE, CZ, PL, NW, near
 
 
@@ -1116,14 +1122,15 @@ def _run_tiles(mode, vp, fe, depth=_E2F, tri=_E2I, pos=_E3F, nrm=_E3F, bary=_E3F
     tscratch = np.empty((nthreads, T, T), dtype=np.int32)
     iscratch = np.empty((nthreads, 3, T), dtype=np.int64)
     fscratch = np.zeros((nthreads, T, T), dtype=np.float32)
-    ntiles = ntx * nty
-    old = numba.set_parallel_chunksize(max(1, ntiles // (8 * numba.get_num_threads())))
-    try:
-        _KERNELS[(mode, program if mode == _M_MINBLEND else 0)](vp, near, T, ntx, nty, bstart, bins, CB, CE, CZ, PL, NW, scratch, tscratch, iscratch,
-                       fscratch, depth, tri, pos, nrm, bary, mask, fcount, foff, fpix, ftri, fbary, fdepth,
-                       program, pparams, cattr, img, blend, bstats, split, bool(cull_discarded))
-    finally:
-        numba.set_parallel_chunksize(old)
+    # load balance: Numba splits a prange into equal contiguous parts, one per thread, whatever the
+    # chunk size; the work of a tile kernel is concentrated where the geometry is. So the prange runs
+    # over one slot per thread and slot p takes tiles p, p + n, p + 2n, ...: neighbouring tiles go
+    # to different threads and every thread gets a share of every busy region.
+    slots = np.empty(numba.get_num_threads(), dtype=np.int64)
+    _KERNELS[(mode, program if mode == _M_MINBLEND else 0)](
+        vp, near, T, ntx, nty, bstart, bins, CB, CE, CZ, PL, NW, scratch, tscratch, iscratch, fscratch, depth, tri,
+        pos, nrm, bary, mask, fcount, foff, fpix, ftri, fbary, fdepth, program, pparams, cattr, img, blend, bstats,
+        split, bool(cull_discarded), slots)
 
 
 def rasterize(view, vertices, faces, cull: str = "none") -> GBuffer:
