@@ -148,8 +148,10 @@ class ShadowMapPass:
 def penumbra_map_view(scene, map_size: int, light_radius: float,
                       base_view: View | None = None) -> tuple[View, View, tuple, bool]:
     """(hard's view, grown view, border (l, r, t, b) in texels, clipped?). The border holds the
-    widest outer penumbra: in window units (x/z) a penumbra around a silhouette vertex at depth
-    z_v reaches at most ``L_r (1/z_v - 1/z_P)`` <= ``L_r (1/z_min_occluder - 1/z_max)``.
+    outer penumbra: in window units (x/z) the cone of a silhouette vertex at depth z_v reaches at
+    most ``L_r (1/z_v - 1/z_max)`` around the vertex's projection (sheets lie between the cones),
+    so each side reaches as far as the farthest such disk of any occluder vertex, and no farther
+    than the geometry.
     ``base_view`` replaces ``hard``'s view (a perspective view from the light center), e.g. to
     compare maps of several scenes on one texel grid."""
     hv = fit_light_view(scene, map_size) if base_view is None else base_view
@@ -165,21 +167,25 @@ def penumbra_map_view(scene, map_size: int, light_radius: float,
     if len(zo) == 0 or len(front) == 0:
         return hv, hv, (0, 0, 0, 0), False
     zmax = float(front[:, 2].max())
-    m = max(light_radius * (1.0 / float(zo.min()) - 1.0 / zmax), 0.0)
     xa, ya = front[:, 0] / front[:, 2], front[:, 1] / front[:, 2]
+    # the reach of every occluder vertex's cone at the farthest depth, around its projection
+    qo = q[occ_idx]
+    qo = qo[qo[:, 2] > 1e-9]
+    xo, yo = qo[:, 0] / qo[:, 2], qo[:, 1] / qo[:, 2]
+    ro = np.maximum(light_radius * (1.0 / qo[:, 2] - 1.0 / zmax), 0.0)
     cap = int(MAX_BORDER_FRACTION * max(hv.width, hv.height))
 
-    def pad(ext_geom, step):  # texels needed on one side: min(penumbra reach, geometry extent) + 1 guard
-        e = min(m, max(ext_geom, 0.0))
+    def pad(reach, ext_geom, step):  # texels needed on one side: min(penumbra reach, geometry extent) + 1 guard
+        e = min(max(reach, 0.0), max(ext_geom, 0.0))
         if e <= 0.0:
             return 0, False
         n = int(math.ceil(e / step)) + 1
         return min(n, cap), n > cap
 
-    pl, cl = pad(l - xa.min(), s)
-    pr, cr = pad(xa.max() - r, s)
-    pt, ct = pad(ya.max() - t, s_y)
-    pb, cb = pad(b - ya.min(), s_y)
+    pl, cl = pad(l - float((xo - ro).min()), l - xa.min(), s)
+    pr, cr = pad(float((xo + ro).max()) - r, xa.max() - r, s)
+    pt, ct = pad(float((yo + ro).max()) - t, ya.max() - t, s_y)
+    pb, cb = pad(b - float((yo - ro).min()), b - ya.min(), s_y)
     window = (l - pl * s, r + pr * s, b - pb * s_y, t + pt * s_y)
     near = max(min(hv.near, float(front[:, 2].min()) * 0.98), 1e-6)
     far = max(hv.far, zmax * 1.02)

@@ -608,6 +608,9 @@ def _make_tiles_kernel(mode, prog=0):
                 if mode == 3:
                     w = foff[tile]
                 elif mode == 4:
+                    for li in range(4):
+                        for k in range(T):
+                            tb[li, k] = 0
                     tthr = -np.inf
                     for i in range(y0, y1 + 1):
                         zr = zb[i - y0]
@@ -833,8 +836,7 @@ def _make_tiles_kernel(mode, prog=0):
                                 # columns: it vectorizes; cheaper than pixel by pixel even for short spans)
                                 klo = lo - x0
                                 khi = hi - x0
-                                nf = 0
-                                nk = 0
+                                sb = 0 if side_a else 2  # lane counters: tb rows sb (fragments), sb + 1 (kept)
                                 if ortho:
                                     for k in range(T):
                                         xw = wl + ((x0 + k) + 0.5) * wsx
@@ -846,8 +848,8 @@ def _make_tiles_kernel(mode, prog=0):
                                         val = run_program(prog, pparams, a, ib[li, k], z)
                                         inside = (k >= klo) & (k <= khi) & (not (z > far))
                                         kept = inside & (val == val)
-                                        nf += inside
-                                        nk += kept
+                                        tb[sb, k] += inside
+                                        tb[sb + 1, k] += kept
                                         zc = zb[li, k]
                                         zb[li, k] = val if (kept & (val < zc)) else zc
                                 elif cconst:
@@ -861,8 +863,8 @@ def _make_tiles_kernel(mode, prog=0):
                                         val = run_program(prog, pparams, ca0, ib[li, k], z)
                                         inside = (k >= klo) & (k <= khi) & (not (z > far))
                                         kept = inside & (val == val)
-                                        nf += inside
-                                        nk += kept
+                                        tb[sb, k] += inside
+                                        tb[sb + 1, k] += kept
                                         zc = zb[li, k]
                                         zb[li, k] = val if (kept & (val < zc)) else zc
                                 else:
@@ -876,16 +878,10 @@ def _make_tiles_kernel(mode, prog=0):
                                         val = run_program(prog, pparams, a, ib[li, k], z)
                                         inside = (k >= klo) & (k <= khi) & (not (z > far))
                                         kept = inside & (val == val)
-                                        nf += inside
-                                        nk += kept
+                                        tb[sb, k] += inside
+                                        tb[sb + 1, k] += kept
                                         zc = zb[li, k]
                                         zb[li, k] = val if (kept & (val < zc)) else zc
-                                if side_a:
-                                    na += nf
-                                    ka += nk
-                                else:
-                                    nb += nf
-                                    kb += nk
                             else:
                                 for j in range(lo, hi + 1):
                                     xw = wl + (j + 0.5) * wsx
@@ -991,6 +987,11 @@ def _make_tiles_kernel(mode, prog=0):
                 elif mode == 2:
                     fcount[tile] = nfrag
                 elif mode == 4:
+                    for k in range(T):
+                        na += tb[0, k]
+                        ka += tb[1, k]
+                        nb += tb[2, k]
+                        kb += tb[3, k]
                     bstats[tile, 0] += na
                     bstats[tile, 1] += nb
                     bstats[tile, 2] += ka
