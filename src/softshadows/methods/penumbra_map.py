@@ -775,7 +775,7 @@ def render_penumbra_map(scene, smp: ShadowMapPass, light_radius: float, *, silho
         rview = View(view.origin, view.right, view.up, view.forward, view.window, view.near,
                      max(z_far * (1.0 + 1e-4), view.near * 2), view.width, view.height, False)
         fst = penumbra_fragment_program(rview, prims, len(cones.triangles), zp, bias, smoothstep == "bernstein", pm,
-                                        cull_discarded=True)
+                                        cull_discarded=early_reject)
     stats = {
         "silhouette_edges": sil.n_edges,
         "silhouette_vertices": sil.n_vertices,
