@@ -48,6 +48,7 @@ def speed(reps: int, size: int, verbose: bool) -> dict:
         "brute (default)": (base, {}),
         "adjacency": (base, {"penumbra-map": {"silhouettes": "adjacency"}}),
         "light radius x0.5": (base.with_light(base.light.scaled(0.5)), {}),
+        "cone_segments=8": (base, {"penumbra-map": {"cone_segments": 8}}),
     }
     for label, (scene, params) in runs.items():
         if verbose:

@@ -305,6 +305,57 @@ def test_fragments_min_blend_equals_depth_test():
     assert np.array_equal(fr.pixel, fr2.pixel) and np.array_equal(fr.tri, fr2.tri)
 
 
+@pytest.mark.parametrize("ortho", [False, True])
+def test_min_blend_penumbra_culling_is_exact(ortho):
+    """rasterize_min_blend with the penumbra program against a per-fragment reference built from
+    rasterize_fragments, with and without hierarchical culling of discarded fragments: the culled
+    pass must give the same texels and the same kept counts, and must actually cull."""
+    from softshadows.raster import rasterize_min_blend
+    from softshadows.raster.programs import PROGRAM_PENUMBRA, penumbra_intensity
+
+    rng = np.random.default_rng(11)
+    n = 300
+    V = rng.uniform(-1.2, 1.2, size=(3 * n, 3)) + [0, 0, -4]
+    F = np.arange(3 * n).reshape(n, 3)
+    if ortho:
+        view = View.frame([0, 0, 0], [0, 0, -1], [0, 1, 0], (-1.2, 1.2, -1.0, 1.0), 0.5, 10, 96, 80, ortho=True)
+    else:
+        view = View.look_at([0, 0, 0], [0, 0, -4], [0, 1, 0], 40, 96, 80)
+    # Z_P: a slanted surface through the geometry, empty (inf) on a block of texels
+    yy, xx = np.mgrid[0:80, 0:96]
+    zp = (3.2 + 0.02 * xx + 0.01 * yy).astype(np.float32)
+    zp[10:30, 60:90] = np.inf
+    za = rng.uniform(2.0, 3.5, size=(n, 3))
+    za[: n // 2] = za[: n // 2, :1]  # half the triangles with a constant attribute (as cones)
+    params = np.array([0.5, 0.01, 1.0])
+    fr = rasterize_fragments(view, V, F)
+    ref = np.ones(96 * 80, np.float32)
+    kept = 0
+    for pix, t, b, z in zip(fr.pixel, fr.tri, fr.bary, fr.depth):
+        a = (1 - b[0] - b[1]) * za[t, 0] + b[0] * za[t, 1] + b[1] * za[t, 2]
+        s = float(zp.ravel()[pix])
+        v = penumbra_intensity(float(z), a, s, params[0] * params[1] * s, True)
+        if v == v:
+            kept += 1
+            ref[pix] = min(ref[pix], v)
+    ref = ref.reshape(80, 96)
+    out = {}
+    for cd in (False, True):
+        o = np.ones((80, 96), np.float32)
+        st = rasterize_min_blend(view, V, F, PROGRAM_PENUMBRA, za, zp, params, o, cull_discarded=cd)
+        out[cd] = (o, st)
+    def tot(st, k):
+        return st[k + "_a"] + st[k + "_b"]
+
+    assert np.array_equal(out[False][0], out[True][0])
+    assert tot(out[False][1], "kept") == tot(out[True][1], "kept")
+    assert out[True][1]["culled_pieces"] > 0 and out[False][1]["culled_pieces"] == 0
+    assert tot(out[True][1], "fragments") < tot(out[False][1], "fragments") == len(fr.pixel)
+    assert abs(tot(out[False][1], "kept") - kept) <= 0.002 * len(fr.pixel)  # float32 depths in fr
+    # fr stores float32 depths and barycentrics: the reference agrees to float32 precision
+    assert np.abs(out[True][0] - ref).max() < 2e-3
+
+
 # ---------------------------------------------------------------------------------------------
 # depth, position, barycentrics
 # ---------------------------------------------------------------------------------------------
@@ -549,3 +600,37 @@ def test_sampling_helpers():
     img2 = img.copy()
     img2[0, 1] = np.nan
     assert sample_bilinear(img2, 0.5, 0.5) == 0.0  # the NaN neighbour has zero weight
+
+
+def test_outputs_do_not_depend_on_the_thread_count():
+    """Tiles and setup chunks are dealt round-robin to one slot per thread: every output (G-buffer,
+    depth, fragment order, min-blend) must be the same with 1 thread as with all of them."""
+    import numba
+
+    from softshadows.raster import rasterize_min_blend
+    from softshadows.raster.programs import PROGRAM_ATTRIBUTE
+
+    rng = np.random.default_rng(12)
+    V, F = grid_plane(20, -3, 3, -9, -2, jitter=0.2, rng=rng)
+    V2 = rng.uniform(-1, 1, size=(600, 3)) + [0, 0.5, -5]
+    F2 = np.arange(600).reshape(200, 3) + len(V)
+    V, F = np.concatenate([V, V2]), np.concatenate([F, F2])
+    view = View.look_at([0, 2, 1], [0, 0, -5], [0, 1, 0], 50, 70, 52)
+    ca = rng.random((len(F), 3))
+
+    def run():
+        g = rasterize(view, V, F)
+        d, t = rasterize_depth(view, V, F)
+        fr = rasterize_fragments(view, V, F)
+        o = np.full((52, 70), np.inf, np.float32)
+        rasterize_min_blend(view, V, F, PROGRAM_ATTRIBUTE, ca, np.zeros((52, 70), np.float32), np.zeros(1), o)
+        return [g.depth, g.tri_id, g.position, d, t, fr.pixel, fr.tri, fr.depth, o]
+
+    n = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        one = run()
+    finally:
+        numba.set_num_threads(n)
+    for a, b in zip(one, run()):
+        assert np.array_equal(a, b, equal_nan=a.dtype.kind == "f")
