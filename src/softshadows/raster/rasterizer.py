@@ -35,8 +35,24 @@ Pipeline (all Numba kernels on plain arrays; the functions at the bottom only or
    a tile's pieces in increasing triangle index, so the depth tie rule (equal depth: the smaller
    index wins) is "strictly nearer wins".
 
+   Min-blend mode (``rasterize_min_blend``) runs a fragment program per fragment, branch-free over
+   the whole tile row (vectorized; a kernel is compiled per program so that the program inlines),
+   and can skip the pieces of a tile that the program would discard entirely (hierarchical culling:
+   an exact depth bound per piece and tile against ``programs.discard_depth``; same output).
+
+4. **load balance**: Numba splits a ``prange`` into equal contiguous parts, one per thread,
+   whatever ``set_parallel_chunksize`` says (measured: a loop with all its work in the first half
+   runs on one thread), while the work of a tile pass is concentrated where the geometry is. The
+   tile and setup kernels therefore run a ``prange`` over one slot per thread, and slot p takes
+   tiles (chunks) p, p + n, p + 2n, ...: every thread gets a share of every busy region. No
+   output depends on the thread count.
+
 Depth is the view-space z (distance along ``forward``, world units) for both perspective and
 orthographic views; the depth test runs in float64 and the outputs are float32.
+
+Hot loops index scratch arrays with 2-D subscripts instead of taking row views: a view costs an
+atomic reference-count update on the shared parent array, and with two threads these contended
+updates cost more than the rasterization itself.
 """
 from __future__ import annotations
 
@@ -575,7 +591,17 @@ def _make_tiles_kernel(mode, prog=0):
         ntiles = ntx * nty
         nslot = slots.shape[0]
         for slot in prange(nslot):
-            for tile in range(slot, ntiles, nslot):
+            # min-blend: tiles slot, slot + n, ... (its work sits in few tiles); dense modes: tile rows
+            # slot, slot + n, ... (contiguous rows of output keep the memory traffic local)
+            if mode == 4:
+                nk = (ntiles - slot + nslot - 1) // nslot
+            else:
+                nk = (nty - slot + nslot - 1) // nslot * ntx
+            for kt in range(nk):
+                if mode == 4:
+                    tile = slot + kt * nslot
+                else:
+                    tile = (slot + (kt // ntx) * nslot) * ntx + kt % ntx
                 if mode >= 2 and bstart[tile] == bstart[tile + 1]:
                     continue  # nothing binned here: no fragments, ``blend`` unchanged (modes 2-4)
                 ty = tile // ntx
