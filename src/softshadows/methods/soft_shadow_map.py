@@ -84,6 +84,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+import numba
 import numpy as np
 from numba import njit, prange
 
@@ -368,7 +369,7 @@ def bin_patches_by_band(ext, n_bands, band_rows):
 
 @njit(parallel=True, **_JIT)
 def accumulate_soft_shadow_map(patches, pmesh, ext, band_ptr, band_idx, band_rows, recv_depth, recv_mesh,
-                               svp, hx, hy, fp16, rtz, check_mesh, ssm):
+                               svp, hx, hy, fp16, rtz, check_mesh, ssm, nslot=1):
     """Add every micro-patch's occlusion percentage into ``ssm`` (H,W) float32 at the texels of
     its penumbra extent. One thread per band of rows, micro-patches in draw order: race-free and
     with the same per-texel order of additions as GPU blending. ``fp16``: round the running sum to
@@ -385,55 +386,63 @@ def accumulate_soft_shadow_map(patches, pmesh, ext, band_ptr, band_idx, band_row
     dys = (t - b) / H
     n_bands = band_ptr.shape[0] - 1
     touched = np.zeros(n_bands, np.int64)
-    for bnd in prange(n_bands):
-        r0 = bnd * band_rows
-        r1 = min(r0 + band_rows, H) - 1
-        cnt = 0
-        for q in range(band_ptr[bnd], band_ptr[bnd + 1]):
-            p = band_idx[q]
-            x0, x1, y0, y1, zo = patches[p, 0], patches[p, 1], patches[p, 2], patches[p, 3], patches[p, 4]
-            pm = pmesh[p]
-            i0 = max(ext[p, 0], r0)
-            i1 = min(ext[p, 1], r1)
-            j0 = ext[p, 2]
-            j1 = ext[p, 3] + 1
-            # x terms of the fragment program are linear in the column: a0(j) = ax - j * dax
-            ux0 = l + (j0 + 0.5) * dxs
-            ax = (x0 - ux0 * zo) / (2.0 * hx)
-            wx = (x1 - x0) / (2.0 * hx)
-            dax = dxs * zo / (2.0 * hx)
-            for i in range(i0, i1 + 1):
-                uy = t - (i + 0.5) * dys
-                c0 = (y0 - uy * zo) / (2.0 * hy)
-                c1 = (y1 - uy * zo) / (2.0 * hy)
-                cnt += j1 - j0
-                row = recv_depth[i, j0:j1]
-                out = ssm[i, j0:j1]
-                if fp16:
-                    for jj in range(row.shape[0]):
-                        zr = np.float64(row[jj])
-                        if zr > zo and not (check_mesh and recv_mesh[i, j0 + jj] == pm):
+    # bands dealt round-robin to ``nslot`` slots, one per thread (Numba splits a prange into equal
+    # contiguous parts: with the shadow in a few bands, contiguous halves would leave a thread idle)
+    for slot in prange(nslot):
+        for bnd in range(slot, n_bands, nslot):
+            r0 = bnd * band_rows
+            r1 = min(r0 + band_rows, H) - 1
+            cnt = 0
+            for q in range(band_ptr[bnd], band_ptr[bnd + 1]):
+                p = band_idx[q]
+                x0, x1, y0, y1, zo = patches[p, 0], patches[p, 1], patches[p, 2], patches[p, 3], patches[p, 4]
+                pm = pmesh[p]
+                i0 = max(ext[p, 0], r0)
+                i1 = min(ext[p, 1], r1)
+                j0 = ext[p, 2]
+                j1 = ext[p, 3] + 1
+                # x terms of the fragment program are linear in the column: a0(j) = ax - j * dax
+                ux0 = l + (j0 + 0.5) * dxs
+                ax = (x0 - ux0 * zo) / (2.0 * hx)
+                wx = (x1 - x0) / (2.0 * hx)
+                dax = dxs * zo / (2.0 * hx)
+                for i in range(i0, i1 + 1):
+                    uy = t - (i + 0.5) * dys
+                    c0 = (y0 - uy * zo) / (2.0 * hy)
+                    c1 = (y1 - uy * zo) / (2.0 * hy)
+                    cnt += j1 - j0
+                    if fp16:
+                        row = recv_depth[i, j0:j1]
+                        out = ssm[i, j0:j1]
+                        for jj in range(row.shape[0]):
+                            zr = np.float64(row[jj])
+                            if zr > zo and not (check_mesh and recv_mesh[i, j0 + jj] == pm):
+                                a0 = ax - jj * dax
+                                c = occlusion_percentage(zr / (zr - zo), a0, a0 + wx, c0, c1)
+                                if c > 0.0:
+                                    out[jj] = np.float32(round_half(np.float64(out[jj]) + round_half(c, rtz), rtz))
+                    elif check_mesh:
+                        ii = np.uint64(i)
+                        for jj in range(j1 - j0):
+                            jx = np.uint64(j0 + jj)
+                            zr = np.float64(recv_depth[ii, jx])
+                            k = zr / (zr - zo)
+                            k = k if zr > zo else 0.0
+                            k = k if recv_mesh[ii, jx] != pm else 0.0
                             a0 = ax - jj * dax
-                            c = occlusion_percentage(zr / (zr - zo), a0, a0 + wx, c0, c1)
-                            if c > 0.0:
-                                out[jj] = np.float32(round_half(np.float64(out[jj]) + round_half(c, rtz), rtz))
-                elif check_mesh:
-                    mrow = recv_mesh[i, j0:j1]
-                    for jj in range(row.shape[0]):
-                        zr = np.float64(row[jj])
-                        k = zr / (zr - zo)
-                        k = k if zr > zo else 0.0
-                        k = k if mrow[jj] != pm else 0.0
-                        a0 = ax - jj * dax
-                        out[jj] += np.float32(occlusion_percentage(k, a0, a0 + wx, c0, c1))
-                else:
-                    for jj in range(row.shape[0]):
-                        zr = np.float64(row[jj])
-                        k = zr / (zr - zo)
-                        k = k if zr > zo else 0.0
-                        a0 = ax - jj * dax
-                        out[jj] += np.float32(occlusion_percentage(k, a0, a0 + wx, c0, c1))
-        touched[bnd] = cnt
+                            ssm[ii, jx] += np.float32(occlusion_percentage(k, a0, a0 + wx, c0, c1))
+                    else:
+                        # 2-D subscripts, no row views (a view costs a contended atomic refcount update);
+                        # unsigned indices: no negative-index wraparound, so the loop vectorizes
+                        ii = np.uint64(i)
+                        for jj in range(j1 - j0):
+                            jx = np.uint64(j0 + jj)
+                            zr = np.float64(recv_depth[ii, jx])
+                            k = zr / (zr - zo)
+                            k = k if zr > zo else 0.0
+                            a0 = ax - jj * dax
+                            ssm[ii, jx] += np.float32(occlusion_percentage(k, a0, a0 + wx, c0, c1))
+            touched[bnd] = cnt
     return touched
 
 
@@ -540,7 +549,8 @@ def compute_soft_shadow_map(scene, map_size: int = 256, ssm_size: int = 256, two
         with timer.phase("soft_shadow_map"):
             ssm = np.zeros((ssm_size, ssm_size), np.float32)
             touched = accumulate_soft_shadow_map(patches, pmesh, ext, ptr, idx, BAND_ROWS, rdepth0, rmesh, svp,
-                                                 hx, hy, fp16, accumulate == "float16-rtz", check_mesh, ssm)
+                                                 hx, hy, fp16, accumulate == "float16-rtz", check_mesh, ssm,
+                                                 numba.get_num_threads())
             clamp_soft_shadow_map(ssm)
         passes[s] = ssm
         stats[f"micro_patches_{s}"] = int(len(patches))
