@@ -83,6 +83,7 @@ and max search radius and filter radius (texels) and the mean penumbra width (wo
 """
 from __future__ import annotations
 
+import numba
 import numpy as np
 from numba import njit, prange
 
@@ -235,7 +236,7 @@ def _cmp_nearest(depth, sx, sy, zt):
 
 @njit(parallel=True, cache=True)
 def blocker_search_kernel(vp, depth_map, pts, nrm, bias, slope_bias, half_light, z_near,
-                          pattern, disk, rotate, seed, plane, zr_out, avg_out, nblk_out, search_out):
+                          pattern, disk, rotate, seed, plane, zr_out, avg_out, nblk_out, search_out, nslot=1):
     """Step 1. Per point: receiver depth (minus bias), average blocker depth and blocker count
     over the search region (point-sampled taps). ``half_light`` = (half size x, half size y) of
     the light in world units, along the map's right/up axes."""
@@ -243,57 +244,60 @@ def blocker_search_kernel(vp, depth_map, pts, nrm, bias, slope_bias, half_light,
     H, W = depth_map.shape
     S = pattern.shape[0]
     texel1 = (vp[13] - vp[12]) / vp[18]  # texel size at depth 1 (perspective)
-    for k in prange(n):
-        sx, sy, z = view_project(vp, pts[k, 0], pts[k, 1], pts[k, 2])
-        if not (z > z_near):
-            zr_out[k] = z
-            avg_out[k] = 0.0
-            nblk_out[k] = 0
-            search_out[k] = 0.0
-            continue
-        off = receiver_offset(vp, pts[k, 0], pts[k, 1], pts[k, 2], nrm[k, 0], nrm[k, 1], nrm[k, 2],
-                              z, bias, slope_bias)
-        zt = z - off
-        nr, nu, nf = _view_normal(vp, nrm[k, 0], nrm[k, 1], nrm[k, 2])
-        npo = nr * 0.0
-        if plane:  # n.(p - o) in view coordinates: receiver plane through p
-            npo = (nrm[k, 0] * (pts[k, 0] - vp[0]) + nrm[k, 1] * (pts[k, 1] - vp[1])
-                   + nrm[k, 2] * (pts[k, 2] - vp[2]))
-        # similar triangles: the light seen from p, cut at depth z_near, in map texels
-        f = (z - z_near) / (z * z_near) / texel1
-        rx = half_light[0] * f
-        ry = half_light[1] * f
-        c = 1.0
-        s = 0.0
-        shx = 0.0
-        shy = 0.0
-        if rotate:
-            a = _hash01(k, seed)
-            c = np.cos(2.0 * np.pi * a)
-            s = np.sin(2.0 * np.pi * a)
-            shx = 2.0 * a
-            shy = 2.0 * _hash01(k + 0x5BD1E995, seed)
-        total = 0.0
-        cnt = 0
-        for i in range(S):
-            ox, oy = _tap_offset(pattern, i, disk, rotate, c, s, shx, shy)
-            tx = sx + ox * rx
-            ty = sy - oy * ry
-            col = int(np.floor(tx))
-            row = int(np.floor(ty))
-            if row < 0 or row >= H or col < 0 or col >= W:
-                continue
-            d = depth_map[row, col]
-            zc = zt
-            if plane:
-                zc = _plane_depth(vp, nr, nu, nf, npo, tx, ty, z) - off
-            if d < zc:
-                total += d
-                cnt += 1
-        zr_out[k] = zt
-        avg_out[k] = total / cnt if cnt > 0 else 0.0
-        nblk_out[k] = cnt
-        search_out[k] = max(rx, ry)
+    nblock = (n + 63) // 64  # blocks of 64 dealt round-robin to one slot per thread
+    for slot in prange(nslot):
+        for blk in range(slot, nblock, nslot):
+            for k in range(blk * 64, min(n, blk * 64 + 64)):
+                sx, sy, z = view_project(vp, pts[k, 0], pts[k, 1], pts[k, 2])
+                if not (z > z_near):
+                    zr_out[k] = z
+                    avg_out[k] = 0.0
+                    nblk_out[k] = 0
+                    search_out[k] = 0.0
+                    continue
+                off = receiver_offset(vp, pts[k, 0], pts[k, 1], pts[k, 2], nrm[k, 0], nrm[k, 1], nrm[k, 2],
+                                      z, bias, slope_bias)
+                zt = z - off
+                nr, nu, nf = _view_normal(vp, nrm[k, 0], nrm[k, 1], nrm[k, 2])
+                npo = nr * 0.0
+                if plane:  # n.(p - o) in view coordinates: receiver plane through p
+                    npo = (nrm[k, 0] * (pts[k, 0] - vp[0]) + nrm[k, 1] * (pts[k, 1] - vp[1])
+                           + nrm[k, 2] * (pts[k, 2] - vp[2]))
+                # similar triangles: the light seen from p, cut at depth z_near, in map texels
+                f = (z - z_near) / (z * z_near) / texel1
+                rx = half_light[0] * f
+                ry = half_light[1] * f
+                c = 1.0
+                s = 0.0
+                shx = 0.0
+                shy = 0.0
+                if rotate:
+                    a = _hash01(k, seed)
+                    c = np.cos(2.0 * np.pi * a)
+                    s = np.sin(2.0 * np.pi * a)
+                    shx = 2.0 * a
+                    shy = 2.0 * _hash01(k + 0x5BD1E995, seed)
+                total = 0.0
+                cnt = 0
+                for i in range(S):
+                    ox, oy = _tap_offset(pattern, i, disk, rotate, c, s, shx, shy)
+                    tx = sx + ox * rx
+                    ty = sy - oy * ry
+                    col = int(np.floor(tx))
+                    row = int(np.floor(ty))
+                    if row < 0 or row >= H or col < 0 or col >= W:
+                        continue
+                    d = depth_map[row, col]
+                    zc = zt
+                    if plane:
+                        zc = _plane_depth(vp, nr, nu, nf, npo, tx, ty, z) - off
+                    if d < zc:
+                        total += d
+                        cnt += 1
+                zr_out[k] = zt
+                avg_out[k] = total / cnt if cnt > 0 else 0.0
+                nblk_out[k] = cnt
+                search_out[k] = max(rx, ry)
 
 
 @njit(cache=True, inline="always")
@@ -308,54 +312,57 @@ def penumbra_estimation(z_receiver, z_blocker, w_light):
 
 @njit(parallel=True, cache=True)
 def filtering_kernel(vp, depth_map, pts, nrm, zr, avg, nblk, light_w, pattern, disk, rotate, seed, bilinear,
-                     plane, out, wp_out, radius_out):
+                     plane, out, wp_out, radius_out, nslot=1):
     """Steps 2 and 3 per point: penumbra estimation, then percentage-closer filtering with a
     kernel of radius w / 2 (per light axis) in texels at the receiver's depth."""
     n = pts.shape[0]
     S = pattern.shape[0]
     texel1 = (vp[13] - vp[12]) / vp[18]  # texel size at depth 1 (perspective map)
-    for k in prange(n):
-        if nblk[k] == 0:  # early out of the blocker search: fully lit, no filtering
-            out[k] = 1.0
-            wp_out[k] = 0.0
-            radius_out[k] = 0.0
-            continue
-        wx = penumbra_estimation(zr[k], avg[k], light_w[0])
-        wy = penumbra_estimation(zr[k], avg[k], light_w[1])
-        rx = 0.5 * wx / (texel1 * zr[k])
-        ry = 0.5 * wy / (texel1 * zr[k])
-        wp_out[k] = max(wx, wy)
-        radius_out[k] = max(rx, ry)
-        sx, sy, z = view_project(vp, pts[k, 0], pts[k, 1], pts[k, 2])
-        zt = zr[k]
-        off = z - zt
-        nr, nu, nf = _view_normal(vp, nrm[k, 0], nrm[k, 1], nrm[k, 2])
-        npo = (nrm[k, 0] * (pts[k, 0] - vp[0]) + nrm[k, 1] * (pts[k, 1] - vp[1])
-               + nrm[k, 2] * (pts[k, 2] - vp[2]))
-        c = 1.0
-        s = 0.0
-        shx = 0.0
-        shy = 0.0
-        if rotate:
-            a = _hash01(k + 0x2545F491, seed)
-            c = np.cos(2.0 * np.pi * a)
-            s = np.sin(2.0 * np.pi * a)
-            shx = 2.0 * a
-            shy = 2.0 * _hash01(k + 0x68E31DA4, seed)
-        acc = 0.0
-        for i in range(S):
-            ox, oy = _tap_offset(pattern, i, disk, rotate, c, s, shx, shy)
-            tx = sx + ox * rx
-            ty = sy - oy * ry
-            zc = zt
-            if plane:
-                zc = _plane_depth(vp, nr, nu, nf, npo, tx, ty, z) - off
-            if bilinear:
-                acc += _cmp_bilinear(depth_map, tx, ty, zc)
-            else:
-                acc += _cmp_nearest(depth_map, tx, ty, zc)
-        v = acc / S
-        out[k] = min(max(v, 0.0), 1.0)
+    nblock = (n + 63) // 64  # blocks of 64 dealt round-robin to one slot per thread
+    for slot in prange(nslot):
+        for blk in range(slot, nblock, nslot):
+            for k in range(blk * 64, min(n, blk * 64 + 64)):
+                if nblk[k] == 0:  # early out of the blocker search: fully lit, no filtering
+                    out[k] = 1.0
+                    wp_out[k] = 0.0
+                    radius_out[k] = 0.0
+                    continue
+                wx = penumbra_estimation(zr[k], avg[k], light_w[0])
+                wy = penumbra_estimation(zr[k], avg[k], light_w[1])
+                rx = 0.5 * wx / (texel1 * zr[k])
+                ry = 0.5 * wy / (texel1 * zr[k])
+                wp_out[k] = max(wx, wy)
+                radius_out[k] = max(rx, ry)
+                sx, sy, z = view_project(vp, pts[k, 0], pts[k, 1], pts[k, 2])
+                zt = zr[k]
+                off = z - zt
+                nr, nu, nf = _view_normal(vp, nrm[k, 0], nrm[k, 1], nrm[k, 2])
+                npo = (nrm[k, 0] * (pts[k, 0] - vp[0]) + nrm[k, 1] * (pts[k, 1] - vp[1])
+                       + nrm[k, 2] * (pts[k, 2] - vp[2]))
+                c = 1.0
+                s = 0.0
+                shx = 0.0
+                shy = 0.0
+                if rotate:
+                    a = _hash01(k + 0x2545F491, seed)
+                    c = np.cos(2.0 * np.pi * a)
+                    s = np.sin(2.0 * np.pi * a)
+                    shx = 2.0 * a
+                    shy = 2.0 * _hash01(k + 0x68E31DA4, seed)
+                acc = 0.0
+                for i in range(S):
+                    ox, oy = _tap_offset(pattern, i, disk, rotate, c, s, shx, shy)
+                    tx = sx + ox * rx
+                    ty = sy - oy * ry
+                    zc = zt
+                    if plane:
+                        zc = _plane_depth(vp, nr, nu, nf, npo, tx, ty, z) - off
+                    if bilinear:
+                        acc += _cmp_bilinear(depth_map, tx, ty, zc)
+                    else:
+                        acc += _cmp_nearest(depth_map, tx, ty, zc)
+                v = acc / S
+                out[k] = min(max(v, 0.0), 1.0)
 
 
 # ---- the paper's steps (orchestration) ---------------------------------------------------------
@@ -379,7 +386,7 @@ def blocker_search(smap, pts, nrm, light, bias, slope_bias, pattern, disk, rotat
     z_near = max(z_near, 1e-9)
     blocker_search_kernel(smap.vp, smap.depth, pts, nrm, float(bias), float(slope_bias),
                           0.5 * light_extent(light), z_near, pattern, disk, rotate, int(seed),
-                          bool(plane), zr, avg, nblk, search)
+                          bool(plane), zr, avg, nblk, search, numba.get_num_threads())
     return zr, avg, nblk, search
 
 
@@ -391,7 +398,7 @@ def filtering(smap, pts, nrm, zr, avg, nblk, light, pattern, disk, rotate, seed,
     wp = np.empty(n, np.float64)
     radius = np.empty(n, np.float64)
     filtering_kernel(smap.vp, smap.depth, pts, nrm, zr, avg, nblk, light_extent(light), pattern, disk, rotate,
-                     int(seed), bool(bilinear), bool(plane), out, wp, radius)
+                     int(seed), bool(bilinear), bool(plane), out, wp, radius, numba.get_num_threads())
     return out, wp, radius
 
 
