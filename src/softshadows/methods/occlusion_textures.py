@@ -96,6 +96,7 @@ import math
 import time
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 from numba import njit, prange
 
@@ -676,7 +677,7 @@ def slice_weight(pz, z_top, z_low, thick, mode):
 # =====================================================================================
 @njit(cache=True, parallel=True)
 def eye_pass(pts, sp, z_planes, slot, bbox, filt, combine, self_mode, max_aniso,
-             pyr, offs, sizes, nb, sat, out):
+             pyr, offs, sizes, nb, sat, out, nslot=1):
     """V for every point ``pts`` (K,3) world. ``slot[k]`` is the index of slice k in the filtered
     arrays, -1 for an empty slice (skipped: its occlusion is 0). ``bbox[slot]`` = (x0, x1, y0, y1)
     texel bounds of the slice's occupied texels: a kernel whose filter support (the rectangle,
@@ -684,44 +685,47 @@ def eye_pass(pts, sp, z_planes, slot, bbox, filt, combine, self_mode, max_aniso,
     occlusion 0 and is skipped, so the result is unchanged."""
     n = z_planes.shape[0] - 1
     thick = (z_planes[n] - z_planes[0]) / n
-    for i in prange(pts.shape[0]):
-        qx = pts[i, 0] - sp[0]
-        qy = pts[i, 1] - sp[1]
-        qz = pts[i, 2] - sp[2]
-        px = qx * sp[3] + qy * sp[4] + qz * sp[5]
-        py = qx * sp[6] + qy * sp[7] + qz * sp[8]
-        pz = qx * sp[9] + qy * sp[10] + qz * sp[11]
-        if not (pz > 0.0):
-            out[i] = 1.0  # at or behind the light plane: nothing lies between P and the light
-            continue
-        acc = 1.0 if combine == 0 else 0.0
-        for k in range(n):
-            if z_planes[k] >= pz:
-                break  # this slice and all later ones are below P
-            w = slice_weight(pz, z_planes[k], z_planes[k + 1], thick, self_mode)
-            s = slot[k]
-            if w <= 0.0 or s < 0:
-                continue
-            x0, x1, y0, y1 = kernel_rect(px, py, pz, z_planes[k + 1], sp)
-            if filt == 0:  # probes inside the rectangle read +-1.5 texels of their upper level
-                m = _mip_support(x0, x1, y0, y1, max_aniso, offs.shape[0])
-            elif filt == 1:  # the larger N-Buffer box is at most twice the short side, +1 bilinear
-                m = 0.5 * min(x1 - x0, y1 - y0) + 1.5
-            else:  # exact box
-                m = 1.0
-            if x1 + m < bbox[s, 0] or x0 - m > bbox[s, 1] or y1 + m < bbox[s, 2] or y0 - m > bbox[s, 3]:
-                continue
-            if filt == 0:
-                o = lookup_mipmap(pyr, s, offs, sizes, max_aniso, x0, x1, y0, y1)
-            elif filt == 1:
-                o = lookup_nbuffers(nb, s, max_aniso, x0, x1, y0, y1)
-            else:
-                o = lookup_sat(sat, s, x0, x1, y0, y1)
-            o = min(max(o, 0.0), 1.0)
-            acc = combine_occlusion(acc, w * o, combine)
-            if combine == 0 and acc <= 0.0:
-                break  # product already 0
-        out[i] = finish_visibility(acc, combine)
+    nblock = (pts.shape[0] + 63) // 64  # blocks of 64 dealt round-robin to one slot per thread
+    for tslot in prange(nslot):
+        for blk in range(tslot, nblock, nslot):
+            for i in range(blk * 64, min(pts.shape[0], blk * 64 + 64)):
+                qx = pts[i, 0] - sp[0]
+                qy = pts[i, 1] - sp[1]
+                qz = pts[i, 2] - sp[2]
+                px = qx * sp[3] + qy * sp[4] + qz * sp[5]
+                py = qx * sp[6] + qy * sp[7] + qz * sp[8]
+                pz = qx * sp[9] + qy * sp[10] + qz * sp[11]
+                if not (pz > 0.0):
+                    out[i] = 1.0  # at or behind the light plane: nothing lies between P and the light
+                    continue
+                acc = 1.0 if combine == 0 else 0.0
+                for k in range(n):
+                    if z_planes[k] >= pz:
+                        break  # this slice and all later ones are below P
+                    w = slice_weight(pz, z_planes[k], z_planes[k + 1], thick, self_mode)
+                    s = slot[k]
+                    if w <= 0.0 or s < 0:
+                        continue
+                    x0, x1, y0, y1 = kernel_rect(px, py, pz, z_planes[k + 1], sp)
+                    if filt == 0:  # probes inside the rectangle read +-1.5 texels of their upper level
+                        m = _mip_support(x0, x1, y0, y1, max_aniso, offs.shape[0])
+                    elif filt == 1:  # the larger N-Buffer box is at most twice the short side, +1 bilinear
+                        m = 0.5 * min(x1 - x0, y1 - y0) + 1.5
+                    else:  # exact box
+                        m = 1.0
+                    if x1 + m < bbox[s, 0] or x0 - m > bbox[s, 1] or y1 + m < bbox[s, 2] or y0 - m > bbox[s, 3]:
+                        continue
+                    if filt == 0:
+                        o = lookup_mipmap(pyr, s, offs, sizes, max_aniso, x0, x1, y0, y1)
+                    elif filt == 1:
+                        o = lookup_nbuffers(nb, s, max_aniso, x0, x1, y0, y1)
+                    else:
+                        o = lookup_sat(sat, s, x0, x1, y0, y1)
+                    o = min(max(o, 0.0), 1.0)
+                    acc = combine_occlusion(acc, w * o, combine)
+                    if combine == 0 and acc <= 0.0:
+                        break  # product already 0
+                out[i] = finish_visibility(acc, combine)
 
 
 def nbuffer_levels_needed(setup: SlicingSetup, pz_max: float) -> int:
@@ -816,7 +820,7 @@ def occlusion_visibility(light, flat, points, slices=16, texture_size=512, filte
         if len(pos) and len(tex_used):
             pyr, offs, sizes, nb, sat = arrays
             eye_pass(pos, setup.params(), setup.z_planes, slot, bbox, _FILTER_ID[filter], _COMBINE_ID[combine],
-                     _SELF_ID[self_shadow], int(anisotropy), pyr, offs, sizes, nb, sat, vis)
+                     _SELF_ID[self_shadow], int(anisotropy), pyr, offs, sizes, nb, sat, vis, numba.get_num_threads())
 
     l, r, b, t = setup.view.window
     stats.update({
