@@ -7,6 +7,7 @@ Every method computes V, the visible fraction of the light at each eye pixel, be
     res = ss.render(scene, "penumbra-map", 512, 512)
     res.visibility, res.image, res.timings, res.stats
 """
+from ._malloc import tune_malloc
 from .errors import SceneError, SoftShadowsError
 from .scene import Camera, Mesh, RectLight, Scene, SphereLight
 from .api import Result, render
@@ -29,3 +30,5 @@ def methods() -> dict:
 __all__ = ["Camera", "Mesh", "RectLight", "Result", "Scene", "SceneError", "SoftShadowsError", "SphereLight",
            "load_scene", "methods", "render"]
 __version__ = "0.1.0"
+
+tune_malloc()  # keep frame buffers in the heap between frames (see softshadows._malloc)
