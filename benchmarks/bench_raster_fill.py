@@ -11,6 +11,8 @@ orthographic light view, a perspective view whose near plane clips the ground, a
 cuts the scene, back-face culling, random-triangle stress meshes with vertices on pixel centers)
 plus the visibility of ``render(..., "hard" / "penumbra-map")``; ``--check`` recomputes them and
 compares exactly (reports max abs / rel differences of float outputs if they are not identical).
+The penumbra-program min-blend is also run with hierarchical culling (``cull_discarded=True``); its
+output is stored only if it equals the unculled one, so ``--check`` fails if culling changes a texel.
 ``--bench`` times the fill-bound paths (median of ``--runs`` runs).
 """
 from __future__ import annotations
