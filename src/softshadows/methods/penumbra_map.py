@@ -279,12 +279,6 @@ def _view_basis(view: View):
         np.asarray(view.forward, float)
 
 
-def _far_point(view: View, x, y, z_far):
-    """World point at view coordinates (x, y, z_far) (arrays)."""
-    o, r, u, f = _view_basis(view)
-    return o + np.asarray(x)[..., None] * r + np.asarray(y)[..., None] * u + z_far * f
-
-
 def build_cones(view: View, positions: np.ndarray, light_radius: float, z_far: float, segments: int,
                 zmax_pyramid=None) -> Primitives:
     """Pass 2b: a cone per silhouette vertex (positions (N,3)): tip at v_i, base circle of radius
@@ -313,40 +307,37 @@ def build_cones(view: View, positions: np.ndarray, light_radius: float, z_far: f
     tips = np.asarray(positions, np.float64)[ok][keep]
     zv, bx, by, lam = zv[keep], bx[keep], by[keep], lam[keep]
     m = len(zv)
-    far = _far_point(view, bx, by, z_far)  # (m, seg, 3)
-    base = tips[:, None, :] + (far - tips[:, None, :]) * lam[..., None]
-    verts = np.concatenate([tips, base.reshape(-1, 3)])
-    i = np.arange(m)[:, None]
-    k = np.arange(segments)[None, :]
-    tri = np.stack([np.broadcast_to(i, (m, segments)),
-                    m + i * segments + k,
-                    m + i * segments + (k + 1) % segments], axis=-1).reshape(-1, 3)
-    zattr = np.repeat(zv, segments)[:, None].repeat(3, axis=1)
-    return Primitives(verts, tri.astype(np.int64), zattr, n, n - m)
+    o, r, u, f = _view_basis(view)
+    verts, tri, zattr = _cone_triangles(np.ascontiguousarray(tips), np.ascontiguousarray(zv),
+                                        np.ascontiguousarray(bx), np.ascontiguousarray(by),
+                                        np.ascontiguousarray(lam), o, r, u, f, float(z_far))
+    return Primitives(verts, tri, zattr, n, n - m)
 
 
-def _occluder_side(view: View, scene_vertices, faces, sil: Silhouette, a0, a1, z_far) -> np.ndarray:
-    """(S,) +1 / -1: side of the edge (far-plane coordinates a0 -> a1) where its adjacent triangles
-    project (left = +1), 0 where they project to both sides or edge-on."""
-    d = a1 - a0
-    side = np.zeros(len(a0))
-    cnt = np.zeros(len(a0))
-    for col in range(2):
-        f = sil.edge_faces[:, col]
-        has = f >= 0
-        if not has.any():
-            continue
-        cen = scene_vertices[faces[f[has]]].mean(axis=1)
-        qc = view.to_view(cen)
-        zc = np.maximum(qc[:, 2], 1e-12)
-        c2 = np.stack([qc[:, 0] * z_far / zc, qc[:, 1] * z_far / zc], 1)
-        cr = d[has, 0] * (c2[:, 1] - a0[has, 1]) - d[has, 1] * (c2[:, 0] - a0[has, 0])
-        sg = np.sign(cr)
-        prev = side[has]
-        agree = (cnt[has] == 0) | (prev == sg)
-        side[has] = np.where(agree, sg, 0.0)
-        cnt[has] += 1
-    return side
+@njit(**_JIT)
+def _cone_triangles(tips, zv, bx, by, lam, o, r, u, f, z_far):
+    """Vertices (tips, then the base vertices: far-plane point (bx, by, z_far) pulled toward the tip
+    to the fraction ``lam`` of the ruling), triangles (tip, B_k, B_k+1) and their corner Z_v."""
+    m, seg = bx.shape
+    verts = np.empty((m + m * seg, 3))
+    tri = np.empty((m * seg, 3), np.int64)
+    zattr = np.empty((m * seg, 3))
+    for i in range(m):
+        for c in range(3):
+            verts[i, c] = tips[i, c]
+        for k in range(seg):
+            vi = m + i * seg + k
+            for c in range(3):
+                far = o[c] + bx[i, k] * r[c] + by[i, k] * u[c] + z_far * f[c]
+                verts[vi, c] = tips[i, c] + (far - tips[i, c]) * lam[i, k]
+            t = i * seg + k
+            tri[t, 0] = i
+            tri[t, 1] = vi
+            tri[t, 2] = m + i * seg + (k + 1) % seg
+            zattr[t, 0] = zv[i]
+            zattr[t, 1] = zv[i]
+            zattr[t, 2] = zv[i]
+    return verts, tri, zattr
 
 
 def build_sheets(view: View, scene_vertices: np.ndarray, faces: np.ndarray, sil: Silhouette,
@@ -363,84 +354,204 @@ def build_sheets(view: View, scene_vertices: np.ndarray, faces: np.ndarray, sil:
     S = sil.n_edges
     if S == 0:
         return Primitives.empty()
-    p0 = scene_vertices[sil.edges[:, 0]]
-    p1 = scene_vertices[sil.edges[:, 1]]
-    q0, q1 = view.to_view(p0), view.to_view(p1)
-    z0, z1 = q0[:, 2], q1[:, 2]
-    ok = (z0 > view.near) & (z1 > view.near) & (z0 < z_far) & (z1 < z_far)
-    a0 = np.stack([q0[:, 0], q0[:, 1]], 1) * (z_far / np.where(ok, z0, 1.0))[:, None]
-    a1 = np.stack([q1[:, 0], q1[:, 1]], 1) * (z_far / np.where(ok, z1, 1.0))[:, None]
-    c0 = (z_far - z0) * light_radius / np.where(ok, z0, 1.0)
-    c1 = (z_far - z1) * light_radius / np.where(ok, z1, 1.0)
-    dvec = a1 - a0
-    dlen = np.linalg.norm(dvec, axis=1)
-    # an edge that projects to (almost) a point: its cones cover it
-    tiny = dlen <= 1e-9 * np.maximum(np.abs(a0).max(axis=1) + c0, 1e-30)
-    ok &= ~tiny
-    side = _occluder_side(view, scene_vertices, faces, sil, a0, a1, z_far)
-    idx = np.flatnonzero(ok)
-    # outward normals: away from the occluder's side; both sides where undecided
-    e = dvec[idx] / dlen[idx, None]
-    left = np.stack([-e[:, 1], e[:, 0]], 1)
-    sg = side[idx]
-    two = sg == 0
-    out_dirs = [np.where((sg > 0)[:, None], -left, left)]
-    rows = [idx]
-    if two.any():
-        out_dirs.append(-left[two])  # the first set used +left for these; add -left
-        rows.append(idx[two])
-    pout = np.concatenate(out_dirs)
-    rows = np.concatenate(rows)
-    ee = dvec[rows] / dlen[rows, None]
-    sin_a = (c0[rows] - c1[rows]) / dlen[rows]
-    inside = np.abs(sin_a) < 1.0  # otherwise one base circle contains the other: perpendicular offset
-    cos_a = np.sqrt(np.clip(1.0 - sin_a**2, 0.0, 1.0))
-    nrm = np.where(inside[:, None], cos_a[:, None] * pout + sin_a[:, None] * ee, pout)
-    f0 = a0[rows] + c0[rows, None] * nrm
-    f1 = a1[rows] + c1[rows, None] * nrm
-    V0, V1 = p0[rows], p1[rows]
-    F0 = _far_point(view, f0[:, 0], f0[:, 1], z_far)
-    F1 = _far_point(view, f1[:, 0], f1[:, 1], z_far)
-    zz0, zz1 = z0[rows], z1[rows]
-    n_objects = len(rows)
+    o, r, u, f = _view_basis(view)
+    V0, V1, F0, F1, zz0, zz1, n_two = _sheet_quads(
+        np.ascontiguousarray(scene_vertices, dtype=np.float64), np.ascontiguousarray(faces, dtype=np.int64),
+        np.ascontiguousarray(sil.edges, dtype=np.int64), np.ascontiguousarray(sil.edge_faces, dtype=np.int64),
+        o, r, u, f, float(view.near), float(z_far), float(light_radius))
+    n_objects = len(V0)
     keep = np.ones(n_objects, bool)
-    if zmax_pyramid is not None:
+    if zmax_pyramid is not None and n_objects:
         ucut = _reject_sheets(view, V0, V1, F0, F1, zz0, zz1, z_far, zmax_pyramid)
         keep = ucut > 0.0
         # the sub-sheet u in [0, ucut] of every ruling: the same ruled surface, shorter
         F0 = V0 + (F0 - V0) * ucut[:, None]
         F1 = V1 + (F1 - V1) * ucut[:, None]
-    V0, V1, F0, F1, zz0, zz1 = V0[keep], V1[keep], F0[keep], F1[keep], zz0[keep], zz1[keep]
-    # how far the quad is from a parallelogram (non-planar, or rulings of different directions or
-    # lengths): two triangles then distort both the surface and the Z_v interpolation along the
-    # rulings. Measure: |(F1 - V1) - (F0 - V0)| relative to the sheet's length.
-    length = np.maximum(np.linalg.norm(F0 - V0, axis=1), np.linalg.norm(F1 - V1, axis=1))
-    ratio = np.linalg.norm((F1 - V1) - (F0 - V0), axis=1) / np.maximum(length, 1e-300)
-    if tolerance > 0:
-        k = np.clip(np.ceil(ratio / tolerance), 1, max_subdiv).astype(np.int64)
-    else:
-        k = np.full(len(V0), max_subdiv, np.int64)
-    k[~np.isfinite(ratio)] = 1
-    # strips: rulings at t = j / k, j = 0..k, each ruling = (v(t), F(t)) with Z_v(t)
-    nr = k + 1
-    sheet = np.repeat(np.arange(len(k)), nr)
-    start = np.cumsum(nr) - nr
-    j = np.arange(nr.sum()) - np.repeat(start, nr)
-    t = j / np.repeat(k, nr)
-    vt = V0[sheet] + (V1 - V0)[sheet] * t[:, None]
-    ft = F0[sheet] + (F1 - F0)[sheet] * t[:, None]
-    zt = zz0[sheet] + (zz1 - zz0)[sheet] * t
-    R = len(t)
-    verts = np.concatenate([vt, ft])  # ruling r: near vertex r, far vertex R + r
-    # strip between ruling r and r+1 (same sheet): (v_r, v_r+1, F_r+1), (v_r, F_r+1, F_r)
-    first = np.ones(R, bool)
-    first[start] = False  # ruling r has a previous ruling in the same sheet
-    r1 = np.flatnonzero(first)
-    r0 = r1 - 1
-    tri = np.concatenate([np.stack([r0, r1, R + r1], 1), np.stack([r0, R + r1, R + r0], 1)])
-    za = np.concatenate([np.stack([zt[r0], zt[r1], zt[r1]], 1), np.stack([zt[r0], zt[r1], zt[r0]], 1)])
-    return Primitives(verts, tri.astype(np.int64), za, n_objects, int((~keep).sum()),
-                      int((k > 1).sum()), int(two.sum()))
+    verts, tri, za, n_sub = _sheet_strips(V0[keep], V1[keep], F0[keep], F1[keep], zz0[keep], zz1[keep],
+                                          float(tolerance), int(max_subdiv))
+    return Primitives(verts, tri, za, n_objects, int((~keep).sum()), n_sub, n_two)
+
+
+@njit(**_JIT)
+def _sheet_quads(V, faces, edges, edge_faces, o, r, u, f, near, z_far, lr):
+    """Per silhouette edge the sheet's quad (v0, v1, F1, F0) on the side away from the adjacent
+    triangles' projection (both sides where they project to both or edge-on), with F0, F1 on the
+    outer common tangent of the two cones' far-plane circles; edges behind the near plane, beyond
+    the far plane or projecting to (almost) a point get none. Returns V0, V1, F0, F1 (n, 3), the
+    silhouette depths z0, z1 (n,) and the number of two-sided edges. Rows: the one-sided quads and
+    the first side of two-sided ones in edge order, then the second sides."""
+    S = edges.shape[0]
+    q0 = np.empty((S, 3))
+    q1 = np.empty((S, 3))
+    for e in range(S):
+        q0[e, 0], q0[e, 1], q0[e, 2] = _to_view(V[edges[e, 0]], o, r, u, f)
+        q1[e, 0], q1[e, 1], q1[e, 2] = _to_view(V[edges[e, 1]], o, r, u, f)
+    ok = np.zeros(S, np.bool_)
+    a0 = np.zeros((S, 2))
+    a1 = np.zeros((S, 2))
+    c0 = np.zeros(S)
+    c1 = np.zeros(S)
+    dlen = np.zeros(S)
+    side = np.zeros(S)
+    for e in range(S):
+        z0 = q0[e, 2]
+        z1 = q1[e, 2]
+        ok_e = (z0 > near) and (z1 > near) and (z0 < z_far) and (z1 < z_far)
+        s0 = z_far / (z0 if ok_e else 1.0)
+        s1 = z_far / (z1 if ok_e else 1.0)
+        a0[e, 0] = q0[e, 0] * s0
+        a0[e, 1] = q0[e, 1] * s0
+        a1[e, 0] = q1[e, 0] * s1
+        a1[e, 1] = q1[e, 1] * s1
+        c0[e] = (z_far - z0) * lr / (z0 if ok_e else 1.0)
+        c1[e] = (z_far - z1) * lr / (z1 if ok_e else 1.0)
+        dx = a1[e, 0] - a0[e, 0]
+        dy = a1[e, 1] - a0[e, 1]
+        dlen[e] = math.sqrt(dx * dx + dy * dy)
+        # an edge that projects to (almost) a point: its cones cover it
+        tiny = dlen[e] <= 1e-9 * max(max(abs(a0[e, 0]), abs(a0[e, 1])) + c0[e], 1e-30)
+        ok[e] = ok_e and not tiny
+        # side of the edge where its adjacent triangles project (+1 left, -1 right, 0 both/edge-on)
+        cnt = 0
+        sd = 0.0
+        for col in range(2):
+            fi = edge_faces[e, col]
+            if fi < 0:
+                continue
+            cx = ((V[faces[fi, 0], 0] + V[faces[fi, 1], 0]) + V[faces[fi, 2], 0]) / 3.0
+            cy = ((V[faces[fi, 0], 1] + V[faces[fi, 1], 1]) + V[faces[fi, 2], 1]) / 3.0
+            cz = ((V[faces[fi, 0], 2] + V[faces[fi, 1], 2]) + V[faces[fi, 2], 2]) / 3.0
+            qx, qy, qz = _to_view(np.array((cx, cy, cz)), o, r, u, f)
+            zc = max(qz, 1e-12)
+            c2x = qx * z_far / zc
+            c2y = qy * z_far / zc
+            cr = dx * (c2y - a0[e, 1]) - dy * (c2x - a0[e, 0])
+            sg = 1.0 if cr > 0.0 else (-1.0 if cr < 0.0 else 0.0)
+            sd = sg if (cnt == 0 or sd == sg) else 0.0
+            cnt += 1
+        side[e] = sd
+    n = 0
+    n_two = 0
+    for e in range(S):
+        if ok[e]:
+            n += 1
+            if side[e] == 0.0:
+                n_two += 1
+    m = n + n_two
+    V0 = np.empty((m, 3))
+    V1 = np.empty((m, 3))
+    F0 = np.empty((m, 3))
+    F1 = np.empty((m, 3))
+    zz0 = np.empty(m)
+    zz1 = np.empty(m)
+    w = 0
+    for pss in range(2):  # first every edge once, then the second side of two-sided edges
+        for e in range(S):
+            if not ok[e] or (pss == 1 and side[e] != 0.0):
+                continue
+            ex = (a1[e, 0] - a0[e, 0]) / dlen[e]
+            ey = (a1[e, 1] - a0[e, 1]) / dlen[e]
+            lx = -ey
+            ly = ex
+            if pss == 0 and side[e] > 0.0:  # away from the occluder's side
+                px, py = -lx, -ly
+            elif pss == 0:
+                px, py = lx, ly
+            else:
+                px, py = -lx, -ly
+            sin_a = (c0[e] - c1[e]) / dlen[e]
+            if abs(sin_a) < 1.0:  # outer common tangent; else one circle contains the other
+                cos_a = math.sqrt(min(max(1.0 - sin_a ** 2, 0.0), 1.0))
+                nx = cos_a * px + sin_a * ex
+                ny = cos_a * py + sin_a * ey
+            else:
+                nx, ny = px, py
+            f0x = a0[e, 0] + c0[e] * nx
+            f0y = a0[e, 1] + c0[e] * ny
+            f1x = a1[e, 0] + c1[e] * nx
+            f1y = a1[e, 1] + c1[e] * ny
+            for c in range(3):
+                V0[w, c] = V[edges[e, 0], c]
+                V1[w, c] = V[edges[e, 1], c]
+                F0[w, c] = o[c] + f0x * r[c] + f0y * u[c] + z_far * f[c]
+                F1[w, c] = o[c] + f1x * r[c] + f1y * u[c] + z_far * f[c]
+            zz0[w] = q0[e, 2]
+            zz1[w] = q1[e, 2]
+            w += 1
+    return V0, V1, F0, F1, zz0, zz1, n_two
+
+
+@njit(**_JIT)
+def _to_view(p, o, r, u, f):
+    dx = p[0] - o[0]
+    dy = p[1] - o[1]
+    dz = p[2] - o[2]
+    return (dx * r[0] + dy * r[1] + dz * r[2], dx * u[0] + dy * u[1] + dz * u[2],
+            dx * f[0] + dy * f[1] + dz * f[2])
+
+
+@njit(**_JIT)
+def _sheet_strips(V0, V1, F0, F1, z0, z1, tolerance, max_subdiv):
+    """Split every sheet into k strips, ``k = ceil(q / tolerance)`` (at most ``max_subdiv``; 1 where
+    q is not finite; ``max_subdiv`` when tolerance is 0), ``q = |(F1 - V1) - (F0 - V0)| / length``:
+    rulings at t = j / k from v(t) = lerp(V0, V1, t) to F(t) = lerp(F0, F1, t) with Z_v(t), two
+    triangles per strip. Returns vertices (near ends of all rulings, then far ends), triangles,
+    corner Z_v and the number of subdivided sheets."""
+    n = V0.shape[0]
+    ks = np.empty(n, np.int64)
+    n_sub = 0
+    R = 0
+    for i in range(n):
+        la = math.sqrt((F0[i, 0] - V0[i, 0]) ** 2 + (F0[i, 1] - V0[i, 1]) ** 2 + (F0[i, 2] - V0[i, 2]) ** 2)
+        lb = math.sqrt((F1[i, 0] - V1[i, 0]) ** 2 + (F1[i, 1] - V1[i, 1]) ** 2 + (F1[i, 2] - V1[i, 2]) ** 2)
+        dq = 0.0
+        for c in range(3):
+            dc = (F1[i, c] - V1[i, c]) - (F0[i, c] - V0[i, c])
+            dq += dc * dc
+        ratio = math.sqrt(dq) / max(max(la, lb), 1e-300)
+        if tolerance > 0:
+            k = math.ceil(ratio / tolerance) if math.isfinite(ratio) else 1.0
+            k = int(min(max(k, 1.0), max_subdiv))
+        else:
+            k = max_subdiv
+        if not math.isfinite(ratio):
+            k = 1
+        ks[i] = k
+        n_sub += k > 1
+        R += k + 1
+    verts = np.empty((2 * R, 3))
+    zt = np.empty(R)
+    T = R - n  # strips
+    tri = np.empty((2 * T, 3), np.int64)
+    za = np.empty((2 * T, 3))
+    rr = 0
+    ts = 0
+    for i in range(n):
+        k = ks[i]
+        for j in range(k + 1):
+            t = j / k
+            for c in range(3):
+                verts[rr, c] = V0[i, c] + (V1[i, c] - V0[i, c]) * t
+                verts[R + rr, c] = F0[i, c] + (F1[i, c] - F0[i, c]) * t
+            zt[rr] = z0[i] + (z1[i] - z0[i]) * t
+            if j > 0:
+                r0 = rr - 1
+                r1 = rr
+                tri[ts, 0] = r0
+                tri[ts, 1] = r1
+                tri[ts, 2] = R + r1
+                za[ts, 0] = zt[r0]
+                za[ts, 1] = zt[r1]
+                za[ts, 2] = zt[r1]
+                tri[T + ts, 0] = r0
+                tri[T + ts, 1] = R + r1
+                tri[T + ts, 2] = R + r0
+                za[T + ts, 0] = zt[r0]
+                za[T + ts, 1] = zt[r1]
+                za[T + ts, 2] = zt[r0]
+                ts += 1
+            rr += 1
+    return verts, tri, za, n_sub
 
 
 # ---- early rejection: a max-depth pyramid of Z_P ----------------------------------------------
