@@ -148,13 +148,18 @@ def _mix(a, b, c):
 
 
 @njit(cache=True)
+def _hash_table(min_size):
+    """An empty open-addressing table (-1 = free) of a power-of-two size >= min_size, and its mask."""
+    size = 16
+    while size < min_size:
+        size *= 2
+    return np.full(size, -1, np.int64), size - 1
+
+
+@njit(cache=True)
 def _weld_kernel(bits):
     n = bits.shape[0]
-    size = 16
-    while size < 2 * n:
-        size *= 2
-    mask = size - 1
-    table = np.full(size, -1, np.int64)
+    table, mask = _hash_table(2 * n)
     rep = np.empty(n, np.int64)
     for i in range(n):
         a = bits[i, 0]
@@ -179,11 +184,7 @@ def _edge_table(rep, faces, fr):
     """Every welded edge of the triangles once, in order of first appearance: (lo, hi, count of
     triangles, count of facing ones, lowest facing triangle, highest non-facing triangle)."""
     F = faces.shape[0]
-    size = 16
-    while size < 6 * F:
-        size *= 2
-    mask = size - 1
-    table = np.full(size, -1, np.int64)
+    table, mask = _hash_table(6 * F)
     lo = np.empty(3 * F, np.int64)
     hi = np.empty(3 * F, np.int64)
     ca = np.zeros(3 * F, np.int64)
