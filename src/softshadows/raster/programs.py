@@ -45,7 +45,9 @@ def penumbra_intensity(zf, zv, zp, eps, bernstein):
     den = zp - zv
     # kept: in front of the surface (tolerance eps; False for zp = +inf/NaN) with Z_P beyond Z_V
     kept = (zf < zp - eps) & (den > 0.0)
-    i = (zf - zv) / (den if kept else 1.0)
+    # the reciprocal does not depend on Z_F: it starts without waiting for the fragment depth's
+    # division (two independent divisions instead of a chain: half the latency per fragment)
+    i = (zf - zv) * (1.0 / (den if kept else 1.0))
     i = i if i > 0.0 else 0.0
     i = i if i < 1.0 else 1.0
     i = smoothstep_bernstein(i) if bernstein else i
