@@ -458,6 +458,19 @@ def kernel_rect(px, py, pz, zs, sp):
 
 
 @njit(cache=True, inline="always")
+def _kernel_rect_fast(px, py, pz, ipz, zs, hu, hv, kx, ky, ox, oy):
+    """:func:`kernel_rect` with its per-slice constants precomputed (``kx = W / ((r - l)(d + zs))``,
+    ``ky``, ``ox = l W / (r - l)``, ``oy = t H / (t - b)``) and ``ipz = 1 / pz``: no division (the
+    eye pass evaluates it for every point and slice). Equal to it up to rounding."""
+    a = abs(pz - zs) * ipz
+    cx = px * zs * ipz
+    cy = py * zs * ipz
+    ax = hu * a
+    ay = hv * a
+    return (cx - ax) * kx - ox, (cx + ax) * kx - ox, oy - (cy + ay) * ky, oy - (cy - ay) * ky
+
+
+@njit(cache=True, inline="always")
 def _mip_fetch(pyr, s, off, size, i, j):
     if i < 0 or j < 0 or i >= size or j >= size:
         return 0.0  # CLAMP_TO_BORDER, border 0 (nothing outside the frustum)
@@ -685,6 +698,15 @@ def eye_pass(pts, sp, z_planes, slot, bbox, filt, combine, self_mode, max_aniso,
     occlusion 0 and is skipped, so the result is unchanged."""
     n = z_planes.shape[0] - 1
     thick = (z_planes[n] - z_planes[0]) / n
+    # per slice plane, the constants of kernel_rect's map to texels (no division per point)
+    kx = np.empty(n)
+    ky = np.empty(n)
+    for k in range(n):
+        D = sp[14] + z_planes[k + 1]
+        kx[k] = sp[19] / ((sp[16] - sp[15]) * D)
+        ky[k] = sp[20] / ((sp[18] - sp[17]) * D)
+    ox = sp[15] * sp[19] / (sp[16] - sp[15])
+    oy = sp[18] * sp[20] / (sp[18] - sp[17])
     nblock = (pts.shape[0] + 63) // 64  # blocks of 64 dealt round-robin to one slot per thread
     for tslot in prange(nslot):
         for blk in range(tslot, nblock, nslot):
@@ -699,6 +721,7 @@ def eye_pass(pts, sp, z_planes, slot, bbox, filt, combine, self_mode, max_aniso,
                     out[i] = 1.0  # at or behind the light plane: nothing lies between P and the light
                     continue
                 acc = 1.0 if combine == 0 else 0.0
+                ipz = 1.0 / pz
                 for k in range(n):
                     if z_planes[k] >= pz:
                         break  # this slice and all later ones are below P
@@ -706,7 +729,8 @@ def eye_pass(pts, sp, z_planes, slot, bbox, filt, combine, self_mode, max_aniso,
                     s = slot[k]
                     if w <= 0.0 or s < 0:
                         continue
-                    x0, x1, y0, y1 = kernel_rect(px, py, pz, z_planes[k + 1], sp)
+                    x0, x1, y0, y1 = _kernel_rect_fast(px, py, pz, ipz, z_planes[k + 1], sp[12], sp[13],
+                                                       kx[k], ky[k], ox, oy)
                     if filt == 0:  # probes inside the rectangle read +-1.5 texels of their upper level
                         m = _mip_support(x0, x1, y0, y1, max_aniso, offs.shape[0])
                     elif filt == 1:  # the larger N-Buffer box is at most twice the short side, +1 bilinear
