@@ -111,7 +111,6 @@ import weakref
 from contextlib import nullcontext
 from dataclasses import dataclass, field
 
-import numba
 import numpy as np
 from numba import njit, prange
 
@@ -119,7 +118,6 @@ from ..errors import SoftShadowsError
 from ..geometry.silhouette import Silhouette, cached_adjacency, silhouette_adjacency, silhouette_brute
 from ..raster import View, rasterize_depth, rasterize_min_blend
 from ..raster.programs import PROGRAM_PENUMBRA, penumbra_intensity, smoothstep_bernstein  # noqa: F401
-from ..raster.rasterizer import TILE
 from .base import Method, MethodOutput, Param, register
 from .shadowmap import biased_light_depth, fit_light_view, scatter
 
