@@ -567,7 +567,7 @@ def _make_tiles_kernel(mode, prog=0):
     @njit(parallel=True, **_JIT)
     def tiles(vp, near, T, ntx, nty, bstart, bins, CB, CE, CZ, PL, NW, scratch, tscratch, iscratch, fscratch,
                depth_out, tri_out, pos_out, nrm_out, bary_out, mask_out, fcount, foff, fpix, ftri, fbary,
-               fdepth, program, pparams, cattr, img, blend, bstats, split, cull_discarded, slots):
+               fdepth, program, pparams, cattr, img, blend, bstats, split, cull_discarded, nslot):
         """mode 0: depth + tri; 1: full G-buffer; 2: count fragments per tile; 3: write fragments;
         4: run a fragment program per fragment and MIN-blend its value into ``blend`` (bstats[tile] =
         fragments and kept fragments for triangles below / from ``split``, pieces culled). With
@@ -589,7 +589,6 @@ def _make_tiles_kernel(mode, prog=0):
         wsx = (vp[13] - vp[12]) / vp[18]  # window units per pixel
         wsy = (vp[15] - vp[14]) / vp[19]
         ntiles = ntx * nty
-        nslot = slots.shape[0]
         for slot in prange(nslot):
             # min-blend: tiles slot, slot + n, ... (its work sits in few tiles); dense modes: tile rows
             # slot, slot + n, ... (contiguous rows of output keep the memory traffic local)
@@ -1150,14 +1149,14 @@ def _run_tiles(mode, vp, fe, depth=_E2F, tri=_E2I, pos=_E3F, nrm=_E3F, bary=_E3F
     iscratch = np.empty((nthreads, 3, T), dtype=np.int64)
     fscratch = np.zeros((nthreads, T, T), dtype=np.float32)
     # load balance: Numba splits a prange into equal contiguous parts, one per thread, whatever the
-    # chunk size; the work of a tile kernel is concentrated where the geometry is. So the prange runs
-    # over one slot per thread and slot p takes tiles p, p + n, p + 2n, ...: neighbouring tiles go
-    # to different threads and every thread gets a share of every busy region.
-    slots = np.empty(numba.get_num_threads(), dtype=np.int64)
+    # chunk size, while the work of a tile kernel is concentrated where the geometry is. So the
+    # prange runs over one slot per thread and slot p takes every n-th tile (min-blend) or tile row
+    # (dense modes) from p on: every thread gets a share of every busy region.
+    nslot = numba.get_num_threads()
     _KERNELS[(mode, program if mode == _M_MINBLEND else 0)](
         vp, near, T, ntx, nty, bstart, bins, CB, CE, CZ, PL, NW, scratch, tscratch, iscratch, fscratch, depth, tri,
         pos, nrm, bary, mask, fcount, foff, fpix, ftri, fbary, fdepth, program, pparams, cattr, img, blend, bstats,
-        split, bool(cull_discarded), slots)
+        split, bool(cull_discarded), int(nslot))
 
 
 def rasterize(view, vertices, faces, cull: str = "none") -> GBuffer:
