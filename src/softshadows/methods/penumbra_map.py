@@ -553,46 +553,37 @@ def _sheet_strips(V0, V1, F0, F1, z0, z1, tolerance, max_subdiv):
 
 
 # ---- early rejection: a max-depth pyramid of Z_P ----------------------------------------------
+@njit(inline="always", **_JIT)
+def _max_down_row(src, s0, sw, sh, dst, d0, dw, i):
+    """Row i of a 2x2-max reduction: src (sh, sw) stored flat from s0 into dst (.., dw) from d0.
+    Non-finite and negative values count as 0 (empty texels: nothing behind them)."""
+    for j in range(dw):
+        m = 0.0
+        for di in range(2):
+            ii = 2 * i + di
+            if ii < sh:
+                for dj in range(2):
+                    jj = 2 * j + dj
+                    if jj < sw:
+                        v = src[s0 + ii * sw + jj]
+                        if v > m and v < np.inf:
+                            m = v
+        dst[d0 + i * dw + j] = m
+
+
 @njit(parallel=True, **_JIT)
-def _pyramid_level1(zp, data, w2):
-    """Level 1 (2x2 max of ``Z_P``; empty texels count as 0) straight from the map."""
-    H, W = zp.shape
-    h2 = (H + 1) // 2
-    for i in prange(h2):
-        for j in range(w2):
-            m = 0.0
-            for di in range(2):
-                ii = 2 * i + di
-                if ii < H:
-                    for dj in range(2):
-                        jj = 2 * j + dj
-                        if jj < W:
-                            v = zp[ii, jj]
-                            if v > m and v < np.inf:
-                                m = v
-            data[i * w2 + j] = m
+def _pyramid_level1(zp_flat, H, W, data, w2):
+    """Level 1 (2x2 max of ``Z_P``) straight from the map, rows in parallel."""
+    for i in prange((H + 1) // 2):
+        _max_down_row(zp_flat, 0, W, H, data, 0, w2, i)
 
 
 @njit(**_JIT)
 def _pyramid_coarser(data, offs, ws, hs):
     """Levels 2.. (small: one serial pass)."""
     for L in range(2, len(offs)):
-        h, w = hs[L - 1], ws[L - 1]
-        src = offs[L - 1]
-        dst = offs[L]
         for i in range(hs[L]):
-            for j in range(ws[L]):
-                m = 0.0
-                for di in range(2):
-                    ii = 2 * i + di
-                    if ii < h:
-                        for dj in range(2):
-                            jj = 2 * j + dj
-                            if jj < w:
-                                v = data[src + ii * w + jj]
-                                if v > m:
-                                    m = v
-                data[dst + i * ws[L] + j] = m
+            _max_down_row(data, offs[L - 1], ws[L - 1], hs[L - 1], data, offs[L], ws[L], i)
 
 
 def build_zmax_pyramid(zp: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -610,7 +601,7 @@ def build_zmax_pyramid(zp: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarr
     data = np.zeros(max(total, 1), np.float32)
     offs, ws, hs = np.array(offs, np.int64), np.array(ws, np.int64), np.array(hs, np.int64)
     if len(offs) > 1:
-        _pyramid_level1(np.ascontiguousarray(zp, dtype=np.float32), data, ws[1])
+        _pyramid_level1(np.ascontiguousarray(zp, dtype=np.float32).reshape(-1), h, w, data, ws[1])
         _pyramid_coarser(data, offs, ws, hs)
     return data, offs, ws, hs
 
