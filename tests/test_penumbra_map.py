@@ -335,3 +335,38 @@ def test_parameters_and_stats():
     st = res.stats
     assert st["silhouette_edges"] == 4 and st["silhouette_vertices"] == 4 and st["cones"] == 4
     assert st["sheets"] == 4 and st["sheet_fragments_kept"] > 0 and st["cone_fragments_kept"] > 0
+
+
+@pytest.mark.parametrize("name", ["bunny", "spheres", "contact"])
+def test_border_holds_every_cone(name):
+    """The bordered map is sized from each occluder vertex's own cone reach: no cone or sheet may
+    reach its outermost texels (they stay white) unless the border was clipped, and a map grown
+    by 32 more texels on every side holds no darker texel outside the original extent."""
+    scene = ss.load_scene(name, light="sphere")
+    smp, pm = _passes(scene, 192, early_reject=False)
+    assert not smp.border_clipped
+    I = pm.intensity
+    ring = np.concatenate([I[0], I[-1], I[:, 0], I[:, -1]])
+    assert np.all(ring == 1.0)
+    # the same texel grid grown by 32 texels: nothing darker than white falls outside
+    v = smp.view
+    l, r, b, t = v.window
+    s = (r - l) / v.width
+    g = 32
+    big = P.View(v.origin, v.right, v.up, v.forward, (l - g * s, r + g * s, b - g * s, t + g * s), v.near, v.far,
+                 v.width + 2 * g, v.height + 2 * g, False)
+    zp = np.full((big.height, big.width), np.inf, np.float32)
+    zp[g:g + v.height, g:g + v.width] = smp.surface_depth
+    # receivers outside the original extent: rasterize them into the margin
+    flat = scene.flat
+    only = flat.receiver & ~flat.occluder
+    if only.any():
+        d, _ = P.rasterize_depth(big, flat.vertices, np.ascontiguousarray(flat.faces[only]))
+        inner = np.zeros_like(zp, bool)
+        inner[g:g + v.height, g:g + v.width] = True
+        zp = np.where(inner, zp, d)
+    smp_big = P.ShadowMapPass(smp.hard_view, big, tuple(x + g for x in smp.border), smp.occluder_depth, zp)
+    pm_big = P.render_penumbra_map(scene, smp_big, P.light_radius_of(scene.light), early_reject=False)
+    outside = np.ones_like(pm_big.intensity, bool)
+    outside[g:g + v.height, g:g + v.width] = False
+    assert np.all(pm_big.intensity[outside] == 1.0)
