@@ -229,13 +229,47 @@ def _face_planes(vertices, faces) -> tuple[np.ndarray, np.ndarray]:
 
 def _facing_from_planes(normals, anchors, point) -> np.ndarray:
     p = np.asarray(point, dtype=np.float64).reshape(3)
-    return np.einsum("ij,ij->i", normals, p - anchors) > 0.0
+    return _facing_planes_kernel(np.ascontiguousarray(normals, dtype=np.float64),
+                                 np.ascontiguousarray(anchors, dtype=np.float64), p)
+
+
+@njit(cache=True, inline="always")
+def _facing_one(nx, ny, nz, ax, ay, az, p):
+    """The facing test of one triangle; every path computes it with these operations in this order
+    (so brute force and adjacency agree bit for bit)."""
+    return nx * (p[0] - ax) + ny * (p[1] - ay) + nz * (p[2] - az) > 0.0
+
+
+@njit(cache=True)
+def _facing_planes_kernel(n, a, p):
+    out = np.empty(n.shape[0], np.bool_)
+    for f in range(n.shape[0]):
+        out[f] = _facing_one(n[f, 0], n[f, 1], n[f, 2], a[f, 0], a[f, 1], a[f, 2], p)
+    return out
+
+
+@njit(cache=True)
+def _facing_kernel(v, faces, p):
+    """Facing of every triangle straight from the vertices: the normal as ``np.cross(b - a, c - a)``
+    computes it, then :func:`_facing_one`."""
+    out = np.empty(faces.shape[0], np.bool_)
+    for f in range(faces.shape[0]):
+        i, j, k = faces[f, 0], faces[f, 1], faces[f, 2]
+        e1x = v[j, 0] - v[i, 0]
+        e1y = v[j, 1] - v[i, 1]
+        e1z = v[j, 2] - v[i, 2]
+        e2x = v[k, 0] - v[i, 0]
+        e2y = v[k, 1] - v[i, 1]
+        e2z = v[k, 2] - v[i, 2]
+        out[f] = _facing_one(e1y * e2z - e1z * e2y, e1z * e2x - e1x * e2z, e1x * e2y - e1y * e2x,
+                             v[i, 0], v[i, 1], v[i, 2], p)
+    return out
 
 
 def facing(vertices: np.ndarray, faces: np.ndarray, point) -> np.ndarray:
     """(F,) bool: triangle faces ``point`` (``((b-a) x (c-a)) . (point - a) > 0``)."""
-    n, a = _face_planes(vertices, np.asarray(faces, np.int64))
-    return _facing_from_planes(n, a, point)
+    return _facing_kernel(np.ascontiguousarray(vertices, dtype=np.float64), np.ascontiguousarray(faces, np.int64),
+                          np.asarray(point, dtype=np.float64).reshape(3))
 
 
 def _edge_keys(rep, faces):
@@ -268,8 +302,7 @@ def silhouette_brute(vertices: np.ndarray, faces: np.ndarray, point, weld: bool 
     if F == 0:
         return _finish(np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0, bool), point)
     rep = weld_vertices(vertices) if weld else np.arange(len(vertices), dtype=np.int64)
-    n, a = _face_planes(vertices, faces)
-    fr = _facing_from_planes(n, a, point)
+    fr = facing(vertices, faces, point)
     lo, hi, ca, cf, first, last = _edge_table(rep, faces, fr)
     sil = (ca == 1) | ((cf > 0) & (cf < ca))
     g = np.flatnonzero(sil)
