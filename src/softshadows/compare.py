@@ -217,6 +217,9 @@ def compare(scene=DEFAULT_SCENE, methods="all", width: int = DEFAULT_SIZE[0], he
     for m in names:
         say(f"  {m} ...")
         try:
+            # one untimed frame at the real size first: some kernels only run (and compile, on a
+            # cold cache) at full size, which would otherwise land in the reported time
+            render(sc, m, width, height, seed=seed, **resolved[m])
             results[m] = render(sc, m, width, height, seed=seed, **resolved[m])
         except SoftShadowsError:
             raise
