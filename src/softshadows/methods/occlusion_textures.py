@@ -507,6 +507,16 @@ def _mip_trilinear(pyr, s, offs, sizes, lod, x, y):
     return (1 - f) * a + f * b
 
 
+@njit(cache=True, inline="always")
+def _probe_count(wx, wy, max_probes):
+    """Probes along the long side of a wx x wy footprint: ceil(long / short), in [1, max_probes]
+    (max_probes for a degenerate footprint). Shared by the mipmap and N-Buffer lookups."""
+    pmax = max(wx, wy)
+    pmin = min(wx, wy)
+    n = int(math.ceil(pmax / pmin - 1e-9)) if pmin > 1e-12 else max_probes
+    return max(1, min(n, max_probes))
+
+
 @njit(cache=True)
 def lookup_mipmap(pyr, s, offs, sizes, max_aniso, x0, x1, y0, y1):
     """Rectangular kernel through anisotropic mipmap filtering (EXT_texture_filter_anisotropic):
@@ -517,12 +527,7 @@ def lookup_mipmap(pyr, s, offs, sizes, max_aniso, x0, x1, y0, y1):
     cx = 0.5 * (x0 + x1)
     cy = 0.5 * (y0 + y1)
     pmax = max(wx, wy)
-    pmin = min(wx, wy)
-    if pmin > 1e-12:
-        n = int(math.ceil(pmax / pmin - 1e-9))
-    else:
-        n = max_aniso
-    n = max(1, min(n, max_aniso))
+    n = _probe_count(wx, wy, max_aniso)
     lod = math.log2(max(pmax / n, 1e-30))
     acc = 0.0
     for i in range(1, n + 1):
@@ -541,9 +546,7 @@ def _mip_support(x0, x1, y0, y1, max_aniso, nl):
     wx = x1 - x0
     wy = y1 - y0
     pmax = max(wx, wy)
-    pmin = min(wx, wy)
-    n = int(math.ceil(pmax / pmin - 1e-9)) if pmin > 1e-12 else max_aniso
-    n = max(1, min(n, max_aniso))
+    n = _probe_count(wx, wy, max_aniso)
     lod = math.log2(max(pmax / n, 1e-30))
     if lod <= 0.0:
         return 1.5
@@ -596,11 +599,7 @@ def lookup_nbuffers(nb, s, max_probes, x0, x1, y0, y1):
     wy = y1 - y0
     side = min(wx, wy)
     big = max(wx, wy)
-    if side > 1e-12:
-        n = int(math.ceil(big / side - 1e-9))
-    else:
-        n = max_probes
-    n = max(1, min(n, max_probes))
+    n = _probe_count(wx, wy, max_probes)
     if n == 1:
         return _nb_square(nb, s, 0.5 * (x0 + x1), 0.5 * (y0 + y1), side)
     acc = 0.0

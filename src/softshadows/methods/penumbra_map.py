@@ -640,6 +640,14 @@ def _zmax_rect(data, offs, ws, hs, x0, y0, x1, y1):
 
 
 @njit(**_JIT)
+def _zmax_bbox(data, offs, ws, hs, xa, ya, xb, yb):
+    """Max Z_P under the pixel-coordinate box [xa, xb] x [ya, yb], grown by a texel on every side,
+    with a relative margin (a safe upper bound for the early rejection)."""
+    return _zmax_rect(data, offs, ws, hs, int(math.floor(xa)) - 1, int(math.floor(ya)) - 1,
+                      int(math.floor(xb)) + 1, int(math.floor(yb)) + 1) * (1.0 + 1e-6)
+
+
+@njit(**_JIT)
 def _wedge_zmax(wl, wt, sxs, sys_, tx, ty, ux0, uy0, ux1, uy1, fa, fb, data, offs, ws, hs):
     """Max Z_P under the part of a cone wedge between ruling fractions fa < fb (window-space
     fractions from the tip (tx, ty) to the base vertices (ux0, uy0), (ux1, uy1))."""
@@ -655,8 +663,7 @@ def _wedge_zmax(wl, wt, sxs, sys_, tx, ty, ux0, uy0, ux1, uy1, fa, fb, data, off
             xb = max(xb, px)
             ya = min(ya, py)
             yb = max(yb, py)
-    return _zmax_rect(data, offs, ws, hs, int(math.floor(xa)) - 1, int(math.floor(ya)) - 1,
-                      int(math.floor(xb)) + 1, int(math.floor(yb)) + 1) * (1.0 + 1e-6)
+    return _zmax_bbox(data, offs, ws, hs, xa, ya, xb, yb)
 
 
 @njit(parallel=True, **_JIT)
@@ -788,8 +795,7 @@ def _sheet_zmax(sx, sy, zc, z_far, ua, ub, data, offs, ws, hs):
             xb = max(xb, px)
             ya = min(ya, py)
             yb = max(yb, py)
-    return _zmax_rect(data, offs, ws, hs, int(math.floor(xa)) - 1, int(math.floor(ya)) - 1,
-                      int(math.floor(xb)) + 1, int(math.floor(yb)) + 1) * (1.0 + 1e-6)
+    return _zmax_bbox(data, offs, ws, hs, xa, ya, xb, yb)
 
 
 def _reject_sheets(view, V0, V1, F0, F1, z0, z1, z_far, pyr):
