@@ -131,7 +131,7 @@ def _edge_test_coverage(view, V, F):
     from softshadows.raster import rasterizer as R
 
     vp, W, H, verts, fcs, code, near = R._prepare(view, V, F, "none")
-    T, ntx, nty, bstart, bins, CB, CE, CZ, PL, NW, near = R._front_end(vp, W, H, verts, fcs, code, near)
+    T, ntx, nty, bstart, bins, CB, CE, CZ, PL, NW, near, _ = R._front_end(vp, W, H, verts, fcs, code, near)
     pairs = []
     for ct in np.unique(bins):
         i0, i1, j0, j1 = CB[ct]
@@ -348,12 +348,24 @@ def test_min_blend_penumbra_culling_is_exact(ortho):
         return st[k + "_a"] + st[k + "_b"]
 
     assert np.array_equal(out[False][0], out[True][0])
-    assert tot(out[False][1], "kept") == tot(out[True][1], "kept")
+    # the coarse value test also skips pieces whose kept fragments could darken no texel
+    assert tot(out[True][1], "kept") <= tot(out[False][1], "kept")
     assert out[True][1]["culled_pieces"] > 0 and out[False][1]["culled_pieces"] == 0
+    assert out[False][1]["value_culled_pieces"] == 0
     assert tot(out[True][1], "fragments") < tot(out[False][1], "fragments") == len(fr.pixel)
     assert abs(tot(out[False][1], "kept") - kept) <= 0.002 * len(fr.pixel)  # float32 depths in fr
     # fr stores float32 depths and barycentrics: the reference agrees to float32 precision
     assert np.abs(out[True][0] - ref).max() < 2e-3
+    # a texel mask: the texels in it exactly as without, the others untouched, fewer fragments
+    mask = rng.random((80, 96)) < 0.1
+    mask[40:56, 0:48] = False  # whole tiles without a texel to shade
+    for cd in (False, True):
+        o = np.full((80, 96), 0.75, np.float32)
+        o[mask] = 1.0
+        st = rasterize_min_blend(view, V, F, PROGRAM_PENUMBRA, za, zp, params, o, cull_discarded=cd, mask=mask)
+        assert np.array_equal(o[mask], out[cd][0][mask])
+        assert np.all(o[~mask] == 0.75)
+        assert 0 < tot(st, "fragments") < 0.25 * tot(out[cd][1], "fragments")
 
 
 # ---------------------------------------------------------------------------------------------

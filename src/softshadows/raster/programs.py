@@ -66,6 +66,26 @@ def discard_depth(program, params, s):
 
 
 @njit(**_JIT)
+def value_lower_bound(program, params, a, z_min, s_max):
+    """A lower bound of the value ``program`` returns for a fragment with attribute ``a``, depth
+    ``z >= z_min`` and input image value ``s <= s_max`` (finite), or -inf where none is known: the
+    rasterizer's coarse value test skips a piece when this bound is at least the largest value
+    already stored in the tile (MIN blending: it could change no texel). For the penumbra program
+    the intensity (Z_F - Z_V) / (Z_P - Z_V) grows with Z_F and, in front of the surface, falls with
+    Z_P; the smoothstep is monotonic. The bound subtracts 1e-9, far above the few units of roundoff
+    by which the fragment's own evaluation can differ."""
+    if program == PROGRAM_PENUMBRA:
+        den = s_max - a
+        if not (den > 0.0 and z_min > a):
+            return -np.inf
+        i = (z_min - a) * (1.0 / den)
+        i = i if i < 1.0 else 1.0
+        i = smoothstep_bernstein(i) if params[2] != 0.0 else i
+        return i - 1e-9
+    return -np.inf
+
+
+@njit(**_JIT)
 def run_program(program, params, a, s, z):
     if program == PROGRAM_PENUMBRA:
         eps = params[0] * params[1] * s

@@ -37,8 +37,12 @@ Pipeline (all Numba kernels on plain arrays; the functions at the bottom only or
 
    Min-blend mode (``rasterize_min_blend``) runs a fragment program per fragment, branch-free over
    the whole tile row (vectorized; a kernel is compiled per program so that the program inlines),
-   and can skip the pieces of a tile that the program would discard entirely (hierarchical culling:
-   an exact depth bound per piece and tile against ``programs.discard_depth``; same output).
+   and can skip the pieces of a tile that cannot change the output (hierarchical culling, same
+   output): those the program would discard entirely (an exact depth bound per piece and tile
+   against ``programs.discard_depth``: a coarse depth test) and those whose every value is at least
+   the tile's largest stored value (``programs.value_lower_bound``: a coarse test of the MIN blend).
+   An optional texel mask restricts the shading to some texels: tiles without one get no pieces,
+   and pieces, rows and spans without one are skipped before the vector pass.
 
 4. **load balance**: Numba splits a ``prange`` into equal contiguous parts, one per thread,
    whatever ``set_parallel_chunksize`` says (measured: a loop with all its work in the first half
@@ -64,7 +68,7 @@ from numba import njit, prange
 
 from .gbuffer import Fragments, GBuffer
 from .kernels import view_coords, view_coords_to_screen
-from .programs import PROGRAMS, discard_depth, run_program
+from .programs import PROGRAMS, discard_depth, run_program, value_lower_bound
 
 TILE = 16  #: tile size in pixels (square)
 SUBPIXEL = 4096.0  #: screen coordinates are snapped to 1/SUBPIXEL px before coverage
@@ -73,6 +77,10 @@ _PERSPECTIVE_MIN_NEAR = 1e-9
 _JIT = dict(cache=True, fastmath=False, error_model="numpy")
 
 _CULL = {"none": 0, "back": 1, "front": 2}
+
+#: min-blend coarse value test: the tile's largest value is recomputed (after pieces have changed
+#: it) only when a piece's value bound comes within this of the stale one
+_VALUE_RECOMPUTE = 0.05
 
 # modes of the tile kernel
 _M_DEPTH, _M_GBUF, _M_FCOUNT, _M_FFILL, _M_MINBLEND = 0, 1, 2, 3, 4
@@ -331,9 +339,40 @@ def _setup_one(t, verts, faces, vp, near, cull, NC, CB, CE, CZ, PL, NW):
 # binning
 # ----------------------------------------------------------------------------------------------
 @njit(parallel=True, **_JIT)
-def _setup_count(verts, faces, vp, near, cull, NC, CB, CE, CZ, PL, NW, T, ntx, chunk, cnt, nslot):
+def _tile_row_bits(mask, T, ntx, nty, bits, tile_any):
+    """bits[tile, li]: bit k set where texel (li, k) of the tile is set in ``mask`` (H,W) uint8;
+    tile_any[tile]: any of them."""
+    H, W = mask.shape
+    for tile in prange(ntx * nty):
+        ty = tile // ntx
+        tx = tile - ty * ntx
+        a = 0
+        for li in range(T):
+            i = ty * T + li
+            b = 0
+            if i < H:
+                for k in range(min(T, W - tx * T)):
+                    b |= np.int64(mask[i, tx * T + k] != 0) << k
+            bits[tile, li] = b
+            a |= b
+        tile_any[tile] = a != 0
+
+
+@njit(**_JIT)
+def _rect_has_bits(RN, i0, i1, j0, j1):
+    """Whether rows i0..i1, columns j0..j1 of a tile (tile coordinates) hold a bit set in the row
+    masks ``RN`` (see :func:`_tile_row_bits`)."""
+    acc = np.int64(0)
+    for li in range(i0, i1 + 1):
+        acc |= RN[li]
+    return ((acc >> j0) & ((np.int64(1) << (j1 - j0 + 1)) - 1)) != 0
+
+
+@njit(parallel=True, **_JIT)
+def _setup_count(verts, faces, vp, near, cull, NC, CB, CE, CZ, PL, NW, T, ntx, chunk, cnt, nslot, tile_any, use_bits):
     """Setup of every triangle (parallel over chunks of triangles, dealt round-robin to ``nslot``
-    slots: see ``_run_tiles``) and per (chunk, tile) bin counts."""
+    slots: see ``_run_tiles``) and per (chunk, tile) bin counts. With ``use_bits``, only the tiles
+    with ``tile_any`` set get pieces (min-blend's texel mask)."""
     nchunk = cnt.shape[0]
     ntiles = cnt.shape[1]
     F = NC.shape[0]
@@ -348,7 +387,10 @@ def _setup_count(verts, faces, vp, near, cull, NC, CB, CE, CZ, PL, NW, T, ntx, c
                     ct = 2 * t + k
                     for ty in range(CB[ct, 0] // T, CB[ct, 1] // T + 1):
                         for tx in range(CB[ct, 2] // T, CB[ct, 3] // T + 1):
-                            cnt[c, ty * ntx + tx] += 1
+                            tile = ty * ntx + tx
+                            if use_bits and tile_any[tile] == 0:
+                                continue
+                            cnt[c, tile] += 1
 
 
 @njit(**_JIT)
@@ -368,7 +410,7 @@ def _bin_offsets(cnt, bstart):
 
 
 @njit(parallel=True, **_JIT)
-def _bin_fill(NC, CB, T, ntx, chunk, off, bins, nslot):
+def _bin_fill(NC, CB, T, ntx, chunk, off, bins, nslot, tile_any, use_bits):
     nchunk = off.shape[0]
     F = NC.shape[0]
     for slot in prange(nslot):
@@ -380,6 +422,8 @@ def _bin_fill(NC, CB, T, ntx, chunk, off, bins, nslot):
                     for ty in range(CB[ct, 0] // T, CB[ct, 1] // T + 1):
                         for tx in range(CB[ct, 2] // T, CB[ct, 3] // T + 1):
                             tile = ty * ntx + tx
+                            if use_bits and tile_any[tile] == 0:
+                                continue
                             bins[off[c, tile]] = ct
                             off[c, tile] += 1
 
@@ -387,6 +431,38 @@ def _bin_fill(NC, CB, T, ntx, chunk, off, bins, nslot):
 # ----------------------------------------------------------------------------------------------
 # tiles
 # ----------------------------------------------------------------------------------------------
+@njit(**_JIT)
+def _rect_edge_test(CE, ct, i0, i1, j0, j1, W, H):
+    """Conservative tests of piece ``ct`` against the pixel centers of rows i0..i1 and columns
+    j0..j1: (reject, full). reject: some edge function is below -thr at the rectangle's four corner
+    centers, so no center of the rectangle is covered; full: every edge function is above thr there,
+    so every center is. The edge functions are affine, so their extremes are at the corners; thr
+    bounds their rounding error."""
+    pa = i0 + 0.5
+    pb = i1 + 0.5
+    qa = j0 + 0.5
+    qb = j1 + 0.5
+    full = True
+    for k in range(3):
+        ax = CE[ct, k, 0]
+        ay = CE[ct, k, 1]
+        dx = CE[ct, k, 2]
+        dy = CE[ct, k, 3]
+        sg = CE[ct, k, 4]
+        e00 = sg * (dx * (pa - ay) - dy * (qa - ax))
+        e01 = sg * (dx * (pa - ay) - dy * (qb - ax))
+        e10 = sg * (dx * (pb - ay) - dy * (qa - ax))
+        e11 = sg * (dx * (pb - ay) - dy * (qb - ax))
+        emin = min(min(e00, e01), min(e10, e11))
+        emax = max(max(e00, e01), max(e10, e11))
+        thr = 1e-12 * (abs(dx) + abs(dy)) * (abs(ax) + abs(ay) + W + H + 1.0)
+        if emax < -thr:
+            return True, False
+        if emin <= thr:
+            full = False
+    return False, full
+
+
 @njit(**_JIT)
 def _bary_c(q4, q5, q6, q7, q8, q9, q10, q11, xw, yw, z, ortho):
     """Barycentrics (b1, b2) of the original triangle t (q4..q11 = PL[t, 4:12]) at the plane point
@@ -565,15 +641,18 @@ def _make_tiles_kernel(mode, prog=0):
     branches, so that they vectorize, and their register allocation clean)."""
 
     @njit(parallel=True, **_JIT)
-    def tiles(vp, near, T, ntx, nty, bstart, bins, CB, CE, CZ, PL, NW, scratch, tscratch, iscratch, fscratch,
+    def tiles(vp, near, T, ntx, nty, bstart, bins, CB, CE, CZ, PL, NW, scratch, tscratch, iscratch, fscratch, xscratch,
                depth_out, tri_out, pos_out, nrm_out, bary_out, mask_out, fcount, foff, fpix, ftri, fbary,
-               fdepth, program, pparams, cattr, img, blend, bstats, split, cull_discarded, nslot):
+               fdepth, program, pparams, cattr, img, blend, bstats, split, cull_discarded, rowbits, use_mask, nslot):
         """mode 0: depth + tri; 1: full G-buffer; 2: count fragments per tile; 3: write fragments;
         4: run a fragment program per fragment and MIN-blend its value into ``blend`` (bstats[tile] =
-        fragments and kept fragments for triangles below / from ``split``, pieces culled). With
-        ``cull_discarded`` (mode 4), the pieces of a tile whose every fragment lies at or beyond the
-        depth where the program discards (``discard_depth``, max over the tile) are skipped; the
-        result is the same.
+        fragments and kept fragments for triangles below / from ``split``, pieces culled by depth,
+        by value). With ``cull_discarded`` (mode 4), the pieces of a tile whose every fragment lies
+        at or beyond the depth where the program discards (``discard_depth``, max over the tile) are
+        skipped, and so are the pieces with a constant attribute whose value bound
+        (``value_lower_bound``) is at least the tile's largest value; the result is the same. With
+        ``use_mask`` (mode 4), only the texels set in ``rowbits`` (bit k of ``rowbits[tile, row]``:
+        column k) are shaded, the others keep their value.
 
         Per piece and row, the covered columns are one span [lo, hi], found exactly from the three edge
         functions (:func:`_edge_span`); depth/G-buffer modes then run the depth of the whole tile row
@@ -615,6 +694,9 @@ def _make_tiles_kernel(mode, prog=0):
                 LO = iscratch[tid, 0]
                 HI = iscratch[tid, 1]
                 EX = iscratch[tid, 2]
+                RW = iscratch[tid, 3]
+                RN = iscratch[tid, 4]  # min-blend: texels to shade per row of the tile
+                CM = xscratch[tid]
                 ib = fscratch[tid]
                 if mode <= 1:
                     for li in range(T):
@@ -625,6 +707,7 @@ def _make_tiles_kernel(mode, prog=0):
                             tr[k] = -1
                 nfrag = 0
                 nculled = 0
+                nvculled = 0
                 w = 0
                 na = 0
                 nb = 0
@@ -633,20 +716,37 @@ def _make_tiles_kernel(mode, prog=0):
                 if mode == 3:
                     w = foff[tile]
                 elif mode == 4:
-                    for li in range(4):
-                        for k in range(T):
-                            tb[li, k] = 0
+                    # the tile's texels: current values, input image, texel mask (``mask``: only these
+                    # texels are shaded) and, over the texels shaded, the bounds of the coarse tests
                     tthr = -np.inf
+                    smax = -np.inf  # the largest finite input-image value
+                    cmax = -np.inf  # the largest current value (an upper bound once ``dirty``)
+                    # RN[li]: bit k set where texel (li, k) of the tile is to be shaded
+                    if use_mask:
+                        anyb = 0
+                        for li in range(T):
+                            RN[li] = rowbits[tile, li]
+                            anyb |= RN[li]
+                        if anyb == 0:
+                            continue  # no texel to shade: ``blend`` unchanged
+                    else:
+                        for li in range(T):
+                            RN[li] = ((np.int64(1) << (x1 - x0 + 1)) - 1) if li <= y1 - y0 else 0
                     for i in range(y0, y1 + 1):
-                        zr = zb[i - y0]
-                        imr = ib[i - y0]
-                        brow = blend[i, x0:x1 + 1]
-                        irow = img[i, x0:x1 + 1]
-                        for k in range(brow.shape[0]):
-                            zr[k] = brow[k]
-                            imr[k] = irow[k]
-                            d = discard_depth(prog, pparams, irow[k])
-                            tthr = d if d > tthr else tthr  # NaN: the program discards there whatever the depth
+                        li = i - y0
+                        rb = RN[li]
+                        for k in range(x1 - x0 + 1):
+                            bv = np.float64(blend[i, x0 + k])
+                            sv = img[i, x0 + k]
+                            need = ((rb >> k) & 1) != 0
+                            zb[li, k] = bv
+                            ib[li, k] = sv
+                            d = discard_depth(prog, pparams, sv)
+                            # NaN: the program discards there whatever the depth
+                            tthr = d if (need and d > tthr) else tthr
+                            smax = sv if (need and sv > smax and sv < np.inf) else smax
+                            cmax = bv if (need and bv > cmax) else cmax
+                    dirty = False
                 for bi in range(bstart[tile], bstart[tile + 1]):
                     ct = bins[bi]
                     t = ct >> 1
@@ -656,6 +756,8 @@ def _make_tiles_kernel(mode, prog=0):
                     j1 = min(CB[ct, 3], x1)
                     if i0 > i1 or j0 > j1:
                         continue
+                    if mode == 4 and use_mask and not _rect_has_bits(RN, i0 - y0, i1 - y0, j0 - x0, j1 - x0):
+                        continue  # no texel to shade in the piece's rectangle of the tile
                     # sanity bounds for the plane depth of this piece's pixels: the snapped coverage may
                     # extrapolate the plane a fraction of a pixel beyond the true triangle, which near the
                     # plane's horizon or for edge-on triangles can give huge, negative or NaN depths
@@ -688,9 +790,31 @@ def _make_tiles_kernel(mode, prog=0):
                         # fragment; its rounding is monotonic in x and in y, so the minimum over the
                         # pixel centers is at a corner of the rectangle: exact, no margin needed.
                         zc_min = _rect_min_depth(ortho, pnx, pny, pnz, pd, wl, wt, wsx, wsy, i0, i1, j0, j1)
-                        if min(max(zc_min, zlo), zhi) >= tthr:
+                        zc_min = min(max(zc_min, zlo), zhi)
+                        if zc_min >= tthr:
                             nculled += 1
                             continue
+                        # the coarse value test (MIN blending): if no fragment of the piece can go
+                        # below the tile's largest current value, it can change no texel. Values
+                        # only decrease, so cmax is recomputed only after a piece has run.
+                        if cattr[t, 0] == cattr[t, 1] and cattr[t, 0] == cattr[t, 2]:
+                            vb = value_lower_bound(prog, pparams, cattr[t, 0], zc_min, smax)
+                            if dirty and vb >= cmax - _VALUE_RECOMPUTE:  # recompute only where it may pay
+                                rb = RN[0]
+                                for k in range(T):  # lane-wise maxima first (vectorizes), then across lanes
+                                    CM[k] = zb[0, k] if ((rb >> k) & 1) != 0 else -np.inf
+                                for li in range(1, y1 - y0 + 1):
+                                    rb = RN[li]
+                                    for k in range(T):
+                                        c = zb[li, k] if ((rb >> k) & 1) != 0 else -np.inf
+                                        CM[k] = c if c > CM[k] else CM[k]
+                                cmax = CM[0]
+                                for k in range(1, T):
+                                    cmax = CM[k] if CM[k] > cmax else cmax
+                                dirty = False
+                            if vb >= cmax:
+                                nvculled += 1
+                                continue
                     ax0 = CE[ct, 0, 0]
                     ay0 = CE[ct, 0, 1]
                     dx0 = CE[ct, 0, 2]
@@ -712,30 +836,7 @@ def _make_tiles_kernel(mode, prog=0):
                     # conservative whole-rectangle tests (edge functions are affine: extremes at corners)
                     full = False
                     if (i1 - i0 + 1) * (j1 - j0 + 1) > 16:
-                        full = True
-                        reject = False
-                        pa = i0 + 0.5
-                        pb = i1 + 0.5
-                        qa = j0 + 0.5
-                        qb = j1 + 0.5
-                        for k in range(3):
-                            ax = CE[ct, k, 0]
-                            ay = CE[ct, k, 1]
-                            dx = CE[ct, k, 2]
-                            dy = CE[ct, k, 3]
-                            sg = CE[ct, k, 4]
-                            e00 = sg * (dx * (pa - ay) - dy * (qa - ax))
-                            e01 = sg * (dx * (pa - ay) - dy * (qb - ax))
-                            e10 = sg * (dx * (pb - ay) - dy * (qa - ax))
-                            e11 = sg * (dx * (pb - ay) - dy * (qb - ax))
-                            emin = min(min(e00, e01), min(e10, e11))
-                            emax = max(max(e00, e01), max(e10, e11))
-                            thr = 1e-12 * (abs(dx) + abs(dy)) * (abs(ax) + abs(ay) + W + H + 1.0)
-                            if emax < -thr:
-                                reject = True
-                                break
-                            if emin <= thr:
-                                full = False
+                        reject, full = _rect_edge_test(CE, ct, i0, i1, j0, j1, W + 0.0, H + 0.0)
                         if reject:
                             continue
                     robust = CZ[ct, 2] != 0.0
@@ -764,6 +865,22 @@ def _make_tiles_kernel(mode, prog=0):
                             LO[k] = lo
                             HI[k] = hi
                             EX[k] = slow
+                        # the rows left to visit: those with a span (min-blend: one holding a texel to
+                        # shade) or a slow search (branch-free compaction; a thin piece's box has many
+                        # empty rows, whose skipping branch the CPU cannot predict)
+                        nrows = 0
+                        for k in range(i0 - y0, i1 - y0 + 1):
+                            RW[nrows] = k
+                            if mode == 4:
+                                width = max(HI[k] - LO[k] + 1, 0)
+                                hit = ((RN[k] >> (LO[k] - x0)) & ((np.int64(1) << width) - 1)) != 0
+                                nrows += hit | (EX[k] != 0)
+                            else:
+                                nrows += (LO[k] <= HI[k]) | (EX[k] != 0)
+                        if nrows == 0:
+                            continue
+                    else:
+                        nrows = i1 - i0 + 1
                     r0 = 0.0
                     r1 = 0.0
                     r2 = 0.0
@@ -771,20 +888,28 @@ def _make_tiles_kernel(mode, prog=0):
                     ca1 = 0.0
                     ca2 = 0.0
                     side_a = t < split
+                    dirty = True
                     cconst = False
                     if mode == 4:
                         ca0 = cattr[t, 0]
                         ca1 = cattr[t, 1]
                         ca2 = cattr[t, 2]
                         cconst = (ca0 == ca1) & (ca0 == ca2)
-                    for i in range(i0, i1 + 1):
+                    for rr in range(nrows):
+                        if robust and not full:
+                            li = RW[rr]
+                            i = li + y0
+                        else:
+                            i = i0 + rr
+                            li = i - y0
+                        if mode == 4 and use_mask and RN[li] == 0:
+                            continue  # no texel of this row is shaded
                         py = i + 0.5
                         yw = wt - py * wsy
                         if ortho:
                             zrow = pd - pny * yw
                         else:
                             zrow = pny * yw + pnz
-                        li = i - y0
                         if full:
                             lo = j0
                             hi = j1
@@ -861,7 +986,15 @@ def _make_tiles_kernel(mode, prog=0):
                                 # columns: it vectorizes; cheaper than pixel by pixel even for short spans)
                                 klo = lo - x0
                                 khi = hi - x0
-                                sb = 0 if side_a else 2  # lane counters: tb rows sb (fragments), sb + 1 (kept)
+                                rn = RN[li]
+                                if use_mask and ((rn >> klo) & ((np.int64(1) << (khi - klo + 1)) - 1)) == 0:
+                                    if full or robust:
+                                        break
+                                    lo, hi = _scan_run(hi + 1, j1, r0, ax0, dy0, sg0, in0, r1, ax1, dy1, sg1, in1,
+                                                       r2, ax2, dy2, sg2, in2)
+                                    continue  # no texel of the span to shade
+                                cin = 0  # fragments and kept fragments of the row (reductions in the vector loop)
+                                ckp = 0
                                 if ortho:
                                     for k in range(T):
                                         xw = wl + ((x0 + k) + 0.5) * wsx
@@ -871,10 +1004,10 @@ def _make_tiles_kernel(mode, prog=0):
                                         b1, b2 = _bary_c(q4, q5, q6, q7, q8, q9, q10, q11, xw, yw, z, True)
                                         a = (1.0 - b1 - b2) * ca0 + b1 * ca1 + b2 * ca2
                                         val = run_program(prog, pparams, a, ib[li, k], z)
-                                        inside = (k >= klo) & (k <= khi) & (not (z > far))
+                                        inside = (k >= klo) & (k <= khi) & (not (z > far)) & (((rn >> k) & 1) != 0)
                                         kept = inside & (val == val)
-                                        tb[sb, k] += inside
-                                        tb[sb + 1, k] += kept
+                                        cin += inside
+                                        ckp += kept
                                         zc = zb[li, k]
                                         zb[li, k] = val if (kept & (val < zc)) else zc
                                 elif cconst:
@@ -886,10 +1019,10 @@ def _make_tiles_kernel(mode, prog=0):
                                         z = z if z >= zlo else zlo
                                         z = zhi if z > zhi else z
                                         val = run_program(prog, pparams, ca0, ib[li, k], z)
-                                        inside = (k >= klo) & (k <= khi) & (not (z > far))
+                                        inside = (k >= klo) & (k <= khi) & (not (z > far)) & (((rn >> k) & 1) != 0)
                                         kept = inside & (val == val)
-                                        tb[sb, k] += inside
-                                        tb[sb + 1, k] += kept
+                                        cin += inside
+                                        ckp += kept
                                         zc = zb[li, k]
                                         zb[li, k] = val if (kept & (val < zc)) else zc
                                 else:
@@ -901,12 +1034,18 @@ def _make_tiles_kernel(mode, prog=0):
                                         b1, b2 = _bary_c(q4, q5, q6, q7, q8, q9, q10, q11, xw, yw, z, False)
                                         a = (1.0 - b1 - b2) * ca0 + b1 * ca1 + b2 * ca2
                                         val = run_program(prog, pparams, a, ib[li, k], z)
-                                        inside = (k >= klo) & (k <= khi) & (not (z > far))
+                                        inside = (k >= klo) & (k <= khi) & (not (z > far)) & (((rn >> k) & 1) != 0)
                                         kept = inside & (val == val)
-                                        tb[sb, k] += inside
-                                        tb[sb + 1, k] += kept
+                                        cin += inside
+                                        ckp += kept
                                         zc = zb[li, k]
                                         zb[li, k] = val if (kept & (val < zc)) else zc
+                                if side_a:
+                                    na += cin
+                                    ka += ckp
+                                else:
+                                    nb += cin
+                                    kb += ckp
                             else:
                                 for j in range(lo, hi + 1):
                                     xw = wl + (j + 0.5) * wsx
@@ -1012,16 +1151,12 @@ def _make_tiles_kernel(mode, prog=0):
                 elif mode == 2:
                     fcount[tile] = nfrag
                 elif mode == 4:
-                    for k in range(T):
-                        na += tb[0, k]
-                        ka += tb[1, k]
-                        nb += tb[2, k]
-                        kb += tb[3, k]
                     bstats[tile, 0] += na
                     bstats[tile, 1] += nb
                     bstats[tile, 2] += ka
                     bstats[tile, 3] += kb
                     bstats[tile, 4] += nculled
+                    bstats[tile, 5] += nvculled
                     for i in range(y0, y1 + 1):
                         zr = zb[i - y0]
                         brow = blend[i, x0:x1 + 1]
@@ -1099,8 +1234,9 @@ def _prepare(view, vertices, faces, cull):
     return vp, W, H, verts, fcs, code, near
 
 
-def _front_end(vp, W, H, verts, fcs, code, near):
-    """setup + binning: returns the arrays the tile kernel reads."""
+def _front_end(vp, W, H, verts, fcs, code, near, mask=None):
+    """setup + binning: returns the arrays the tile kernel reads. ``mask`` (H,W) uint8: bin a piece
+    only to the tiles where its bounding box holds a set texel (min-blend's texel mask)."""
     F = len(fcs)
     NC = np.empty(F, dtype=np.int32)
     CB = np.empty((2 * F, 4), dtype=np.int32)
@@ -1116,11 +1252,19 @@ def _front_end(vp, W, H, verts, fcs, code, near):
     chunk = (F + nchunk - 1) // nchunk if F else 1
     cnt = np.empty((nchunk, ntx * nty), dtype=np.int64)
     bstart = np.empty(ntx * nty + 1, dtype=np.int64)
-    _setup_count(verts, fcs, vp, near, code, NC, CB, CE, CZ, PL, NW, T, ntx, chunk, cnt, nthreads)
+    if mask is not None:
+        rowbits = np.empty((ntx * nty, T), dtype=np.int64)
+        tile_any = np.empty(ntx * nty, dtype=np.uint8)
+        _tile_row_bits(mask, T, ntx, nty, rowbits, tile_any)
+    else:
+        rowbits = _E2I64
+        tile_any = _E1U
+    use = mask is not None
+    _setup_count(verts, fcs, vp, near, code, NC, CB, CE, CZ, PL, NW, T, ntx, chunk, cnt, nthreads, tile_any, use)
     _bin_offsets(cnt, bstart)
     bins = np.empty(int(bstart[-1]), dtype=np.int32)
-    _bin_fill(NC, CB, T, ntx, chunk, cnt, bins, nthreads)
-    return T, ntx, nty, bstart, bins, CB, CE, CZ, PL, NW, near
+    _bin_fill(NC, CB, T, ntx, chunk, cnt, bins, nthreads, tile_any, use)
+    return T, ntx, nty, bstart, bins, CB, CE, CZ, PL, NW, near, rowbits
 
 
 _E1 = np.empty(0, dtype=np.int64)
@@ -1129,6 +1273,9 @@ _E1F = np.empty(0, dtype=np.float32)
 _E2F = np.empty((0, 0), dtype=np.float32)
 _E2I = np.empty((0, 0), dtype=np.int32)
 _E2B = np.empty((0, 0), dtype=np.bool_)
+_E2U = np.empty((0, 0), dtype=np.uint8)
+_E2I64 = np.empty((0, 0), dtype=np.int64)
+_E1U = np.empty(0, dtype=np.uint8)
 _E3F = np.empty((0, 0, 3), dtype=np.float32)
 _EFB = np.empty((0, 2), dtype=np.float32)
 
@@ -1142,21 +1289,23 @@ def _run_tiles(mode, vp, fe, depth=_E2F, tri=_E2I, pos=_E3F, nrm=_E3F, bary=_E3F
                fcount=_E1, foff=_E1, fpix=_E1, ftri=_E1I, fbary=_EFB, fdepth=_E1F,
                program=0, pparams=_EP, cattr=_ECA, img=_E2F, blend=_E2F, bstats=_EBS, split=0,
                cull_discarded=False):
-    T, ntx, nty, bstart, bins, CB, CE, CZ, PL, NW, near = fe
+    T, ntx, nty, bstart, bins, CB, CE, CZ, PL, NW, near, rowbits = fe
     nthreads = numba.config.NUMBA_NUM_THREADS
     scratch = np.empty((nthreads, T, T), dtype=np.float64)
     tscratch = np.empty((nthreads, T, T), dtype=np.int32)
-    iscratch = np.empty((nthreads, 3, T), dtype=np.int64)
+    iscratch = np.empty((nthreads, 5, T), dtype=np.int64)
     fscratch = np.zeros((nthreads, T, T), dtype=np.float32)
+    xscratch = np.zeros((nthreads, T), dtype=np.float64)
     # load balance: Numba splits a prange into equal contiguous parts, one per thread, whatever the
     # chunk size, while the work of a tile kernel is concentrated where the geometry is. So the
     # prange runs over one slot per thread and slot p takes every n-th tile (min-blend) or tile row
     # (dense modes) from p on: every thread gets a share of every busy region.
     nslot = numba.get_num_threads()
     _KERNELS[(mode, program if mode == _M_MINBLEND else 0)](
-        vp, near, T, ntx, nty, bstart, bins, CB, CE, CZ, PL, NW, scratch, tscratch, iscratch, fscratch, depth, tri,
+        vp, near, T, ntx, nty, bstart, bins, CB, CE, CZ, PL, NW, scratch, tscratch, iscratch, fscratch, xscratch,
+        depth, tri,
         pos, nrm, bary, mask, fcount, foff, fpix, ftri, fbary, fdepth, program, pparams, cattr, img, blend, bstats,
-        split, bool(cull_discarded), int(nslot))
+        split, bool(cull_discarded), rowbits, rowbits.size > 0, int(nslot))
 
 
 def rasterize(view, vertices, faces, cull: str = "none") -> GBuffer:
@@ -1216,7 +1365,7 @@ def rasterize_fragments(view, vertices, faces, cull: str = "none") -> Fragments:
 
 
 def rasterize_min_blend(view, vertices, faces, program: int, corner_attr, image, params, out,
-                        cull: str = "none", split: int = 0, cull_discarded: bool = False) -> dict:
+                        cull: str = "none", split: int = 0, cull_discarded: bool = False, mask=None) -> dict:
     """Run a fragment program on every fragment and MIN-blend its value into ``out`` (H,W) float32
     in place: the equivalent of a GPU fragment program with MIN blending (or of writing the value
     as depth with a LESS depth test). No depth test on the geometry itself.
@@ -1230,8 +1379,16 @@ def rasterize_min_blend(view, vertices, faces, program: int, corner_attr, image,
     ``cull_discarded``: hierarchical culling, the equivalent of a GPU's coarse (per-tile) depth
     test. A piece of a triangle in one tile is skipped when its nearest fragment there lies at or
     beyond the depth from which the program discards on every pixel of the tile
-    (``programs.discard_depth``; an exact bound, so the output is identical). Skipped fragments are
-    not counted in ``fragments_*``; ``culled_pieces`` counts the skipped (piece, tile) pairs.
+    (``programs.discard_depth``; an exact bound, so the output is identical); ``culled_pieces``
+    counts the skipped (piece, tile) pairs. A piece whose attribute is the same at its three corners
+    is also skipped when no fragment can go below the tile's largest stored value
+    (``programs.value_lower_bound``; MIN blending: it could change no texel; the output is
+    identical); ``value_culled_pieces`` counts those. Skipped fragments are not counted in
+    ``fragments_*`` / ``kept_*``.
+
+    ``mask`` (H,W) bool or uint8: shade only the texels set (the others keep their value in
+    ``out``; their fragments are neither run nor counted). The output at the texels set is
+    identical to that of an unmasked pass.
     """
     vp, W, H, verts, fcs, code, near = _prepare(view, vertices, faces, cull)
     if out.shape != (H, W) or out.dtype != np.float32:
@@ -1242,10 +1399,17 @@ def rasterize_min_blend(view, vertices, faces, program: int, corner_attr, image,
     im = np.ascontiguousarray(image, dtype=np.float32)
     if im.shape != (H, W):
         raise ValueError(f"image must have shape {(H, W)}, got {im.shape}")
-    fe = _front_end(vp, W, H, verts, fcs, code, near)
-    bstats = np.zeros((fe[1] * fe[2], 5), dtype=np.int64)
+    if mask is None:
+        mk = _E2U
+    else:
+        mk = np.ascontiguousarray(mask).view(np.uint8) if np.asarray(mask).dtype == np.bool_ else \
+            np.ascontiguousarray(mask, dtype=np.uint8)
+        if mk.shape != (H, W):
+            raise ValueError(f"mask must have shape {(H, W)}, got {mk.shape}")
+    fe = _front_end(vp, W, H, verts, fcs, code, near, None if mask is None else mk)
+    bstats = np.zeros((fe[1] * fe[2], 6), dtype=np.int64)
     _run_tiles(_M_MINBLEND, vp, fe, program=int(program), pparams=np.asarray(params, dtype=np.float64),
                cattr=ca, img=im, blend=out, bstats=bstats, split=int(split), cull_discarded=cull_discarded)
     tot = bstats.sum(axis=0)
     return {"fragments_a": int(tot[0]), "fragments_b": int(tot[1]), "kept_a": int(tot[2]), "kept_b": int(tot[3]),
-            "culled_pieces": int(tot[4])}
+            "culled_pieces": int(tot[4]), "value_culled_pieces": int(tot[5])}
