@@ -313,9 +313,35 @@ def test_paths_and_options_agree():
     assert np.mean(d > 1e-3) < 1e-3 and d.max() < 0.05
     assert fast.stats["cone_fragments"] < ref.stats["cone_fragments"]
     assert fast.stats["sheet_fragments"] < ref.stats["sheet_fragments"]
-    assert fast.stats["cone_fragments_kept"] == pytest.approx(ref.stats["cone_fragments_kept"], rel=1e-3)
+    # kept fragments: the coarse value test also skips pieces that could lower no texel (kept
+    # fragments, but not darker than the map already is), so at most the reference's
+    assert 0.9 * ref.stats["cone_fragments_kept"] <= fast.stats["cone_fragments_kept"] <= \
+        ref.stats["cone_fragments_kept"]
+    assert fast.stats["value_culled_tile_pieces"] > 0 and ref.stats["value_culled_tile_pieces"] == 0
     np.testing.assert_array_equal(adj.intensity, fast.intensity)  # same silhouette, same map
     assert fast.stats["silhouette_vertices_degree3plus"] > 0
+
+
+@pytest.mark.parametrize("name,light", [("bunny", "sphere"), ("spheres", "rect"), ("contact", "sphere")])
+def test_texels_read_gives_the_same_visibility(name, light):
+    """``texels=read`` shades only the penumbra-map texels the eye pass reads: V must be bit for
+    bit that of the whole map (``texels=all``), at far fewer fragments; the texels read are those
+    of the eye points outside the umbra and inside the map."""
+    scene = ss.load_scene(name, light=light)
+    a = ss.render(scene, "penumbra-map", 72, 64, map_size=256, texels="read")
+    b = ss.render(scene, "penumbra-map", 72, 64, map_size=256, texels="all")
+    np.testing.assert_array_equal(a.visibility[a.mask], b.visibility[b.mask])
+    sa, sb = a.stats, b.stats
+    assert sb["texels_shaded"] == sb["penumbra_map_width"] * sb["penumbra_map_height"]
+    n_out = int(a.mask.sum()) - sa["umbra_pixels"]  # eye points that read a texel (or none: outside)
+    assert 0 < sa["texels_shaded"] <= n_out
+    assert 0 < sa["cone_fragments"] < 0.5 * sb["cone_fragments"]
+    # the lookups before pass 2 are those of pass 3
+    smp = P.shadow_map_pass(scene, 256, P.light_radius_of(scene.light))
+    ctx_pts = np.random.default_rng(2).uniform(-1.5, 1.5, size=(500, 3)) + [0, 0.5, 0]
+    nrm = np.tile([0.0, 1.0, 0.0], (500, 1))
+    look = P.eye_lookups(smp, ctx_pts, nrm, 1.0, 1.0)
+    assert look.needed.sum() == len(np.unique(look.texel[(look.texel >= 0) & ~look.umbra]))
 
 
 def test_parameters_and_stats():
