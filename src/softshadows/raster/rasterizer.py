@@ -888,9 +888,9 @@ def _make_tiles_kernel(mode, prog=0):
                     ca1 = 0.0
                     ca2 = 0.0
                     side_a = t < split
-                    dirty = True
                     cconst = False
                     if mode == 4:
+                        dirty = True  # this piece will lower texels: the tile's largest value may fall
                         ca0 = cattr[t, 0]
                         ca1 = cattr[t, 1]
                         ca2 = cattr[t, 2]
@@ -1273,7 +1273,6 @@ _E1F = np.empty(0, dtype=np.float32)
 _E2F = np.empty((0, 0), dtype=np.float32)
 _E2I = np.empty((0, 0), dtype=np.int32)
 _E2B = np.empty((0, 0), dtype=np.bool_)
-_E2U = np.empty((0, 0), dtype=np.uint8)
 _E2I64 = np.empty((0, 0), dtype=np.int64)
 _E1U = np.empty(0, dtype=np.uint8)
 _E3F = np.empty((0, 0, 3), dtype=np.float32)
@@ -1399,14 +1398,13 @@ def rasterize_min_blend(view, vertices, faces, program: int, corner_attr, image,
     im = np.ascontiguousarray(image, dtype=np.float32)
     if im.shape != (H, W):
         raise ValueError(f"image must have shape {(H, W)}, got {im.shape}")
-    if mask is None:
-        mk = _E2U
-    else:
+    mk = None
+    if mask is not None:
         mk = np.ascontiguousarray(mask).view(np.uint8) if np.asarray(mask).dtype == np.bool_ else \
             np.ascontiguousarray(mask, dtype=np.uint8)
         if mk.shape != (H, W):
             raise ValueError(f"mask must have shape {(H, W)}, got {mk.shape}")
-    fe = _front_end(vp, W, H, verts, fcs, code, near, None if mask is None else mk)
+    fe = _front_end(vp, W, H, verts, fcs, code, near, mk)
     bstats = np.zeros((fe[1] * fe[2], 6), dtype=np.int64)
     _run_tiles(_M_MINBLEND, vp, fe, program=int(program), pparams=np.asarray(params, dtype=np.float64),
                cattr=ca, img=im, blend=out, bstats=bstats, split=int(split), cull_discarded=cull_discarded)
