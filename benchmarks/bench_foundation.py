@@ -5,6 +5,7 @@
 
 All numbers are medians after JIT warm-up, measured in this one process.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -72,15 +73,30 @@ def main():
     shape, center, u, v, radius = gtm.light_arrays(scene.light)
     per = max(1, gtm.CHUNK_RAYS // S)
     batches = []
-    for ci, start in enumerate(range(0, len(pts), per)):
+    for _ci, start in enumerate(range(0, len(pts), per)):
         stop = min(len(pts), start + per)
         m = stop - start
         org = np.empty((m * S, 3), np.float32)
         dirs = np.empty((m * S, 3), np.float32)
         dist = np.empty(m * S, np.float32)
         geo = np.empty(m * S, np.float32)
-        gtm.generate_light_rays(pts[start:stop], nrm[start:stop], idx[start:stop], eps, 0, side, shape, center, u, v, radius,
-                                org, dirs, dist, geo)
+        gtm.generate_light_rays(
+            pts[start:stop],
+            nrm[start:stop],
+            idx[start:stop],
+            eps,
+            0,
+            side,
+            shape,
+            center,
+            u,
+            v,
+            radius,
+            org,
+            dirs,
+            dist,
+            geo,
+        )
         batches.append((org, dirs, dist))
     raw = []
     for _ in range(max(1, a.repeats // 2)):
@@ -89,8 +105,10 @@ def main():
             esc.run(org, dirs, dists=dist, query="OCCLUDED")
         raw.append(time.perf_counter() - t0)
     raw_t = statistics.median(raw)
-    print(f"rays: {rays}  ground-truth method: {rays / method_time / 1e6:.2f} Mrays/s   raw Embree: "
-          f"{rays / raw_t / 1e6:.2f} Mrays/s   ratio {raw_t / method_time:.2f} (target >= 0.67)")
+    print(
+        f"rays: {rays}  ground-truth method: {rays / method_time / 1e6:.2f} Mrays/s   raw Embree: "
+        f"{rays / raw_t / 1e6:.2f} Mrays/s   ratio {raw_t / method_time:.2f} (target >= 0.67)"
+    )
 
 
 if __name__ == "__main__":

@@ -1,28 +1,44 @@
 """Rasterizer micro-benchmark: eye G-buffer 512^2 and shadow maps 1024^2 on the bunny.
 
-    python benchmarks/bench_raster.py [nthreads]
+python benchmarks/bench_raster.py [nthreads]
 """
-import time, sys, numpy as np, numba
-from softshadows.raster import View, rasterize, rasterize_depth, rasterize_fragments
+
+import sys
+import time
 from importlib import resources
-d = np.load(resources.files('softshadows') / 'data' / 'bunny.npz')
-bv, bf = d['vertices'].astype(float), d['faces'].astype(np.int64)
+
+import numba
+import numpy as np
+
+from softshadows.raster import View, rasterize, rasterize_depth, rasterize_fragments
+
+d = np.load(resources.files("softshadows") / "data" / "bunny.npz")
+bv, bf = d["vertices"].astype(float), d["faces"].astype(np.int64)
 gv = np.array([[-3, 0, -3], [3, 0, -3], [3, 0, 3], [-3, 0, 3]], float)
 gf = np.array([[0, 2, 1], [0, 3, 2]])
-V = np.concatenate([bv, gv]); F = np.concatenate([bf, gf + len(bv)])
+V = np.concatenate([bv, gv])
+F = np.concatenate([bf, gf + len(bv)])
 eye = View.look_at([0.4, 1.3, 2.6], [0, 0.5, 0], [0, 1, 0], 45, 512, 512, near=0.05, far=100)
 light = View.look_at([2.0, 5.0, 1.5], [0, 0.3, 0], [0, 1, 0], 70, 1024, 1024, near=0.5, far=100)
-lortho = View.frame([2.0, 5.0, 1.5], [-2, -4.7, -1.5], [0, 1, 0], (-3.5, 3.5, -3.5, 3.5), 0.5, 100, 1024, 1024, ortho=True)
+lortho = View.frame(
+    [2.0, 5.0, 1.5], [-2, -4.7, -1.5], [0, 1, 0], (-3.5, 3.5, -3.5, 3.5), 0.5, 100, 1024, 1024, ortho=True
+)
+
+
 def bench(name, fn, n=30):
     fn()
     ts = []
     for _ in range(n):
-        t0 = time.perf_counter(); r = fn(); ts.append(time.perf_counter() - t0)
+        t0 = time.perf_counter()
+        r = fn()
+        ts.append(time.perf_counter() - t0)
     ts = np.array(ts) * 1e3
     print(f"{name:40s} median {np.median(ts):7.2f} ms  min {ts.min():7.2f} ms")
     return r
-import os
-if len(sys.argv) > 1: numba.set_num_threads(int(sys.argv[1]))
+
+
+if len(sys.argv) > 1:
+    numba.set_num_threads(int(sys.argv[1]))
 print("threads", numba.get_num_threads())
 g = bench("rasterize eye 512x512 (10k+2 tris)", lambda: rasterize(eye, V, F))
 print("   covered", g.mask.mean())

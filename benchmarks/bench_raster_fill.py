@@ -15,6 +15,7 @@ The penumbra-program min-blend is also run with hierarchical culling (``cull_dis
 output is stored only if it equals the unculled one, so ``--check`` fails if culling changes a texel.
 ``--bench`` times the fill-bound paths (median of ``--runs`` runs).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -106,8 +107,18 @@ def compute():
         ca = rng.random((len(F), 3))
         blend = rng.random((H, W)).astype(np.float32)
         blend[rng.random((H, W)) < 0.3] = np.inf
-        st = rasterize_min_blend(view, V, F, PROGRAM_ATTRIBUTE, ca, np.zeros((H, W), np.float32), np.zeros(1),
-                                 blend, cull=cull, split=len(F) // 2)
+        st = rasterize_min_blend(
+            view,
+            V,
+            F,
+            PROGRAM_ATTRIBUTE,
+            ca,
+            np.zeros((H, W), np.float32),
+            np.zeros(1),
+            blend,
+            cull=cull,
+            split=len(F) // 2,
+        )
         out[f"{name}|minblend.attr"] = blend
         out[f"{name}|minblend.attr.stats"] = np.array([st[k] for k in _BLEND_STATS])
         # penumbra program: attribute ~ a depth, image = a depth map (the scene's own, pushed back)
@@ -115,15 +126,27 @@ def compute():
         za = rng.uniform(0.0, 2.0, size=(len(F), 3)) * zs
         img = np.where(np.isfinite(d), d * 1.05 + 0.01, np.inf).astype(np.float32)
         blend2 = np.ones((H, W), np.float32)
-        st = rasterize_min_blend(view, V, F, PROGRAM_PENUMBRA, za, img, np.array([0.5, 0.001, 1.0]), blend2,
-                                 cull=cull, split=len(F) // 3)
+        st = rasterize_min_blend(
+            view, V, F, PROGRAM_PENUMBRA, za, img, np.array([0.5, 0.001, 1.0]), blend2, cull=cull, split=len(F) // 3
+        )
         out[f"{name}|minblend.pen"] = blend2
         out[f"{name}|minblend.pen.stats"] = np.array([st[k] for k in _BLEND_STATS])
         # hierarchical culling of discarded fragments must not change the output (compared with the
         # reference of the unculled pass) nor the kept counts
         blend3 = np.ones((H, W), np.float32)
-        st3 = rasterize_min_blend(view, V, F, PROGRAM_PENUMBRA, za, img, np.array([0.5, 0.001, 1.0]), blend3,
-                                  cull=cull, split=len(F) // 3, cull_discarded=True)
+        st3 = rasterize_min_blend(
+            view,
+            V,
+            F,
+            PROGRAM_PENUMBRA,
+            za,
+            img,
+            np.array([0.5, 0.001, 1.0]),
+            blend3,
+            cull=cull,
+            split=len(F) // 3,
+            cull_discarded=True,
+        )
         out[f"{name}|minblend.pen"] = blend3 if np.array_equal(blend2, blend3) else np.full_like(blend3, -1.0)
         if (st3["kept_a"], st3["kept_b"]) != (st["kept_a"], st["kept_b"]):
             out[f"{name}|minblend.pen.stats"] = -out[f"{name}|minblend.pen.stats"]
@@ -161,8 +184,10 @@ def check(ref_path):
             da = np.abs(a[fin].astype(float) - b[fin].astype(float))
             rel = da / np.maximum(np.abs(a[fin].astype(float)), 1e-30)
             ndiff = int((a != b).sum() - (np.isnan(a) & np.isnan(b)).sum())
-            print(f"DIFF {k}: {ndiff} of {a.size} differ, max abs {da.max() if da.size else 0:.3g}, "
-                  f"max rel {rel.max() if rel.size else 0:.3g}, same finiteness {same_inf}")
+            print(
+                f"DIFF {k}: {ndiff} of {a.size} differ, max abs {da.max() if da.size else 0:.3g}, "
+                f"max rel {rel.max() if rel.size else 0:.3g}, same finiteness {same_inf}"
+            )
         else:
             print(f"DIFF {k}: {int((a != b).sum())} of {a.size} differ")
     print(f"{len(ref.files)} arrays compared, {bad} differ")
@@ -171,6 +196,7 @@ def check(ref_path):
 
 def bench(runs, renders):
     import numba
+
     print("threads", numba.get_num_threads())
 
     def med(fn, n):
@@ -191,8 +217,7 @@ def bench(runs, renders):
     res["eye gbuffer 512^2 bunny"] = med(lambda: rasterize(ev, fl.vertices, fl.faces), runs)
     res["depth 1024^2 light bunny (all faces)"] = med(lambda: rasterize_depth(lv, fl.vertices, fl.faces), runs)
     res["depth 1024^2 light bunny (occluders)"] = med(lambda: rasterize_depth(lv, fl.vertices, occ), runs)
-    res["fragments 1024^2 light bunny (occluders)"] = med(lambda: rasterize_fragments(lv, fl.vertices, occ),
-                                                          runs)
+    res["fragments 1024^2 light bunny (occluders)"] = med(lambda: rasterize_fragments(lv, fl.vertices, occ), runs)
     H, W = lv.height, lv.width
     ca = np.random.default_rng(0).random((len(fl.faces), 3))
     img = np.zeros((H, W), np.float32)
@@ -201,6 +226,7 @@ def bench(runs, renders):
     def mb():
         buf.fill(np.inf)
         rasterize_min_blend(lv, fl.vertices, fl.faces, PROGRAM_ATTRIBUTE, ca, img, np.zeros(1), buf)
+
     res["min_blend attr 1024^2 light bunny"] = med(mb, runs)
     for k, (m, mn) in res.items():
         print(f"{k:45s} median {m:8.2f} ms   min {mn:8.2f} ms")

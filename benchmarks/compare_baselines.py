@@ -10,13 +10,13 @@
 
 Prints markdown tables; exits 1 if the speed target is missed.
 """
+
 from __future__ import annotations
 
 import argparse
 import json
 import sys
 import time
-
 
 import softshadows as ss
 from softshadows.bench import bench, format_table
@@ -40,7 +40,9 @@ def main(argv=None) -> int:
     print(format_table(b))
     ratio = next(r["ratio_to_hard"] for r in b["results"] if r["method"] == "pcss")
     ok = ratio <= 2.0
-    print(f"\nPCSS / hard, full frame, bunny {a.size}x{a.size}: {ratio:.2f}x  (target <= 2x: {'met' if ok else 'MISSED'})\n")
+    print(
+        f"\nPCSS / hard, full frame, bunny {a.size}x{a.size}: {ratio:.2f}x  (target <= 2x: {'met' if ok else 'MISSED'})\n"
+    )
     out["bench"] = b
     out["pcss_over_hard"] = ratio
 
@@ -54,14 +56,15 @@ def main(argv=None) -> int:
             for m in ("pcss", "hard"):
                 r = ss.render(sc, m, n, n)
                 mt = compute_metrics(r.visibility, gt.visibility, r.image, gt.image)
-                rows.append({"scene": scene, "light": light, "method": m, **mt,
-                             "ms": r.timings["total"] * 1e3})
+                rows.append({"scene": scene, "light": light, "method": m, **mt, "ms": r.timings["total"] * 1e3})
     print(f"Error against ground truth ({a.samples} samples), {n}x{n}:\n")
     print("| scene | light | method | MAE | ssm_error | MAE penumbra | bias | FLIP | ms |")
     print("|---|---|---|---|---|---|---|---|---|")
     for r in rows:
-        print(f"| {r['scene']} | {r['light']} | {r['method']} | {r['mae']:.4f} | {r['ssm_error']:.4f} | "
-              f"{r['mae_penumbra']:.4f} | {r['bias']:+.4f} | {r['flip']:.4f} | {r['ms']:.1f} |")
+        print(
+            f"| {r['scene']} | {r['light']} | {r['method']} | {r['mae']:.4f} | {r['ssm_error']:.4f} | "
+            f"{r['mae_penumbra']:.4f} | {r['bias']:+.4f} | {r['flip']:.4f} | {r['ms']:.1f} |"
+        )
     out["errors"] = rows
     out["seconds"] = time.perf_counter() - t0
     if a.json:

@@ -11,6 +11,7 @@ normalize (uniform scale to ``--height`` units tall, bottom at y = 0, bounding b
 x = z = 0; the source is already y up), and save float32 vertices / int32 faces with
 ``numpy.savez_compressed``.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -31,8 +32,9 @@ def make(source: Path, out: Path, faces: int = 10_000, height: float = 1.2) -> t
     mesh.merge_vertices()
     v0 = np.asarray(mesh.vertices, np.float64)
     f0 = np.asarray(mesh.faces, np.int64)
-    v, f = fast_simplification.simplify(v0.astype(np.float32), f0.astype(np.int32),
-                                        target_reduction=1.0 - faces / len(f0))
+    v, f = fast_simplification.simplify(
+        v0.astype(np.float32), f0.astype(np.int32), target_reduction=1.0 - faces / len(f0)
+    )
     m = trimesh.Trimesh(np.asarray(v, np.float64), np.asarray(f, np.int64), process=True)
     m.update_faces(m.nondegenerate_faces())
     m.remove_unreferenced_vertices()

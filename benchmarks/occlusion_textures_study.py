@@ -19,6 +19,7 @@ Writes under ``--out``: ``occlusion_textures_study.md`` (the tables below, also 
     PYTHONPATH=src python benchmarks/occlusion_textures_study.py --out /tmp/ot_study
     PYTHONPATH=src python benchmarks/occlusion_textures_study.py --out /tmp/ot_quick --quick
 """
+
 from __future__ import annotations
 
 import argparse
@@ -30,8 +31,8 @@ from pathlib import Path
 import numpy as np
 
 import softshadows as ss
-from softshadows.metrics import compute_metrics
 from softshadows.methods import occlusion_textures as ot
+from softshadows.metrics import compute_metrics
 from softshadows.scene.builtin import square_visibility
 
 
@@ -54,8 +55,11 @@ def time_prefilters(reps: int) -> dict:
     out = {}
     for size in (256, 512):
         tex = bunny_textures(size)
-        fns = {"mipmap": lambda: ot.prefilter_mipmap(tex), "nbuffers": lambda: ot.prefilter_nbuffers(tex),
-               "sat": lambda: ot.prefilter_sat(tex)}
+        fns = {
+            "mipmap": lambda tex=tex: ot.prefilter_mipmap(tex),
+            "nbuffers": lambda tex=tex: ot.prefilter_nbuffers(tex),
+            "sat": lambda tex=tex: ot.prefilter_sat(tex),
+        }
         for name, fn in fns.items():
             fn()  # warm-up (JIT)
             ts = []
@@ -64,18 +68,25 @@ def time_prefilters(reps: int) -> dict:
                 fn()
                 ts.append(time.perf_counter() - t0)
             med = float(np.median(ts))
-            out[f"{name}@{size}"] = {"filter": name, "size": size, "textures": int(tex.shape[0]),
-                                     "median_ms": med * 1e3, "per_texture_ms": med * 1e3 / tex.shape[0],
-                                     "min_ms": float(min(ts)) * 1e3}
+            out[f"{name}@{size}"] = {
+                "filter": name,
+                "size": size,
+                "textures": int(tex.shape[0]),
+                "median_ms": med * 1e3,
+                "per_texture_ms": med * 1e3 / tex.shape[0],
+                "min_ms": float(min(ts)) * 1e3,
+            }
     return out
 
 
 def time_frames(reps: int) -> dict:
     sc = ss.load_scene("bunny")
-    runs = {"hard": ("hard", {}),
-            "occlusion-textures (nbuffers)": ("occlusion-textures", dict(slices=16, texture_size=256)),
-            "occlusion-textures (sat)": ("occlusion-textures", dict(slices=16, texture_size=256, filter="sat")),
-            "occlusion-textures (mipmap)": ("occlusion-textures", dict(slices=16, texture_size=256, filter="mipmap"))}
+    runs = {
+        "hard": ("hard", {}),
+        "occlusion-textures (nbuffers)": ("occlusion-textures", dict(slices=16, texture_size=256)),
+        "occlusion-textures (sat)": ("occlusion-textures", dict(slices=16, texture_size=256, filter="sat")),
+        "occlusion-textures (mipmap)": ("occlusion-textures", dict(slices=16, texture_size=256, filter="mipmap")),
+    }
     for m, kw in runs.values():  # warm-up: JIT + first-call costs
         ss.render(sc, m, 512, 512, **kw)
         ss.render(sc, m, 512, 512, **kw)
@@ -109,45 +120,76 @@ def errors(size: int, samples: int, scenes) -> list:
             for comb in ot.COMBINES:
                 r = ss.render(sc, "occlusion-textures", size, size, filter=filt, combine=comb)
                 mt = compute_metrics(r.visibility, gt.visibility)
-                row = {"scene": name, "filter": filt, "combine": comb, "mae": mt["mae"], "rmse": mt["rmse"],
-                       "bias": mt["bias"], "ssm_error": mt["ssm_error"]}
+                row = {
+                    "scene": name,
+                    "filter": filt,
+                    "combine": comb,
+                    "mae": mt["mae"],
+                    "rmse": mt["rmse"],
+                    "bias": mt["bias"],
+                    "ssm_error": mt["ssm_error"],
+                }
                 if cf is not None:
                     row["mae_closed_form"] = compute_metrics(r.visibility, cf)["mae"]
                 rows.append(row)
         # ground-truth noise floor on the closed-form scene
         if cf is not None:
-            rows.append({"scene": name, "filter": "(ground truth)", "combine": "-",
-                         "mae_closed_form": compute_metrics(gt.visibility, cf)["mae"]})
+            rows.append(
+                {
+                    "scene": name,
+                    "filter": "(ground truth)",
+                    "combine": "-",
+                    "mae_closed_form": compute_metrics(gt.visibility, cf)["mae"],
+                }
+            )
     return rows
 
 
 def markdown(pre: dict, frames: dict, rows: list, args) -> str:
-    L = ["# occlusion-textures study\n",
-         f"Machine: {platform.processor() or platform.machine()}, numba threads "
-         f"{__import__('numba').get_num_threads()}. Command: `PYTHONPATH=src python "
-         f"benchmarks/occlusion_textures_study.py --out {args.out}" + (" --quick" if args.quick else "") + "`\n",
-         "## Prefilter time (16 occlusion textures of bunny)\n",
-         "| filter | size | 16 textures (ms, median) | per texture (ms) | paper, GeForce 7800 (ms) |",
-         "|---|---|---|---|---|"]
-    paper = {("mipmap", 256): "< 1", ("mipmap", 512): "< 1", ("nbuffers", 256): "3", ("nbuffers", 512): "11",
-             ("sat", 256): "32", ("sat", 512): "139"}
+    L = [
+        "# occlusion-textures study\n",
+        f"Machine: {platform.processor() or platform.machine()}, numba threads "
+        f"{__import__('numba').get_num_threads()}. Command: `PYTHONPATH=src python "
+        f"benchmarks/occlusion_textures_study.py --out {args.out}" + (" --quick" if args.quick else "") + "`\n",
+        "## Prefilter time (16 occlusion textures of bunny)\n",
+        "| filter | size | 16 textures (ms, median) | per texture (ms) | paper, GeForce 7800 (ms) |",
+        "|---|---|---|---|---|",
+    ]
+    paper = {
+        ("mipmap", 256): "< 1",
+        ("mipmap", 512): "< 1",
+        ("nbuffers", 256): "3",
+        ("nbuffers", 512): "11",
+        ("sat", 256): "32",
+        ("sat", 512): "139",
+    }
     for v in pre.values():
-        L.append(f"| {v['filter']} | {v['size']}^2 | {v['median_ms']:.2f} | {v['per_texture_ms']:.3f} | "
-                 f"{paper[(v['filter'], v['size'])]} |")
-    L += ["\n## Full frame, bunny 512 x 512, 16 slices of 256^2 (median ms)\n",
-          "| method | total (median) | ratio vs hard (median) | total (min) | ratio vs hard (min) | phases (median) |",
-          "|---|---|---|---|---|---|"]
+        L.append(
+            f"| {v['filter']} | {v['size']}^2 | {v['median_ms']:.2f} | {v['per_texture_ms']:.3f} | "
+            f"{paper[(v['filter'], v['size'])]} |"
+        )
+    L += [
+        "\n## Full frame, bunny 512 x 512, 16 slices of 256^2 (median ms)\n",
+        "| method | total (median) | ratio vs hard (median) | total (min) | ratio vs hard (min) | phases (median) |",
+        "|---|---|---|---|---|---|",
+    ]
     for k, v in frames.items():
         ph = ", ".join(f"{p} {x:.1f}" for p, x in v.items() if "total" not in p and "ratio" not in p)
-        L.append(f"| {k} | {v['total']:.1f} | {v['ratio_vs_hard']:.2f} | {v['min_total']:.1f} | "
-                 f"{v['min_ratio_vs_hard']:.2f} | {ph} |")
-    L += [f"\n## Error against ground truth ({args.size}^2, {args.samples} samples; texture 512^2, 16 slices)\n",
-          "| scene | filter | combine | MAE | RMSE | bias | ssm_error | MAE vs closed form |",
-          "|---|---|---|---|---|---|---|---|"]
+        L.append(
+            f"| {k} | {v['total']:.1f} | {v['ratio_vs_hard']:.2f} | {v['min_total']:.1f} | "
+            f"{v['min_ratio_vs_hard']:.2f} | {ph} |"
+        )
+    L += [
+        f"\n## Error against ground truth ({args.size}^2, {args.samples} samples; texture 512^2, 16 slices)\n",
+        "| scene | filter | combine | MAE | RMSE | bias | ssm_error | MAE vs closed form |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
     for r in rows:
-        f = lambda k: f"{r[k]:.4f}" if k in r and r[k] == r[k] else "-"  # noqa: E731
-        L.append(f"| {r['scene']} | {r['filter']} | {r['combine']} | {f('mae')} | {f('rmse')} | {f('bias')} | "
-                 f"{f('ssm_error')} | {f('mae_closed_form')} |")
+        f = lambda k, r=r: f"{r[k]:.4f}" if k in r and r[k] == r[k] else "-"  # noqa: E731
+        L.append(
+            f"| {r['scene']} | {r['filter']} | {r['combine']} | {f('mae')} | {f('rmse')} | {f('bias')} | "
+            f"{f('ssm_error')} | {f('mae_closed_form')} |"
+        )
     return "\n".join(L) + "\n"
 
 
@@ -170,8 +212,9 @@ def main():
     md = markdown(pre, frames, rows, args)
     print(md)
     (out / "occlusion_textures_study.md").write_text(md)
-    (out / "occlusion_textures_study.json").write_text(json.dumps(
-        {"prefilter": pre, "frames": frames, "errors": rows, "args": vars(args)}, indent=1))
+    (out / "occlusion_textures_study.json").write_text(
+        json.dumps({"prefilter": pre, "frames": frames, "errors": rows, "args": vars(args)}, indent=1)
+    )
 
 
 if __name__ == "__main__":

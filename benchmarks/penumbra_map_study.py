@@ -22,6 +22,7 @@ Writes under ``--out`` (``study.json`` with every number, ``summary.md``, PNG pl
     PYTHONPATH=src python benchmarks/penumbra_map_study.py --out /tmp/pm_study
     PYTHONPATH=src python benchmarks/penumbra_map_study.py --out /tmp/pm_quick --quick
 """
+
 from __future__ import annotations
 
 import argparse
@@ -55,8 +56,9 @@ def speed(reps: int, size: int, verbose: bool) -> dict:
     for label, (scene, params) in runs.items():
         if verbose:
             print(f"speed: {label}", flush=True)
-        res = bench(scene, "penumbra-map", sizes=(size,), repeats=reps, warmup=1, params_by_method=params,
-                    verbose=False)
+        res = bench(
+            scene, "penumbra-map", sizes=(size,), repeats=reps, warmup=1, params_by_method=params, verbose=False
+        )
         print(format_table(res), flush=True)
         pm = next(r for r in res["results"] if r["method"] == "penumbra-map")
         hard = next(r for r in res["results"] if r["method"] == "hard")
@@ -66,17 +68,34 @@ def speed(reps: int, size: int, verbose: bool) -> dict:
         # one more frame for the statistics (fragments, silhouettes)
         st = ss.render(scene, "penumbra-map", size, size, **params.get("penumbra-map", {})).stats
         out[label] = {
-            "ratio_to_hard": pm["ratio_to_hard"], "ratio_to_hard_method_phases": pm["ratio_to_hard_method"],
-            "pm_total_ms": med["total"] * 1e3, "hard_total_ms": hard["timings"]["total"]["median"] * 1e3,
+            "ratio_to_hard": pm["ratio_to_hard"],
+            "ratio_to_hard_method_phases": pm["ratio_to_hard_method"],
+            "pm_total_ms": med["total"] * 1e3,
+            "hard_total_ms": hard["timings"]["total"]["median"] * 1e3,
             "pm_phases_ms": {k: v * 1e3 for k, v in med.items()},
             "hard_phases_ms": {k: v["median"] * 1e3 for k, v in hard["timings"].items()},
             "shares_of_paper_phases": {k: v / tot for k, v in own.items()} if tot > 0 else {},
             "light_radius": scene.light.radius,
-            "stats": {k: st[k] for k in ("silhouette_edges", "silhouette_vertices", "silhouette_vertices_degree3plus",
-                                         "cones", "sheets", "cone_fragments", "sheet_fragments",
-                                         "cone_fragments_kept", "sheet_fragments_kept", "penumbra_map_width",
-                                         "penumbra_texels", "texels_shaded", "culled_tile_pieces",
-                                         "value_culled_tile_pieces") if k in st},
+            "stats": {
+                k: st[k]
+                for k in (
+                    "silhouette_edges",
+                    "silhouette_vertices",
+                    "silhouette_vertices_degree3plus",
+                    "cones",
+                    "sheets",
+                    "cone_fragments",
+                    "sheet_fragments",
+                    "cone_fragments_kept",
+                    "sheet_fragments_kept",
+                    "penumbra_map_width",
+                    "penumbra_texels",
+                    "texels_shaded",
+                    "culled_tile_pieces",
+                    "value_culled_tile_pieces",
+                )
+                if k in st
+            },
             "machine": res["machine"],
         }
     return out
@@ -94,9 +113,18 @@ def errors(size: int, gt_samples: int, verbose: bool) -> list:
             for m in METHODS:
                 r = ss.render(sc, m, size, size)
                 met = compute_metrics(r.visibility, gt.visibility)
-                rows.append({"scene": name, "factor": f, "light_radius": sc.light.radius, "method": m,
-                             **{k: met[k] for k in ("mae", "ssm_error", "mae_umbra", "mae_penumbra", "mae_lit",
-                                                    "bias", "rmse")}})
+                rows.append(
+                    {
+                        "scene": name,
+                        "factor": f,
+                        "light_radius": sc.light.radius,
+                        "method": m,
+                        **{
+                            k: met[k]
+                            for k in ("mae", "ssm_error", "mae_umbra", "mae_penumbra", "mae_lit", "bias", "rmse")
+                        },
+                    }
+                )
     return rows
 
 
@@ -115,8 +143,10 @@ def plot_sweeps(sweeps: dict, path: Path, title: str) -> None:
             axes[1].plot(x, d["bias"], "o" + ls, color=c, label=f"{m} ({label})")
             axes[2].plot(x, d["ssm_error"], "o" + ls, color=c, label=f"{m} ({label})")
     xl = next(iter(sweeps.values()))["x_title"]
-    for ax, yl in zip(axes, ("MAE  mean |V - V_gt|", "bias  mean (V - V_gt)  (< 0: too dark)",
-                             "ssm_error  mean |dV| over umbra+penumbra")):
+    for ax, yl in zip(
+        axes,
+        ("MAE  mean |V - V_gt|", "bias  mean (V - V_gt)  (< 0: too dark)", "ssm_error  mean |dV| over umbra+penumbra"),
+    ):
         ax.set_xlabel(xl)
         ax.set_ylabel(yl)
         ax.grid(alpha=0.3)
@@ -135,21 +165,45 @@ def sweeps(size: int, gt_samples: int, values, verbose: bool, out: Path) -> dict
         base_r = ss.load_scene(name, light="sphere").light.radius
         if verbose:
             print(f"sweep light-size on {name}", flush=True)
-        d = sweep(name, "light-size", values=values, methods=",".join(METHODS), size=(size, size), light="sphere",
-                  gt_samples=gt_samples, repeats=1, error_key="mae")
+        d = sweep(
+            name,
+            "light-size",
+            values=values,
+            methods=",".join(METHODS),
+            size=(size, size),
+            light="sphere",
+            gt_samples=gt_samples,
+            repeats=1,
+            error_key="mae",
+        )
         d["x_scale"] = base_r
         d["x_title"] = "sphere light radius (world units)"
         light_sweeps[name] = d
-    plot_sweeps(light_sweeps, out / "pm_light_size.png",
-                f"penumbra-map vs hard against ground truth ({gt_samples} spp), light-size sweep, {size}x{size}")
+    plot_sweeps(
+        light_sweeps,
+        out / "pm_light_size.png",
+        f"penumbra-map vs hard against ground truth ({gt_samples} spp), light-size sweep, {size}x{size}",
+    )
     res["light-size"] = light_sweeps
     if verbose:
         print("sweep occluder-height on square", flush=True)
-    d = sweep("square", "occluder-height", values=[0.0, 0.3, 0.6, 0.9, 1.2], methods=",".join(METHODS),
-              size=(size, size), light="sphere", gt_samples=gt_samples, repeats=1, error_key="mae")
+    d = sweep(
+        "square",
+        "occluder-height",
+        values=[0.0, 0.3, 0.6, 0.9, 1.2],
+        methods=",".join(METHODS),
+        size=(size, size),
+        light="sphere",
+        gt_samples=gt_samples,
+        repeats=1,
+        error_key="mae",
+    )
     d["x_title"] = "occluder lift above y = 1 (world units; light at y = 3)"
-    plot_sweeps({"square": d}, out / "pm_occluder_height.png",
-                f"penumbra-map vs hard, occluder-height sweep on square, {size}x{size}")
+    plot_sweeps(
+        {"square": d},
+        out / "pm_occluder_height.png",
+        f"penumbra-map vs hard, occluder-height sweep on square, {size}x{size}",
+    )
     res["occluder-height"] = {"square": d}
     return res
 
@@ -159,33 +213,52 @@ def summary_md(study: dict, cmd: str) -> str:
     sp = study["speed"]
     first = next(iter(sp.values()))
     mi = first["machine"]
-    lines.append(f"Machine: {mi.get('cpu', '?')}, {mi.get('numba_threads', '?')} Numba threads. "
-                 f"Study wall time {study['wall_s']:.0f} s.")
-    lines += ["", "## Speed (bunny, sphere light, %dx%d, medians of %d frames)" % (study["size"], study["size"], study["reps"]), "",
-              "| variant | light radius | penumbra-map ms | hard ms | x hard (frame) | x hard (own phases) | shares sil/pm/eye | cone frags | sheet frags |",
-              "|---|---|---|---|---|---|---|---|---|"]
+    lines.append(
+        f"Machine: {mi.get('cpu', '?')}, {mi.get('numba_threads', '?')} Numba threads. "
+        f"Study wall time {study['wall_s']:.0f} s."
+    )
+    lines += [
+        "",
+        f"## Speed (bunny, sphere light, {study['size']}x{study['size']}, medians of {study['reps']} frames)",
+        "",
+        "| variant | light radius | penumbra-map ms | hard ms | x hard (frame) | x hard (own phases) | shares sil/pm/eye | cone frags | sheet frags |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
     for label, r in sp.items():
         sh = r["shares_of_paper_phases"]
-        lines.append(f"| {label} | {r['light_radius']:.3f} | {r['pm_total_ms']:.1f} | {r['hard_total_ms']:.1f} | "
-                     f"{r['ratio_to_hard']:.2f} | {r['ratio_to_hard_method_phases']:.2f} | "
-                     f"{sh.get('silhouettes', 0):.0%} / {sh.get('penumbra_map', 0):.0%} / {sh.get('eye_pass', 0):.0%} | "
-                     f"{r['stats'].get('cone_fragments', 0):,} | {r['stats'].get('sheet_fragments', 0):,} |")
-    lines += ["", "Phases (ms, default variant): " + ", ".join(f"{k} {v:.1f}" for k, v in first["pm_phases_ms"].items()),
-              "", f"## Error vs ground truth ({study['gt_samples']} spp, {study['err_size']}x{study['err_size']}, sphere light)", "",
-              "| scene | radius | method | MAE | ssm_error | MAE umbra | MAE penumbra | MAE lit | bias |",
-              "|---|---|---|---|---|---|---|---|---|"]
+        lines.append(
+            f"| {label} | {r['light_radius']:.3f} | {r['pm_total_ms']:.1f} | {r['hard_total_ms']:.1f} | "
+            f"{r['ratio_to_hard']:.2f} | {r['ratio_to_hard_method_phases']:.2f} | "
+            f"{sh.get('silhouettes', 0):.0%} / {sh.get('penumbra_map', 0):.0%} / {sh.get('eye_pass', 0):.0%} | "
+            f"{r['stats'].get('cone_fragments', 0):,} | {r['stats'].get('sheet_fragments', 0):,} |"
+        )
+    lines += [
+        "",
+        "Phases (ms, default variant): " + ", ".join(f"{k} {v:.1f}" for k, v in first["pm_phases_ms"].items()),
+        "",
+        f"## Error vs ground truth ({study['gt_samples']} spp, {study['err_size']}x{study['err_size']}, sphere light)",
+        "",
+        "| scene | radius | method | MAE | ssm_error | MAE umbra | MAE penumbra | MAE lit | bias |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
     for r in study["errors"]:
-        lines.append(f"| {r['scene']} | {r['light_radius']:.3f} (x{r['factor']}) | {r['method']} | {r['mae']:.4f} | "
-                     f"{r['ssm_error']:.4f} | {r['mae_umbra']:.4f} | {r['mae_penumbra']:.4f} | {r['mae_lit']:.4f} | "
-                     f"{r['bias']:+.4f} |")
+        lines.append(
+            f"| {r['scene']} | {r['light_radius']:.3f} (x{r['factor']}) | {r['method']} | {r['mae']:.4f} | "
+            f"{r['ssm_error']:.4f} | {r['mae_umbra']:.4f} | {r['mae_penumbra']:.4f} | {r['mae_lit']:.4f} | "
+            f"{r['bias']:+.4f} |"
+        )
     lines += ["", "## Sweeps", "", "pm_light_size.png, pm_occluder_height.png", ""]
     for kind, per in study["sweeps"].items():
         for name, d in per.items():
             xs = np.array(d["x"], float) * d.get("x_scale", 1.0)
             lines.append(f"{kind} on {name}: x = " + ", ".join(f"{x:.3g}" for x in xs))
             for m, md in d["methods"].items():
-                lines.append(f"  {m}: MAE " + ", ".join(f"{v:.4f}" for v in md["mae"]) +
-                             "; bias " + ", ".join(f"{v:+.4f}" for v in md["bias"]))
+                lines.append(
+                    f"  {m}: MAE "
+                    + ", ".join(f"{v:.4f}" for v in md["mae"])
+                    + "; bias "
+                    + ", ".join(f"{v:+.4f}" for v in md["bias"])
+                )
     return "\n".join(lines) + "\n"
 
 
@@ -213,7 +286,9 @@ def main() -> None:
     study["sweeps"] = sweeps(sw_size, gts, values, True, out) if "sweeps" in parts else {}
     study["wall_s"] = time.perf_counter() - t0
     (out / "study.json").write_text(json.dumps(jsonable(study), indent=1))
-    cmd = "PYTHONPATH=src python benchmarks/penumbra_map_study.py --out " + str(out) + (" --quick" if args.quick else "")
+    cmd = (
+        "PYTHONPATH=src python benchmarks/penumbra_map_study.py --out " + str(out) + (" --quick" if args.quick else "")
+    )
     if study["speed"]:
         (out / "summary.md").write_text(summary_md(study, cmd))
         print((out / "summary.md").read_text())

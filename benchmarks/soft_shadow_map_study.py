@@ -23,6 +23,7 @@ Timings: one process, JIT warmed up, methods interleaved, median of ``--reps`` f
     PYTHONPATH=src python benchmarks/soft_shadow_map_study.py --out /tmp/ssm_study
     PYTHONPATH=src python benchmarks/soft_shadow_map_study.py --out /tmp/ssm_quick --quick
 """
+
 from __future__ import annotations
 
 import argparse
@@ -117,8 +118,10 @@ def study_light_size(ref, scales, map_sizes, log):
                 row[f"N{n}"], _ = error_of(ref, (name, "light", f), sc, map_size=n)
             row["N128_two_pass"], _ = error_of(ref, (name, "light", f), sc, map_size=128, two_pass=True)
             rows.append(row)
-            log(f"  fig18 {name:8s} light x{f:5.3f} (side {sc.light.size:.3f})  "
-                + "  ".join(f"N{n} {row[f'N{n}']:.4f}" for n in map_sizes))
+            log(
+                f"  fig18 {name:8s} light x{f:5.3f} (side {sc.light.size:.3f})  "
+                + "  ".join(f"N{n} {row[f'N{n}']:.4f}" for n in map_sizes)
+            )
         out[name] = {"occluder_size": occ_size, "rows": rows}
     return out
 
@@ -139,8 +142,15 @@ def study_height(ref, n_steps, log):
             e2, _ = error_of(ref, (name, "height", round(float(t), 6)), sc, map_size=128, two_pass=True)
             pos = t / light_y  # the paper's parameter: 0 = on the receiver
             top = (t + (y1 - y0)) / light_y  # 1 = touching the light
-            rows.append({"bottom_y": float(t), "position": float(pos), "top_position": float(top),
-                         "one_pass": e1, "two_pass": e2})
+            rows.append(
+                {
+                    "bottom_y": float(t),
+                    "position": float(pos),
+                    "top_position": float(top),
+                    "one_pass": e1,
+                    "two_pass": e2,
+                }
+            )
             log(f"  fig20 {name:8s} bottom y {t:5.2f} (top at {top:.2f} of light height)  one {e1:.4f}  two {e2:.4f}")
         out[name] = rows
     return out
@@ -177,8 +187,11 @@ def study_fp16(ref, log, out_dir):
 
 def study_timing(reps, map_sizes, log):
     sc = ss.load_scene("bunny")
-    configs = {"hard": ("hard", {}), "ssm_one_pass": ("soft-shadow-map", {"map_size": 256}),
-               "ssm_two_pass": ("soft-shadow-map", {"map_size": 256, "two_pass": True})}
+    configs = {
+        "hard": ("hard", {}),
+        "ssm_one_pass": ("soft-shadow-map", {"map_size": 256}),
+        "ssm_two_pass": ("soft-shadow-map", {"map_size": 256, "two_pass": True}),
+    }
     for m, kw in configs.values():  # warm-up (JIT, caches)
         ss.render(sc, m, 512, 512, **kw)
     samples = {k: [] for k in configs}
@@ -192,18 +205,30 @@ def study_timing(reps, map_sizes, log):
     phase_med = {k: {p: float(np.median([t[p] for t in phases[k]])) for p in phases[k][0]} for k in configs}
     ratio1 = med["ssm_one_pass"] / med["hard"]
     ratio2 = med["ssm_two_pass"] / med["ssm_one_pass"]
-    log(f"  timing bunny 512x512: hard {med['hard']*1e3:.1f} ms, ssm one-pass {med['ssm_one_pass']*1e3:.1f} ms "
-        f"(x{ratio1:.2f} hard), two-pass {med['ssm_two_pass']*1e3:.1f} ms (x{ratio2:.2f} one-pass)")
+    log(
+        f"  timing bunny 512x512: hard {med['hard'] * 1e3:.1f} ms, ssm one-pass {med['ssm_one_pass'] * 1e3:.1f} ms "
+        f"(x{ratio1:.2f} hard), two-pass {med['ssm_two_pass'] * 1e3:.1f} ms (x{ratio2:.2f} one-pass)"
+    )
     lin = []
     for n in map_sizes:
         ss.render(sc, "soft-shadow-map", 512, 512, map_size=n)
         ts = [ss.render(sc, "soft-shadow-map", 512, 512, map_size=n) for _ in range(reps)]
         tot = float(np.median([r.timings["total"] for r in ts]))
         ssm_t = float(np.median([r.timings["soft_shadow_map"] + r.timings["penumbra_extents"] for r in ts]))
-        lin.append({"map_size": n, "pixels": n * n, "total": tot, "ssm_phase": ssm_t,
-                    "micro_patches": ts[0].stats["micro_patches"], "texels_touched": ts[0].stats["texels_touched"]})
-        log(f"  timing N={n:4d} ({n*n:7d} px): frame {tot*1e3:7.1f} ms, micro-patch phases {ssm_t*1e3:7.1f} ms, "
-            f"{ts[0].stats['micro_patches']} patches")
+        lin.append(
+            {
+                "map_size": n,
+                "pixels": n * n,
+                "total": tot,
+                "ssm_phase": ssm_t,
+                "micro_patches": ts[0].stats["micro_patches"],
+                "texels_touched": ts[0].stats["texels_touched"],
+            }
+        )
+        log(
+            f"  timing N={n:4d} ({n * n:7d} px): frame {tot * 1e3:7.1f} ms, micro-patch phases {ssm_t * 1e3:7.1f} ms, "
+            f"{ts[0].stats['micro_patches']} patches"
+        )
     px = np.array([r["pixels"] for r in lin], float)
     fits = {}
     for key in ("total", "ssm_phase"):
@@ -212,10 +237,19 @@ def study_timing(reps, map_sizes, log):
         pred = a * px + b
         r2 = 1 - np.sum((y - pred) ** 2) / np.sum((y - y.mean()) ** 2)
         fits[key] = {"slope_ms_per_kpx": a * 1e6, "intercept_ms": b * 1e3, "r2": float(r2)}
-    log(f"  linear fit frame time: {fits['total']['slope_ms_per_kpx']:.3f} ms per 1000 px + "
-        f"{fits['total']['intercept_ms']:.1f} ms, R^2 = {fits['total']['r2']:.4f}")
-    return {"median_total_s": med, "phases_median_s": phase_med, "ratio_one_pass_vs_hard": ratio1,
-            "ratio_two_pass_vs_one_pass": ratio2, "linearity": lin, "fits": fits, "reps": reps}
+    log(
+        f"  linear fit frame time: {fits['total']['slope_ms_per_kpx']:.3f} ms per 1000 px + "
+        f"{fits['total']['intercept_ms']:.1f} ms, R^2 = {fits['total']['r2']:.4f}"
+    )
+    return {
+        "median_total_s": med,
+        "phases_median_s": phase_med,
+        "ratio_one_pass_vs_hard": ratio1,
+        "ratio_two_pass_vs_one_pass": ratio2,
+        "linearity": lin,
+        "fits": fits,
+        "reps": reps,
+    }
 
 
 # ---- plots -------------------------------------------------------------------------------------
@@ -289,11 +323,15 @@ def plot_all(data, out_dir):
         axs[0].grid(alpha=0.3)
         axs[0].legend(fontsize=7)
         names = ["hard", "ssm_one_pass", "ssm_two_pass"]
-        axs[1].bar(["hard (1024²)", "SSM one-pass", "SSM two-pass"], [t["median_total_s"][k] * 1e3 for k in names],
-                   color=["gray", "C0", "C1"])
+        axs[1].bar(
+            ["hard (1024²)", "SSM one-pass", "SSM two-pass"],
+            [t["median_total_s"][k] * 1e3 for k in names],
+            color=["gray", "C0", "C1"],
+        )
         axs[1].set_ylabel("Frame time (ms, median)", fontsize=8)
-        axs[1].set_title(f"bunny 512x512, 256² occluder map: one-pass = {t['ratio_one_pass_vs_hard']:.2f} x hard",
-                         fontsize=9)
+        axs[1].set_title(
+            f"bunny 512x512, 256² occluder map: one-pass = {t['ratio_one_pass_vs_hard']:.2f} x hard", fontsize=9
+        )
         axs[1].tick_params(labelsize=8)
         save(fig, "ssm_timing.png")
 

@@ -8,6 +8,7 @@
    to ``hard`` measured in the same run (``softshadows.bench``).
 Writes DIR/summary.md and prints it.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -29,20 +30,33 @@ def main():
     w, h = (int(x) for x in a.size.split("x"))
     os.makedirs(a.out, exist_ok=True)
     t0 = time.time()
-    lines = [f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores. "
-             f"Command: `python benchmarks/summary.py --size {a.size} --samples {a.samples}`", ""]
+    lines = [
+        f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores. "
+        f"Command: `python benchmarks/summary.py --size {a.size} --samples {a.samples}`",
+        "",
+    ]
     err = {}
     names = None
     for scene in ("square", "spheres", "bunny"):
         for light in ("rect", "sphere"):
-            r = compare(scene, "all", w, h, os.path.join(a.out, f"{scene}-{light}"), gt_samples=a.samples,
-                        light=light, verbose=False)
+            r = compare(
+                scene,
+                "all",
+                w,
+                h,
+                os.path.join(a.out, f"{scene}-{light}"),
+                gt_samples=a.samples,
+                light=light,
+                verbose=False,
+            )
             for m, met in r["metrics"].items():
                 err.setdefault(m, {})[(scene, light)] = met
             names = names or list(r["metrics"])
     cols = [(s, l) for s in ("square", "spheres", "bunny") for l in ("rect", "sphere")]
-    lines.append(f"Error against ground truth ({a.samples} samples), {w}x{h}: MAE / ssm_error "
-                 "(mean |dV| over umbra+penumbra); '-' = light shape not supported")
+    lines.append(
+        f"Error against ground truth ({a.samples} samples), {w}x{h}: MAE / ssm_error "
+        "(mean |dV| over umbra+penumbra); '-' = light shape not supported"
+    )
     lines.append("")
     lines.append("| method | " + " | ".join(f"{s} {l}" for s, l in cols) + " |")
     lines.append("|---|" + "---|" * len(cols))
@@ -62,8 +76,10 @@ def main():
         for rm in b["results"]:
             ph = {k: v["median"] for k, v in rm["timings"].items() if k != "total"}
             slow = max(ph, key=ph.get) if ph else ""
-            lines.append(f"| {rm['method']} | {rm['timings']['total']['median'] * 1e3:.1f} | {rm['ratio_to_hard']:.2f} | "
-                         f"{slow} ({ph.get(slow, 0) * 1e3:.1f} ms) |")
+            lines.append(
+                f"| {rm['method']} | {rm['timings']['total']['median'] * 1e3:.1f} | {rm['ratio_to_hard']:.2f} | "
+                f"{slow} ({ph.get(slow, 0) * 1e3:.1f} ms) |"
+            )
         lines.append("")
     lines.append(f"(wall time {time.time() - t0:.0f} s)")
     text = "\n".join(lines)

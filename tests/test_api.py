@@ -1,4 +1,5 @@
 """The shared interface: every method on every built-in scene and light shape."""
+
 import numpy as np
 import pytest
 

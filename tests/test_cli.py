@@ -1,4 +1,5 @@
 """CLI: outputs exist and bad input gives one clear line and exit code 2."""
+
 import subprocess
 import sys
 
@@ -16,7 +17,9 @@ def run(*args):
 
 def test_render_writes_png_and_exr(tmp_path):
     out, exr = tmp_path / "a.png", tmp_path / "a.exr"
-    assert main(["render", "square", "--method", "hard", "--size", "40x30", "-o", str(out), "--exr", str(exr), "-q"]) == 0
+    assert (
+        main(["render", "square", "--method", "hard", "--size", "40x30", "-o", str(out), "--exr", str(exr), "-q"]) == 0
+    )
     img = np.asarray(Image.open(out))
     assert img.shape == (30, 40, 3)
     from softshadows.shading import load_exr
@@ -35,16 +38,19 @@ def test_list_shows_methods_scenes_and_defaults(capsys):
         assert word in out
 
 
-@pytest.mark.parametrize("args, needle", [
-    (["render", "nosuchscene"], "nosuchscene"),
-    (["render", "square", "--method", "nope"], "nope"),
-    (["render", "square", "--method", "hard", "--set", "wat=1"], "wat"),
-    (["render", "square", "--method", "hard", "--set", "map_size=-4"], "map_size"),
-    (["render", "square", "--size", "0x10"], "size"),
-    (["render", "square", "--size", "axb"], "size"),
-    (["render", "square", "--set", "novalue"], "key=value"),
-    (["render", "/nonexistent/x.obj"], "x.obj"),
-])
+@pytest.mark.parametrize(
+    "args, needle",
+    [
+        (["render", "nosuchscene"], "nosuchscene"),
+        (["render", "square", "--method", "nope"], "nope"),
+        (["render", "square", "--method", "hard", "--set", "wat=1"], "wat"),
+        (["render", "square", "--method", "hard", "--set", "map_size=-4"], "map_size"),
+        (["render", "square", "--size", "0x10"], "size"),
+        (["render", "square", "--size", "axb"], "size"),
+        (["render", "square", "--set", "novalue"], "key=value"),
+        (["render", "/nonexistent/x.obj"], "x.obj"),
+    ],
+)
 def test_bad_input_one_line_exit_2(args, needle, capsys):
     code = main(args + ["-q"])
     err = capsys.readouterr().err.strip()
@@ -56,7 +62,7 @@ def test_bad_input_one_line_exit_2(args, needle, capsys):
 def test_malformed_mesh_file_via_subprocess(tmp_path):
     bad = tmp_path / "bad.obj"
     bad.write_text("v 0 0 0\nv 1 0 0\nv nan 1 0\nf 1 2 3\n")
-    code, out, err = run("render", str(bad), "--size", "16x16", "-q")
+    code, _out, err = run("render", str(bad), "--size", "16x16", "-q")
     assert code == 2, err
     assert "bad.obj" in err and "Traceback" not in err
 

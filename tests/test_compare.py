@@ -1,4 +1,5 @@
 """`compare` writes every file and the report names every method; `bench` and `sweep` on tiny inputs."""
+
 import json
 import os
 import re
@@ -44,7 +45,7 @@ def test_metrics_json_and_report_name_every_method(compared):
     doc = json.loads((out / "metrics.json").read_text())
     assert set(doc["methods"]) == set(res["metrics"])
     assert doc["methods"]["pcss"]["params"]["filter_samples"] == 25  # --set reached the method
-    for m, d in doc["methods"].items():
+    for d in doc["methods"].values():
         assert 0.0 <= d["metrics"]["mae"] <= 1.0
         assert d["timings"]["total"] > 0
     html = (out / "report.html").read_text()
@@ -83,7 +84,7 @@ def test_bench_ratio_to_hard_and_table():
     res = bench("square", "pcss", [32, "40x30"], repeats=2, warmup=0)
     rows = {(tuple(r["size"]), r["method"]): r for r in res["results"]}
     assert set(rows) == {((32, 32), "hard"), ((32, 32), "pcss"), ((40, 30), "hard"), ((40, 30), "pcss")}
-    for (size, m), r in rows.items():
+    for (_size, m), r in rows.items():
         t = r["timings"]["total"]
         assert t["n"] == 2 and t["min"] <= t["median"] <= t["max"]
         if m == "hard":
@@ -105,9 +106,9 @@ def test_sweep_light_size(tmp_path):
 def test_sweep_geometry_edits():
     sc = ss.load_scene("square")
     up = translate_occluders(sc, 0.5)
-    occ = [m for m in up.meshes if m.role == "occluder"][0]
+    occ = next(m for m in up.meshes if m.role == "occluder")
     assert np.allclose(occ.vertices[:, 1], 1.5)
-    assert np.allclose([m for m in sc.meshes if m.role == "occluder"][0].vertices[:, 1], 1.0)  # original untouched
+    assert np.allclose(next(m for m in sc.meshes if m.role == "occluder").vertices[:, 1], 1.0)  # original untouched
     with pytest.raises(SoftShadowsError):
         translate_occluders(sc, 5.0)  # above the light
     with pytest.raises(SoftShadowsError):

@@ -1,4 +1,5 @@
 """Ground truth against the closed forms (DESIGN.md: analytic cases first)."""
+
 import numpy as np
 import pytest
 
@@ -13,8 +14,9 @@ def _square_closed_form(scene, res):
     ground = np.isfinite(v) & (np.abs(pos[:, 1]) < 1e-4)
     h = builtin.SQUARE_OCCLUDER_SIDE / 2
     lh = builtin.SQUARE_LIGHT_SIDE / 2
-    ref = rect_occluder_visibility(pos[ground], [0, builtin.SQUARE_OCCLUDER_Y, 0], [h, h],
-                                   [0, builtin.SQUARE_LIGHT_Y, 0], [lh, lh])
+    ref = rect_occluder_visibility(
+        pos[ground], [0, builtin.SQUARE_OCCLUDER_Y, 0], [h, h], [0, builtin.SQUARE_LIGHT_Y, 0], [lh, lh]
+    )
     return v[ground], ref
 
 

@@ -1,5 +1,6 @@
 """The allocator setting made at import (softshadows._malloc): on by default on glibc, off with
 SOFTSHADOWS_TUNE_MALLOC=0, and it keeps repeated frames from page-faulting."""
+
 import os
 import subprocess
 import sys

@@ -1,4 +1,5 @@
 """Metrics on small synthetic arrays with hand-computed values."""
+
 import numpy as np
 import pytest
 
@@ -9,10 +10,8 @@ NAN = np.nan
 
 def _arrays():
     # ground truth: row 0 = umbra, penumbra, lit, background; row 1 = lit, lit, penumbra, umbra
-    ref = np.array([[0.0, 0.5, 1.0, NAN],
-                    [1.0, 1.0, 0.25, 0.0]], np.float32)
-    v = np.array([[0.1, 0.3, 1.0, NAN],
-                  [1.0, 0.6, 0.25, 0.0]], np.float32)
+    ref = np.array([[0.0, 0.5, 1.0, NAN], [1.0, 1.0, 0.25, 0.0]], np.float32)
+    v = np.array([[0.1, 0.3, 1.0, NAN], [1.0, 0.6, 0.25, 0.0]], np.float32)
     return v, ref
 
 
@@ -76,7 +75,7 @@ def test_nonfinite_method_pixels_are_counted():
 
 def _image(seed=0, h=40, w=48):
     rng = np.random.default_rng(seed)
-    y, x = np.mgrid[0:h, 0:w]
+    _y, x = np.mgrid[0:h, 0:w]
     base = 0.5 + 0.4 * np.sin(x / 5.0)[..., None] * np.array([1.0, 0.8, 0.6])
     return np.clip(base + 0.02 * rng.standard_normal((h, w, 3)), 0, 1).astype(np.float32)
 

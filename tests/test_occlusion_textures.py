@@ -7,6 +7,7 @@ through p onto the light's plane as an axis-aligned rectangle, and
     V(p) = 1 - area(projection of the occluder through p onto the light plane  n  light) / area(light),
 separable in the two axes; V = 1 for points not below the occluder.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -109,7 +110,7 @@ def test_slicing_view_contains_scene_and_is_fitted_to_light(square):
     assert np.all((sx >= 0) & (sx <= 256) & (sy >= 0) & (sy <= 256))  # the frustum contains the scene
     # fitted to the light: its corners project onto the corners of the texture (Fig. 5)
     lt = square.light
-    corners = lt.center + np.array([[-.5, -.5], [.5, -.5], [.5, .5], [-.5, .5]]) @ np.stack([lt.u, lt.v])
+    corners = lt.center + np.array([[-0.5, -0.5], [0.5, -0.5], [0.5, 0.5], [-0.5, 0.5]]) @ np.stack([lt.u, lt.v])
     cx, cy, depth = setup.view.project(corners)
     assert np.allclose(sorted(set(np.round(cx, 6))), [0, 256]) and np.allclose(sorted(set(np.round(cy, 6))), [0, 256])
     assert np.allclose(depth, setup.d)  # the COP is d behind the light plane
@@ -149,11 +150,11 @@ def test_prefilters_against_brute_force():
     pad[:, :32, :32] = tex
     for lv in range(6):
         s = 1 << lv
-        for (i, j) in [(0, 0), (5, 17), (31, 31), (20, 3)]:
-            assert np.isclose(nb[1, lv, i, j], pad[1, i:i + s, j:j + s].mean(), atol=1e-6)
+        for i, j in [(0, 0), (5, 17), (31, 31), (20, 3)]:
+            assert np.isclose(nb[1, lv, i, j], pad[1, i : i + s, j : j + s].mean(), atol=1e-6)
     # mipmap pyramid: dyadic 2x2 averages
-    pyr, offs, sizes = ot.prefilter_mipmap(tex)
-    lv2 = pyr[0, offs[2]:offs[2] + 64].reshape(8, 8)
+    pyr, offs, _sizes = ot.prefilter_mipmap(tex)
+    lv2 = pyr[0, offs[2] : offs[2] + 64].reshape(8, 8)
     assert np.allclose(lv2, tex[0].reshape(8, 4, 8, 4).mean(axis=(1, 3)))
     # SAT: exact box filter over any real rectangle (integral of the piecewise-constant texture)
     sat = ot.prefilter_sat(tex)
@@ -162,7 +163,7 @@ def test_prefilters_against_brute_force():
         got = ot.lookup_sat(sat, 1, x0, x1, y0, y1)
         a = [int(round(c * 8)) for c in (x0, x1, y0, y1)]
         cl = [min(max(c, 0), 256) for c in a]
-        want = fine[cl[2]:cl[3], cl[0]:cl[1]].sum() / ((a[1] - a[0]) * (a[3] - a[2]))
+        want = fine[cl[2] : cl[3], cl[0] : cl[1]].sum() / ((a[1] - a[0]) * (a[3] - a[2]))
         assert np.isclose(got, want, atol=1e-9), (got, want)
     # N-Buffer lookup of an exact power-of-two box equals the box mean
     assert np.isclose(ot.lookup_nbuffers(nb, 0, 16, 4.0, 12.0, 8.0, 16.0), tex[0, 8:16, 4:12].mean(), atol=1e-6)
@@ -175,7 +176,7 @@ def test_kernel_rect_is_the_light_seen_from_p_on_the_slice_plane(square):
     occ = flat.vertices[np.unique(flat.faces[flat.occluder])]
     setup = ot.fit_slicing_view(square.light, occ, occ, 256, 4)
     lt = square.light
-    corners = lt.center + np.array([[-.5, -.5], [.5, .5]]) @ np.stack([lt.u, lt.v])
+    corners = lt.center + np.array([[-0.5, -0.5], [0.5, 0.5]]) @ np.stack([lt.u, lt.v])
     sp = setup.params()
     for P in ([0.3, 0.0, -0.2], [-0.9, 0.4, 0.6]):
         P = np.array(P)
@@ -206,8 +207,10 @@ def test_spheres_product_beats_max_and_sum(spheres_gt):
         m = np.isfinite(gt)
         err[c] = float(np.abs(v - gt)[m].mean())
     assert err["product"] < err["max"] and err["product"] < err["sum"], err
-    mean = {c: float(np.nanmean(ss.render(sc, "occlusion-textures", RES, RES, combine=c).visibility))
-            for c in ("max", "sum")}
+    mean = {
+        c: float(np.nanmean(ss.render(sc, "occlusion-textures", RES, RES, combine=c).visibility))
+        for c in ("max", "sum")
+    }
     assert mean["max"] > mean["sum"]  # max brighter than sum, as the paper argues
 
 
@@ -279,8 +282,11 @@ def test_containing_slice_is_not_used(ramp_scene):
 @pytest.mark.parametrize("name", sorted(BUILTIN))
 def test_visibility_finite_in_unit_interval_on_builtins(name):
     sc = ss.load_scene(name)
-    for kw in ({}, {"filter": "mipmap", "combine": "sum", "leak_fix": True, "texture_size": 64, "slices": 4},
-               {"filter": "sat", "combine": "max", "self_shadow": "include"}):
+    for kw in (
+        {},
+        {"filter": "mipmap", "combine": "sum", "leak_fix": True, "texture_size": 64, "slices": 4},
+        {"filter": "sat", "combine": "max", "self_shadow": "include"},
+    ):
         r = ss.render(sc, "occlusion-textures", 40, 40, **kw)
         m = np.isfinite(r.position[..., 0])
         v = r.visibility[m]
@@ -297,8 +303,17 @@ def test_sphere_light_through_equal_area_square():
     assert v.min() < 0.2 and v.max() == pytest.approx(1.0)
 
 
-@pytest.mark.parametrize("params", [{"filter": "box"}, {"combine": "mean"}, {"texture_size": 300},
-                                    {"slices": 0}, {"cop_distance": -1.0}, {"self_shadow": "off"}])
+@pytest.mark.parametrize(
+    "params",
+    [
+        {"filter": "box"},
+        {"combine": "mean"},
+        {"texture_size": 300},
+        {"slices": 0},
+        {"cop_distance": -1.0},
+        {"self_shadow": "off"},
+    ],
+)
 def test_bad_parameters_raise(square, params):
     with pytest.raises(SoftShadowsError):
         ss.render(square, "occlusion-textures", 16, 16, **params)

@@ -1,4 +1,5 @@
 """PCSS (Fernando 2005): contact hardening, the analytic square, range on every built-in scene."""
+
 import numpy as np
 import pytest
 

@@ -1,6 +1,7 @@
 """``penumbra-map`` (Wyman & Hansen 2003): the construction against an independent evaluation,
 the umbra against ``hard``, the outer-penumbra profile, overlaps, contact, and sanity on every
 built-in scene."""
+
 import numpy as np
 import pytest
 
@@ -161,7 +162,9 @@ def test_penumbra_map_matches_direct_cone_sheet_evaluation(tilt, subdiv):
     occ_w, _ = _window(view, corners)
     px = (view.window[1] - view.window[0]) / view.width
     path = Path(occ_w)
-    on_occ = path.contains_points(w.reshape(-1, 2), radius=-4 * px) | path.contains_points(w.reshape(-1, 2), radius=4 * px)
+    on_occ = path.contains_points(w.reshape(-1, 2), radius=-4 * px) | path.contains_points(
+        w.reshape(-1, 2), radius=4 * px
+    )
     ground = (~on_occ.reshape(zp.shape)) & np.isfinite(smp.surface_depth)
     ref = direct_penumbra(view, w, zp, corners, light.radius, pm.z_far, 16, bias=1.0)
     got = pm.intensity
@@ -315,8 +318,9 @@ def test_paths_and_options_agree():
     assert fast.stats["sheet_fragments"] < ref.stats["sheet_fragments"]
     # kept fragments: the coarse value test also skips pieces that could lower no texel (kept
     # fragments, but not darker than the map already is), so at most the reference's
-    assert 0.9 * ref.stats["cone_fragments_kept"] <= fast.stats["cone_fragments_kept"] <= \
-        ref.stats["cone_fragments_kept"]
+    assert (
+        0.9 * ref.stats["cone_fragments_kept"] <= fast.stats["cone_fragments_kept"] <= ref.stats["cone_fragments_kept"]
+    )
     assert fast.stats["value_culled_tile_pieces"] > 0 and ref.stats["value_culled_tile_pieces"] == 0
     np.testing.assert_array_equal(adj.intensity, fast.intensity)  # same silhouette, same map
     assert fast.stats["silhouette_vertices_degree3plus"] > 0
@@ -379,20 +383,30 @@ def test_border_holds_every_cone(name):
     l, r, b, t = v.window
     s = (r - l) / v.width
     g = 32
-    big = P.View(v.origin, v.right, v.up, v.forward, (l - g * s, r + g * s, b - g * s, t + g * s), v.near, v.far,
-                 v.width + 2 * g, v.height + 2 * g, False)
+    big = P.View(
+        v.origin,
+        v.right,
+        v.up,
+        v.forward,
+        (l - g * s, r + g * s, b - g * s, t + g * s),
+        v.near,
+        v.far,
+        v.width + 2 * g,
+        v.height + 2 * g,
+        False,
+    )
     zp = np.full((big.height, big.width), np.inf, np.float32)
-    zp[g:g + v.height, g:g + v.width] = smp.surface_depth
+    zp[g : g + v.height, g : g + v.width] = smp.surface_depth
     # receivers outside the original extent: rasterize them into the margin
     flat = scene.flat
     only = flat.receiver & ~flat.occluder
     if only.any():
         d, _ = P.rasterize_depth(big, flat.vertices, np.ascontiguousarray(flat.faces[only]))
         inner = np.zeros_like(zp, bool)
-        inner[g:g + v.height, g:g + v.width] = True
+        inner[g : g + v.height, g : g + v.width] = True
         zp = np.where(inner, zp, d)
     smp_big = P.ShadowMapPass(smp.hard_view, big, tuple(x + g for x in smp.border), smp.occluder_depth, zp)
     pm_big = P.render_penumbra_map(scene, smp_big, P.light_radius_of(scene.light), early_reject=False)
     outside = np.ones_like(pm_big.intensity, bool)
-    outside[g:g + v.height, g:g + v.width] = False
+    outside[g : g + v.height, g : g + v.width] = False
     assert np.all(pm_big.intensity[outside] == 1.0)

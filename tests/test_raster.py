@@ -1,11 +1,19 @@
 """Tests of the shared software rasterizer (analytic cases, small images)."""
+
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
 from softshadows.raster import (
-    Fragments, GBuffer, View, cull_mask, face_normals, facing, rasterize, rasterize_depth,
+    Fragments,
+    GBuffer,
+    View,
+    cull_mask,
+    face_normals,
+    facing,
+    rasterize,
+    rasterize_depth,
     rasterize_fragments,
 )
 from softshadows.raster.kernels import sample_bilinear, sample_nearest, view_project, view_unproject
@@ -49,7 +57,10 @@ def cube(center=(0.0, 0.0, 0.0), half=1.0):
     """Closed cube, outward-wound (cross(v1-v0, v2-v0) points outward)."""
     c = np.asarray(center, float)
     V = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], float) * half + c
-    idx = lambda x, y, z: (x > 0) * 4 + (y > 0) * 2 + (z > 0)
+
+    def idx(x, y, z):
+        return (x > 0) * 4 + (y > 0) * 2 + (z > 0)
+
     F = []
     for axis in range(3):
         for s in (-1, 1):
@@ -78,7 +89,10 @@ def uv_sphere(nu=24, nv=12, radius=1.0, center=(0.0, 0.0, 0.0)):
     V = np.stack([np.sin(T) * np.cos(P), np.cos(T), np.sin(T) * np.sin(P)], -1).reshape(-1, 3)
     V = np.concatenate([[[0, 1, 0]], V, [[0, -1, 0]]])
     top, bot = 0, len(V) - 1
-    ring = lambda k, j: 1 + k * nu + j % nu
+
+    def ring(k, j):
+        return 1 + k * nu + j % nu
+
     F = [[top, ring(0, j + 1), ring(0, j)] for j in range(nu)]
     for k in range(nv - 2):
         for j in range(nu):
@@ -95,7 +109,7 @@ def uv_sphere(nu=24, nv=12, radius=1.0, center=(0.0, 0.0, 0.0)):
 
 def pixel_rays(view):
     """Per pixel center: (origin (3,), direction (H,W,3) with unit forward component)."""
-    i, j = np.mgrid[0:view.height, 0:view.width]
+    i, j = np.mgrid[0 : view.height, 0 : view.width]
     p1 = view.unproject(j + 0.5, i + 0.5, np.ones(i.shape))
     if view.ortho:
         o = view.unproject(j + 0.5, i + 0.5, np.zeros(i.shape))
@@ -131,11 +145,11 @@ def _edge_test_coverage(view, V, F):
     from softshadows.raster import rasterizer as R
 
     vp, W, H, verts, fcs, code, near = R._prepare(view, V, F, "none")
-    T, ntx, nty, bstart, bins, CB, CE, CZ, PL, NW, near, _ = R._front_end(vp, W, H, verts, fcs, code, near)
+    _T, _ntx, _nty, _bstart, bins, CB, CE, _CZ, _PL, _NW, near, _ = R._front_end(vp, W, H, verts, fcs, code, near)
     pairs = []
     for ct in np.unique(bins):
         i0, i1, j0, j1 = CB[ct]
-        i, j = np.mgrid[i0:i1 + 1, j0:j1 + 1]
+        i, j = np.mgrid[i0 : i1 + 1, j0 : j1 + 1]
         py = i + 0.5
         px = j + 0.5
         cov = np.ones(i.shape, bool)
@@ -206,11 +220,20 @@ def test_span_coverage_equals_pixel_edge_tests(kind, ortho):
     np.cumsum(fcount, out=foff[1:])
     K = int(foff[-1])
     fpix, ftri = np.empty(K, np.int64), np.empty(K, np.int32)
-    R._run_tiles(R._M_FFILL, vp, fe, fcount=fcount, foff=foff, fpix=fpix, ftri=ftri,
-                 fbary=np.empty((K, 2), np.float32), fdepth=np.empty(K, np.float32))
+    R._run_tiles(
+        R._M_FFILL,
+        vp,
+        fe,
+        fcount=fcount,
+        foff=foff,
+        fpix=fpix,
+        ftri=ftri,
+        fbary=np.empty((K, 2), np.float32),
+        fdepth=np.empty(K, np.float32),
+    )
     assert sorted(zip(ftri.tolist(), fpix.tolist())) == ref
     # the depth-test paths see the same coverage
-    depth, tri = rasterize_depth(view, V, F)
+    _depth, tri = rasterize_depth(view, V, F)
     covered = np.zeros(W * H, bool)
     covered[fr.pixel] = True
     assert np.array_equal(tri.ravel() >= 0, covered)
@@ -232,8 +255,7 @@ def test_tessellated_plane_perspective_exact_cover(jitter):
 def test_tessellated_plane_ortho_exact_cover(jitter):
     rng = np.random.default_rng(2)
     V, F = grid_plane(40, -4, 4, -4, 4, jitter=jitter, rng=rng, flip_some=True)
-    view = View.frame([0.1, 5, 0.2], [0.3, -1, 0.2], [0, 0, -1], (-1.2, 1.1, -1.0, 1.3), 0.1, 100,
-                      61, 67, ortho=True)
+    view = View.frame([0.1, 5, 0.2], [0.3, -1, 0.2], [0, 0, -1], (-1.2, 1.1, -1.0, 1.3), 0.1, 100, 61, 67, ortho=True)
     s, hit = analytic_plane_depth(view, np.zeros(3), np.array([0.0, 1.0, 0.0]))
     assert np.all(np.isfinite(s)) and np.all(np.abs(hit[..., 0]) < 3.5) and np.all(np.abs(hit[..., 2]) < 3.5)
     _assert_exact_cover(view, V, F)
@@ -243,8 +265,7 @@ def test_vertices_and_edges_exactly_on_pixel_centers():
     # ortho view in which every grid vertex and every diagonal passes exactly through pixel centers
     V, F = grid_plane(34, -1.5, 66.5, -66.5, 1.5, flip_some=True, rng=np.random.default_rng(3))
     # looking down -y: right = +x, up = -z, so sx = x and sy = 64 + z; the grid overhangs the window
-    view = View.frame([0, 10, 0], [0, -1, 0], [0, 0, -1], (0.0, 64.0, 0.0, 64.0), 0.1, 100, 64, 64,
-                      ortho=True)
+    view = View.frame([0, 10, 0], [0, -1, 0], [0, 0, -1], (0.0, 64.0, 0.0, 64.0), 0.1, 100, 64, 64, ortho=True)
     sx, sy, _ = view.project(V)
     frac = np.concatenate([sx % 1.0, sy % 1.0])
     assert np.allclose(frac, 0.5)  # really on pixel centers
@@ -270,11 +291,11 @@ def test_closed_sphere_watertight_and_silhouettes():
         eye = c + d * r * rng.uniform(1.2, 5.0)
         W, H = (int(x) for x in rng.integers(12, 40, size=2))
         if rng.random() < 0.3:
-            view = View.frame(eye, c - eye, [0, 1, 0], (-0.9 * r, 1.1 * r, -r, 0.8 * r), 0.0, 1e3, W, H,
-                              ortho=True)
+            view = View.frame(eye, c - eye, [0, 1, 0], (-0.9 * r, 1.1 * r, -r, 0.8 * r), 0.0, 1e3, W, H, ortho=True)
         else:
-            view = View.look_at(eye, c + rng.normal(size=3) * 0.2 * r, [0, 1, 0], rng.uniform(25, 80), W, H,
-                                near=1e-3 * r)
+            view = View.look_at(
+                eye, c + rng.normal(size=3) * 0.2 * r, [0, 1, 0], rng.uniform(25, 80), W, H, near=1e-3 * r
+            )
         cnt = {}
         for cull in ("none", "back", "front"):
             fr = rasterize_fragments(view, V, F, cull=cull)
@@ -344,6 +365,7 @@ def test_min_blend_penumbra_culling_is_exact(ortho):
         o = np.ones((80, 96), np.float32)
         st = rasterize_min_blend(view, V, F, PROGRAM_PENUMBRA, za, zp, params, o, cull_discarded=cd)
         out[cd] = (o, st)
+
     def tot(st, k):
         return st[k + "_a"] + st[k + "_b"]
 
@@ -386,8 +408,7 @@ def test_tilted_plane_depth_position_bary(ortho):
     R = np.eye(3) + np.sin(ang) * K + (1 - np.cos(ang)) * K @ K
     V = V @ R.T + p0
     if ortho:
-        view = View.frame([0.2, 0.5, 2.0], [0, -0.1, -1], [0, 1, 0], (-1.0, 1.2, -0.8, 0.9), -1, 50,
-                          40, 36, ortho=True)
+        view = View.frame([0.2, 0.5, 2.0], [0, -0.1, -1], [0, 1, 0], (-1.0, 1.2, -0.8, 0.9), -1, 50, 40, 36, ortho=True)
     else:
         view = View.look_at([0.2, 0.5, 2.0], [0, -0.2, -3], [0, 1, 0], 35, 40, 36)
     g = rasterize(view, V, F)
@@ -476,8 +497,9 @@ def test_cube_culling(mirror):
     V, F = cube((0.1, -0.2, 0.0), 1.0)
     view = View.look_at([3.0, 2.5, 4.0], [0.1, -0.2, 0], [0, 1, 0], 40, 48, 40)
     if mirror:  # a left-handed frame (mirrored image): facing must not change
-        view = View(view.origin, -view.right, view.up, view.forward, view.window, view.near, view.far,
-                    view.width, view.height)
+        view = View(
+            view.origin, -view.right, view.up, view.forward, view.window, view.near, view.far, view.width, view.height
+        )
     fac = facing(view, V, F)
     front = fac < 0
     assert front.sum() == 6  # three faces visible from this corner
@@ -541,9 +563,10 @@ def test_rasterize_depth_matches_rasterize():
     Fr = rng.integers(0, 90, size=(60, 3))
     V = np.concatenate([Vc, Vg, Vr])
     F = np.concatenate([Fc, Fg + len(Vc), Fr + len(Vc) + len(Vg)])
-    for view in (View.look_at([2, 3, 4], [0, 0.3, 0], [0, 1, 0], 50, 50, 38),
-                 View.frame([0, 6, 0.5], [0.1, -1, 0], [0, 0, -1], (-3, 3, -2, 2), 0.5, 30, 45, 33,
-                            ortho=True)):
+    for view in (
+        View.look_at([2, 3, 4], [0, 0.3, 0], [0, 1, 0], 50, 50, 38),
+        View.frame([0, 6, 0.5], [0.1, -1, 0], [0, 0, -1], (-3, 3, -2, 2), 0.5, 30, 45, 33, ortho=True),
+    ):
         for cull in ("none", "back", "front"):
             g = rasterize(view, V, F, cull=cull)
             d, t = rasterize_depth(view, V, F, cull=cull)
@@ -553,12 +576,11 @@ def test_rasterize_depth_matches_rasterize():
 
 def test_degenerate_and_nonfinite_inputs():
     view = View.look_at([0, 0, 3], [0, 0, 0], [0, 1, 0], 40, 24, 20)
-    V = np.array([[-1, -1, 0], [1, -1, 0], [0, 1, 0], [np.nan, 0, 0], [np.inf, 1, 1], [0.5, 0.5, 0]],
-                 float)
+    V = np.array([[-1, -1, 0], [1, -1, 0], [0, 1, 0], [np.nan, 0, 0], [np.inf, 1, 1], [0.5, 0.5, 0]], float)
     F = np.array([[0, 1, 3], [3, 4, 0], [0, 0, 1], [0, 5, 5], [0, 1, 2], [2, 1, 4]])
     g = rasterize(view, V, F)
     assert g.mask.any() and set(np.unique(g.tri_id[g.mask])) == {4}
-    d, t = rasterize_depth(view, V, F)
+    _d, t = rasterize_depth(view, V, F)
     assert np.array_equal(t, g.tri_id)
     fr = rasterize_fragments(view, V, F)
     assert set(np.unique(fr.tri)) == {4}
@@ -571,9 +593,20 @@ def test_degenerate_and_nonfinite_inputs():
 
 def test_triangle_fully_behind_or_offscreen():
     view = View.look_at([0, 0, 0], [0, 0, -1], [0, 1, 0], 40, 16, 16)
-    V = np.array([[-1, -1, 1], [1, -1, 1], [0, 1, 1],          # behind
-                  [50, 50, -1], [52, 50, -1], [51, 52, -1],    # off screen
-                  [-1, -1, -2], [1, -1, -2], [0, 1, -2]], float)
+    V = np.array(
+        [
+            [-1, -1, 1],
+            [1, -1, 1],
+            [0, 1, 1],  # behind
+            [50, 50, -1],
+            [52, 50, -1],
+            [51, 52, -1],  # off screen
+            [-1, -1, -2],
+            [1, -1, -2],
+            [0, 1, -2],
+        ],
+        float,
+    )
     F = np.array([[0, 1, 2], [3, 4, 5], [6, 7, 8]])
     g = rasterize(view, V, F)
     assert set(np.unique(g.tri_id[g.mask])) == {2}
@@ -584,8 +617,7 @@ def test_triangle_fully_behind_or_offscreen():
 # ---------------------------------------------------------------------------------------------
 @pytest.mark.parametrize("ortho", [False, True])
 def test_view_project_unproject_helpers(ortho):
-    view = View.frame([0.3, 1, 2], [0.1, -0.3, -1], [0, 1, 0], (-0.7, 0.5, -0.4, 0.6), 0.1, 100, 50, 40,
-                      ortho=ortho)
+    view = View.frame([0.3, 1, 2], [0.1, -0.3, -1], [0, 1, 0], (-0.7, 0.5, -0.4, 0.6), 0.1, 100, 50, 40, ortho=ortho)
     vp = view.params()
     rng = np.random.default_rng(8)
     P = rng.uniform(-1, 1, size=(20, 3)) + [0, 0, -3]

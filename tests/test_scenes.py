@@ -1,4 +1,5 @@
 """Scenes: primitives, built-in scenes, TOML scene files, mesh files, and their errors."""
+
 import builtins
 import math
 
@@ -6,7 +7,8 @@ import numpy as np
 import pytest
 
 from softshadows.errors import SceneError
-from softshadows.scene import RectLight, SphereLight, builtin, load_scene, primitives as prim
+from softshadows.scene import RectLight, SphereLight, builtin, load_scene
+from softshadows.scene import primitives as prim
 from softshadows.scene.builtin import BUILTIN
 
 
@@ -50,9 +52,11 @@ def _err(fn, *args, **kw) -> str:
 # ---- primitives ------------------------------------------------------------------------------
 @pytest.mark.parametrize("shape", ["box", "icosphere", "cylinder"])
 def test_closed_primitives_face_outward(shape):
-    v, f = {"box": lambda: prim.box((1.0, 0.8, 0.6), (1, 2, 3)),
-            "icosphere": lambda: prim.icosphere(0.5, (1, 2, 3), 2),
-            "cylinder": lambda: prim.cylinder(0.2, (1, 2, 3), (1.5, 3, 3.2), 10)}[shape]()
+    v, f = {
+        "box": lambda: prim.box((1.0, 0.8, 0.6), (1, 2, 3)),
+        "icosphere": lambda: prim.icosphere(0.5, (1, 2, 3), 2),
+        "cylinder": lambda: prim.cylinder(0.2, (1, 2, 3), (1.5, 3, 3.2), 10),
+    }[shape]()
     assert _signed_volume(v - v.mean(axis=0), f) > 0
     n = prim.face_normals(v, f)
     centroid = v[f].mean(axis=1)
@@ -274,28 +278,36 @@ def _toml(tmp_path, text, name="scene.toml"):
 
 
 MESH_OK = '[[mesh]]\nprimitive = "box"\n'
-LIGHT_OK = '[light]\ncenter = [0, 4, 0]\nu = [1, 0, 0]\nv = [0, 0, 1]\n'
+LIGHT_OK = "[light]\ncenter = [0, 4, 0]\nu = [1, 0, 0]\nv = [0, 0, 1]\n"
 
 
-@pytest.mark.parametrize("text, needles", [
-    (LIGHT_OK + '[[mesh]]\npath = "missing.obj"\n', ["[[mesh]] #1", "path 'missing.obj' not found"]),
-    ("[light\ncenter = 1\n", ["malformed TOML", "line"]),
-    ('[light]\ncenter = [0, 4, 0]\nu = [1, 0, 0]\nv = [2, 0, 0]\n' + MESH_OK, ["[light].u", "area"]),
-    ('[light]\ntype = "sphere"\ncenter = [0, 4, 0]\nradius = -1\n' + MESH_OK, ["[light].radius must be > 0, got -1"]),
-    (LIGHT_OK + 'colour = 3\n' + MESH_OK, ["[light]", "unknown key 'colour'"]),
-    (LIGHT_OK + MESH_OK + 'role = "shadow"\n', ["[[mesh]] #1", "role", "shadow", "occluder"]),
-    (LIGHT_OK + MESH_OK + MESH_OK + 'sise = 2\n', ["[[mesh]] #2", "unknown key 'sise'"]),
-    (LIGHT_OK + MESH_OK + 'albedo = [1, 2]\n', ["[[mesh]] #1", "albedo"]),
-    (LIGHT_OK + MESH_OK + 'translate = [1, 2, 3]\nmatrix = [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]\n',
-     ["matrix", "translate"]),
-    (LIGHT_OK + MESH_OK + 'scale = 0\n', ["[[mesh]] #1", "scale", "got 0"]),
-    (LIGHT_OK + '[[mesh]]\nprimitive = "torus"\n', ["primitive", "torus"]),
-    (LIGHT_OK + '[[mesh]]\nalbedo = 0.5\n', ["[[mesh]] #1", "path", "primitive"]),
-    (LIGHT_OK, ["no [[mesh]]"]),
-    ('[camera]\neye = [0, 1, 0]\ntarget = [0, 1, 0]\n' + MESH_OK, ["[camera]: eye and target coincide"]),
-    ('[camera]\neye = [0, 1]\ntarget = [0, 0, 0]\n' + MESH_OK, ["[camera].eye", "3 numbers"]),
-    ('mystery = 1\n' + MESH_OK, ["unknown key 'mystery'"]),
-])
+@pytest.mark.parametrize(
+    "text, needles",
+    [
+        (LIGHT_OK + '[[mesh]]\npath = "missing.obj"\n', ["[[mesh]] #1", "path 'missing.obj' not found"]),
+        ("[light\ncenter = 1\n", ["malformed TOML", "line"]),
+        ("[light]\ncenter = [0, 4, 0]\nu = [1, 0, 0]\nv = [2, 0, 0]\n" + MESH_OK, ["[light].u", "area"]),
+        (
+            '[light]\ntype = "sphere"\ncenter = [0, 4, 0]\nradius = -1\n' + MESH_OK,
+            ["[light].radius must be > 0, got -1"],
+        ),
+        (LIGHT_OK + "colour = 3\n" + MESH_OK, ["[light]", "unknown key 'colour'"]),
+        (LIGHT_OK + MESH_OK + 'role = "shadow"\n', ["[[mesh]] #1", "role", "shadow", "occluder"]),
+        (LIGHT_OK + MESH_OK + MESH_OK + "sise = 2\n", ["[[mesh]] #2", "unknown key 'sise'"]),
+        (LIGHT_OK + MESH_OK + "albedo = [1, 2]\n", ["[[mesh]] #1", "albedo"]),
+        (
+            LIGHT_OK + MESH_OK + "translate = [1, 2, 3]\nmatrix = [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]\n",
+            ["matrix", "translate"],
+        ),
+        (LIGHT_OK + MESH_OK + "scale = 0\n", ["[[mesh]] #1", "scale", "got 0"]),
+        (LIGHT_OK + '[[mesh]]\nprimitive = "torus"\n', ["primitive", "torus"]),
+        (LIGHT_OK + "[[mesh]]\nalbedo = 0.5\n", ["[[mesh]] #1", "path", "primitive"]),
+        (LIGHT_OK, ["no [[mesh]]"]),
+        ("[camera]\neye = [0, 1, 0]\ntarget = [0, 1, 0]\n" + MESH_OK, ["[camera]: eye and target coincide"]),
+        ("[camera]\neye = [0, 1]\ntarget = [0, 0, 0]\n" + MESH_OK, ["[camera].eye", "3 numbers"]),
+        ("mystery = 1\n" + MESH_OK, ["unknown key 'mystery'"]),
+    ],
+)
 def test_toml_errors_name_file_and_field(tmp_path, text, needles):
     p = _toml(tmp_path, text)
     msg = _err(load_scene, p)
@@ -355,12 +367,14 @@ def test_mesh_file_alone_is_staged(tmp_path):
 def test_multi_part_file_is_flattened_with_transforms(tmp_path):
     trimesh = pytest.importorskip("trimesh")
     sc = trimesh.Scene()
-    sc.add_geometry(trimesh.Trimesh(TETRA_V, TETRA_F, process=False),
-                    transform=trimesh.transformations.translation_matrix([0, 3, 0]))
+    sc.add_geometry(
+        trimesh.Trimesh(TETRA_V, TETRA_F, process=False),
+        transform=trimesh.transformations.translation_matrix([0, 3, 0]),
+    )
     sc.add_geometry(trimesh.Trimesh(TETRA_V, TETRA_F, process=False))
     sc.export(tmp_path / "two.glb")
     s = load_scene(tmp_path / "two.glb")
-    obj = [m for m in s.meshes if m.role == "occluder"][0]
+    obj = next(m for m in s.meshes if m.role == "occluder")
     assert len(obj.faces) == 8 and obj.vertices[:, 1].max() == pytest.approx(4.0)
 
 

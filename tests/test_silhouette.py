@@ -1,5 +1,6 @@
 """Silhouette edges seen from a point: brute force and adjacency paths against an independent
 reference and against geometry whose silhouette is known."""
+
 import numpy as np
 import pytest
 
@@ -17,7 +18,7 @@ def _reference(vertices, faces, point):
     for i, v in enumerate(map(tuple, vertices)):
         rep[i] = key_of.setdefault(v, i)
     edges = {}
-    for fi, (a, b, c) in enumerate(faces):
+    for _fi, (a, b, c) in enumerate(faces):
         pa, pb, pc = vertices[a], vertices[b], vertices[c]
         facing = float(np.dot(np.cross(pb - pa, pc - pa), np.asarray(point) - pa)) > 0
         for u, w in ((a, b), (b, c), (c, a)):

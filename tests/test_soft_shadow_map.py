@@ -6,6 +6,7 @@ light's plane as an axis-aligned rectangle, and
     V(p) = 1 - area(projection of the occluder through p onto the light plane  n  light) / area(light),
 separable in the two axes. It is computed here, independently of the library.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -19,15 +20,18 @@ from softshadows.scene.types import Mesh, RectLight, Scene
 OCC_Y, OCC_HALF, LIGHT_Y = 1.0, 0.5, 3.0  # the built-in ``square`` scene (documented in scene/builtin.py)
 
 
-def closed_form_v(p, occ_half=(OCC_HALF, OCC_HALF), occ_y=OCC_Y, light_half=(0.5, 0.5), light_y=LIGHT_Y,
-                  light_center=(0.0, 0.0)):
+def closed_form_v(
+    p, occ_half=(OCC_HALF, OCC_HALF), occ_y=OCC_Y, light_half=(0.5, 0.5), light_y=LIGHT_Y, light_center=(0.0, 0.0)
+):
     """V at points p (K,3) below a horizontal occluder [-ox, ox] x [-oz, oz] at height occ_y, for a
     horizontal light of half sizes (lx, lz) at height light_y centered at (cx, cz)."""
     p = np.asarray(p, float)
     k = (light_y - p[:, 1]) / (occ_y - p[:, 1])  # projection scale from p onto the light plane
     cover = np.ones(len(p))
-    for ax, oh, lh, c in ((0, occ_half[0], light_half[0], light_center[0]),
-                          (2, occ_half[1], light_half[1], light_center[1])):
+    for ax, oh, lh, c in (
+        (0, occ_half[0], light_half[0], light_center[0]),
+        (2, occ_half[1], light_half[1], light_center[1]),
+    ):
         lo = p[:, ax] + (-oh - p[:, ax]) * k
         hi = p[:, ax] + (oh - p[:, ax]) * k
         cover *= np.clip(np.minimum(hi, c + lh) - np.maximum(lo, c - lh), 0.0, None)
@@ -49,9 +53,28 @@ def ground_error(res, **cf):
 def test_round_half_is_ieee_binary16():
     """round_half must give exactly np.float16's value (ties to even, subnormals, overflow)."""
     rng = np.random.default_rng(1)
-    x = np.concatenate([rng.uniform(-2, 2, 4000), 10.0 ** rng.uniform(-9, 5.5, 4000),
-                        np.array([1 + 2.0**-11, 1 + 3 * 2.0**-11, 2048 + 1, 0.5 + 1 / 2049, 65504, 65519, 65520,
-                                  2.0**-24, 2.0**-25, 3 * 2.0**-26, 6e-8, 0.0])])
+    x = np.concatenate(
+        [
+            rng.uniform(-2, 2, 4000),
+            10.0 ** rng.uniform(-9, 5.5, 4000),
+            np.array(
+                [
+                    1 + 2.0**-11,
+                    1 + 3 * 2.0**-11,
+                    2048 + 1,
+                    0.5 + 1 / 2049,
+                    65504,
+                    65519,
+                    65520,
+                    2.0**-24,
+                    2.0**-25,
+                    3 * 2.0**-26,
+                    6e-8,
+                    0.0,
+                ]
+            ),
+        ]
+    )
     got = np.array([ssm.round_half(float(v)) for v in x])
     with np.errstate(over="ignore"):
         ref = x.astype(np.float16).astype(np.float64)
@@ -74,8 +97,9 @@ def test_occlusion_percentage_of_whole_square_is_closed_form():
     p = np.c_[rng.uniform(-1.2, 1.2, 500), np.zeros(500), rng.uniform(-1.2, 1.2, 500)]
     zr = LIGHT_Y - p[:, 1]
     patch = (-0.5, 0.5, -0.5, 0.5, LIGHT_Y - OCC_Y)
-    got = np.array([ssm.occlusion_percentage_at(patch, x / z, y / z, z, 0.5, 0.5)
-                    for x, y, z in zip(p[:, 0], p[:, 2], zr)])
+    got = np.array(
+        [ssm.occlusion_percentage_at(patch, x / z, y / z, z, 0.5, 0.5) for x, y, z in zip(p[:, 0], p[:, 2], zr)]
+    )
     np.testing.assert_allclose(1 - got, closed_form_v(p), atol=1e-12)
 
 
@@ -90,8 +114,9 @@ def test_penumbra_extent_contains_every_occluded_texel():
     c = rng.uniform(-0.3, 0.3, (20, 2))
     z = rng.uniform(0.8, 2.8, 20)
     size = rng.uniform(0.002, 0.05, 20)
-    patches = np.c_[c[:, 0] * z - size * z, c[:, 0] * z + size * z, c[:, 1] * z - size * z / 1.5,
-                    c[:, 1] * z + size * z / 1.5, z]
+    patches = np.c_[
+        c[:, 0] * z - size * z, c[:, 0] * z + size * z, c[:, 1] * z - size * z / 1.5, c[:, 1] * z + size * z / 1.5, z
+    ]
     ext = ssm.penumbra_extents(patches, hx, hy, z_plane, sv.params())
     jj, ii = np.meshgrid(np.arange(90), np.arange(60))
     ux = -0.6 + (jj + 0.5) * 1.2 / 90

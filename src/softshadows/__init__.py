@@ -7,10 +7,11 @@ Every method computes V, the visible fraction of the light at each eye pixel, be
     res = ss.render(scene, "penumbra-map", 512, 512)
     res.visibility, res.image, res.timings, res.stats
 """
+
 from ._malloc import tune_malloc
+from .api import Result, render
 from .errors import SceneError, SoftShadowsError
 from .scene import Camera, Mesh, RectLight, Scene, SphereLight
-from .api import Result, render
 
 
 def load_scene(name_or_path, light=None):
@@ -27,8 +28,19 @@ def methods() -> dict:
     return _methods()
 
 
-__all__ = ["Camera", "Mesh", "RectLight", "Result", "Scene", "SceneError", "SoftShadowsError", "SphereLight",
-           "load_scene", "methods", "render"]
+__all__ = [
+    "Camera",
+    "Mesh",
+    "RectLight",
+    "Result",
+    "Scene",
+    "SceneError",
+    "SoftShadowsError",
+    "SphereLight",
+    "load_scene",
+    "methods",
+    "render",
+]
 __version__ = "0.1.0"
 
 tune_malloc()  # keep frame buffers in the heap between frames (see softshadows._malloc)

@@ -12,6 +12,7 @@ where the next frame reuses it: the same frame then takes ~42 ms with ~5 faults.
 ``TRIM_THRESHOLD`` bytes of freed memory instead of returning it to the system. On other C
 libraries (macOS, musl) it does nothing.
 """
+
 from __future__ import annotations
 
 import ctypes

@@ -6,6 +6,7 @@
 * :func:`disk_halfplane_visibility` — a disk light (the sphere light's facing disk) and a
   half-plane occluder: V = 1 - circular segment / disk area.
 """
+
 from __future__ import annotations
 
 import numpy as np

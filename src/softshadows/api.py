@@ -4,6 +4,7 @@ Phases timed (seconds, JIT compile excluded: the first call of a method in a pro
 by a tiny warm-up render of the same scene): ``eye_gbuffer``, the method's own phases, ``shading``,
 and ``total``.
 """
+
 from __future__ import annotations
 
 import time
@@ -11,10 +12,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from . import shading
 from .errors import SoftShadowsError
 from .methods.base import FrameContext, Timer, get_method
 from .raster import View, rasterize
-from . import shading
 
 _WARM: set = set()
 
@@ -46,8 +47,17 @@ def _check_size(width, height):
             raise SoftShadowsError(f"image {nm} {v} is too large (max 16384)")
 
 
-def render(scene, method: str, width: int = 512, height: int = 512, *, seed: int = 0,
-           progress: bool = False, warmup: bool = True, **params) -> Result:
+def render(
+    scene,
+    method: str,
+    width: int = 512,
+    height: int = 512,
+    *,
+    seed: int = 0,
+    progress: bool = False,
+    warmup: bool = True,
+    **params,
+) -> Result:
     """Render V and the shaded image of ``scene`` with ``method`` at ``width`` x ``height``."""
     _check_size(width, height)
     m = get_method(method)
@@ -77,5 +87,14 @@ def _render(scene, m, width, height, resolved, seed, progress) -> Result:
         img = shading.shade(scene, g, v, shadowed=shadowed)
     timings = dict(timer.times)
     timings["total"] = time.perf_counter() - t0
-    return Result(visibility=v, image=img, position=g.position, timings=timings, stats=out.stats,
-                  method=m.name, params=dict(resolved), normal=g.normal, mask=g.mask)
+    return Result(
+        visibility=v,
+        image=img,
+        position=g.position,
+        timings=timings,
+        stats=out.stats,
+        method=m.name,
+        params=dict(resolved),
+        normal=g.normal,
+        mask=g.mask,
+    )

@@ -32,6 +32,7 @@ Atty et al. 2006) against the parameter:
   the shape does not change, only the cost), f < 1 simplifies it by quadric decimation
   (``fast_simplification``, through trimesh; the shape changes); the x axis is the actual count.
 """
+
 from __future__ import annotations
 
 import json
@@ -56,8 +57,14 @@ DEFAULT_SWEEP_VALUES = {
 def _stats(x) -> dict:
     a = np.asarray(x, float)
     q1, med, q3 = np.percentile(a, [25, 50, 75])
-    return {"median": float(med), "min": float(a.min()), "max": float(a.max()), "q1": float(q1),
-            "q3": float(q3), "n": int(a.size)}
+    return {
+        "median": float(med),
+        "min": float(a.min()),
+        "max": float(a.max()),
+        "q1": float(q1),
+        "q3": float(q3),
+        "n": int(a.size),
+    }
 
 
 def _sizes(sizes) -> list[tuple[int, int]]:
@@ -91,9 +98,18 @@ def _resolve_all(names, params_by_method):
     return {m: get_method(m).resolve_params(params_by_method.get(m, {})) for m in names}
 
 
-def bench(scene="bunny", methods="all", sizes=(512,), repeats: int = 5, warmup: int = 1, *,
-          params_by_method: dict | None = None, light: str | None = None, seed: int = 0,
-          verbose: bool = False) -> dict:
+def bench(
+    scene="bunny",
+    methods="all",
+    sizes=(512,),
+    repeats: int = 5,
+    warmup: int = 1,
+    *,
+    params_by_method: dict | None = None,
+    light: str | None = None,
+    seed: int = 0,
+    verbose: bool = False,
+) -> dict:
     """Time ``methods`` on ``scene`` at each of ``sizes`` (ints for N x N, 'WxH' or (w, h)).
 
     Returns ``{"scene", "light", "machine", "repeats", "warmup", "skipped", "results": [{"size",
@@ -112,14 +128,14 @@ def bench(scene="bunny", methods="all", sizes=(512,), repeats: int = 5, warmup: 
         names = ["hard"] + names
     resolved = _resolve_all(names, params_by_method)
     results = []
-    for (w, h) in _sizes(sizes):
+    for w, h in _sizes(sizes):
         samples: dict = {m: [] for m in names}
         for m in names:
             if verbose:
                 print(f"  warm-up {m} {w}x{h}", file=sys.stderr, flush=True)
             for _ in range(int(warmup)):
                 render(sc, m, w, h, seed=seed, **resolved[m])
-        for r in range(int(repeats)):
+        for _r in range(int(repeats)):
             for m in names:
                 samples[m].append(render(sc, m, w, h, seed=seed, **resolved[m]).timings)
         hard_total = float(np.median([t["total"] for t in samples["hard"]]))
@@ -132,26 +148,46 @@ def bench(scene="bunny", methods="all", sizes=(512,), repeats: int = 5, warmup: 
                         phases.append(k)
             tim = {p: _stats([t.get(p, 0.0) for t in samples[m]]) for p in phases}
             mt = _stats([_method_time(t) for t in samples[m]])
-            results.append({
-                "size": [w, h], "method": m, "params": resolved[m], "timings": tim, "method_time": mt,
-                "ratio_to_hard": tim["total"]["median"] / hard_total if hard_total > 0 else float("nan"),
-                "ratio_to_hard_method": mt["median"] / hard_method if hard_method > 0 else float("nan"),
-            })
-    return {"scene": sc.name, "light": sc.light.shape, "repeats": int(repeats), "warmup": int(warmup),
-            "seed": seed, "skipped": skipped, "machine": machine_info(), "results": results}
+            results.append(
+                {
+                    "size": [w, h],
+                    "method": m,
+                    "params": resolved[m],
+                    "timings": tim,
+                    "method_time": mt,
+                    "ratio_to_hard": tim["total"]["median"] / hard_total if hard_total > 0 else float("nan"),
+                    "ratio_to_hard_method": mt["median"] / hard_method if hard_method > 0 else float("nan"),
+                }
+            )
+    return {
+        "scene": sc.name,
+        "light": sc.light.shape,
+        "repeats": int(repeats),
+        "warmup": int(warmup),
+        "seed": seed,
+        "skipped": skipped,
+        "machine": machine_info(),
+        "results": results,
+    }
 
 
 def format_table(res: dict) -> str:
     """The printed table: one row per (size, method), milliseconds."""
-    lines = [f"{res['scene']} ({res['light']} light), {res['repeats']} repeats after {res['warmup']} warm-up frame(s); "
-             f"times in ms: median [min-max]; x hard = ratio of medians (whole frame / method phases only)"]
-    lines.append(f"{'size':>10}  {'method':<20}{'total':>10} {'[min-max]':>17} {'x hard':>7} {'x hard*':>8}  phases (median)")
+    lines = [
+        f"{res['scene']} ({res['light']} light), {res['repeats']} repeats after {res['warmup']} warm-up frame(s); "
+        f"times in ms: median [min-max]; x hard = ratio of medians (whole frame / method phases only)"
+    ]
+    lines.append(
+        f"{'size':>10}  {'method':<20}{'total':>10} {'[min-max]':>17} {'x hard':>7} {'x hard*':>8}  phases (median)"
+    )
     for r in res["results"]:
         t = r["timings"]
         ph = "  ".join(f"{k}={v['median'] * 1e3:.1f}" for k, v in t.items() if k != "total")
-        lines.append(f"{r['size'][0]:>5}x{r['size'][1]:<4}  {r['method']:<20}{t['total']['median'] * 1e3:10.1f} "
-                     f"{'[' + format(t['total']['min'] * 1e3, '.1f') + '-' + format(t['total']['max'] * 1e3, '.1f') + ']':>17} "
-                     f"{r['ratio_to_hard']:7.2f} {r['ratio_to_hard_method']:8.2f}  {ph}")
+        lines.append(
+            f"{r['size'][0]:>5}x{r['size'][1]:<4}  {r['method']:<20}{t['total']['median'] * 1e3:10.1f} "
+            f"{'[' + format(t['total']['min'] * 1e3, '.1f') + '-' + format(t['total']['max'] * 1e3, '.1f') + ']':>17} "
+            f"{r['ratio_to_hard']:7.2f} {r['ratio_to_hard_method']:8.2f}  {ph}"
+        )
     for m, why in res.get("skipped", {}).items():
         lines.append(f"skipped {m}: {why}")
     return "\n".join(lines)
@@ -159,8 +195,11 @@ def format_table(res: dict) -> str:
 
 # ---- sweeps -----------------------------------------------------------------------------------
 def _map_params(method) -> list[str]:
-    return [p.name for p in method.params
-            if p.name == "map_size" or p.name.endswith("_map_size") or p.name.endswith("_resolution")]
+    return [
+        p.name
+        for p in method.params
+        if p.name == "map_size" or p.name.endswith("_map_size") or p.name.endswith("_resolution")
+    ]
 
 
 def translate_occluders(scene, dy: float):
@@ -168,8 +207,10 @@ def translate_occluders(scene, dy: float):
     from .scene.types import Mesh, Scene
 
     if not any(m.role == "occluder" for m in scene.meshes):
-        raise SoftShadowsError(f"scene '{scene.name}' has no mesh with role 'occluder' to move "
-                               "(occluder-height needs separate occluder and receiver meshes)")
+        raise SoftShadowsError(
+            f"scene '{scene.name}' has no mesh with role 'occluder' to move "
+            "(occluder-height needs separate occluder and receiver meshes)"
+        )
     meshes = []
     top = -np.inf
     for m in scene.meshes:
@@ -180,8 +221,10 @@ def translate_occluders(scene, dy: float):
             m = Mesh(v, m.faces, m.albedo, m.role, m.name)
         meshes.append(m)
     if top >= scene.light.center[1]:
-        raise SoftShadowsError(f"occluder-height {dy:g} lifts the occluders to y={top:.3g}, at or above "
-                               f"the light (y={scene.light.center[1]:.3g})")
+        raise SoftShadowsError(
+            f"occluder-height {dy:g} lifts the occluders to y={top:.3g}, at or above "
+            f"the light (y={scene.light.center[1]:.3g})"
+        )
     return Scene(meshes, scene.light, scene.camera, scene.name)
 
 
@@ -206,8 +249,9 @@ def retriangulate_occluders(scene, factor: float):
                 try:
                     dec = tm.simplify_quadric_decimation(face_count=target)
                 except (ImportError, ModuleNotFoundError) as exc:
-                    raise SoftShadowsError("triangles < 1 needs quadric decimation: pip install fast-simplification "
-                                           f"({exc})") from None
+                    raise SoftShadowsError(
+                        f"triangles < 1 needs quadric decimation: pip install fast-simplification ({exc})"
+                    ) from None
                 except ValueError as exc:
                     raise SoftShadowsError(f"cannot decimate mesh '{m.name}' to {target} triangles: {exc}") from None
                 v, f = np.asarray(dec.vertices), np.asarray(dec.faces)
@@ -216,9 +260,22 @@ def retriangulate_occluders(scene, factor: float):
     return Scene(meshes, scene.light, scene.camera, scene.name)
 
 
-def sweep(scene_name, kind: str, values=None, methods="pcss", size=(256, 256), params_by_method: dict | None = None,
-          out_png=None, light: str | None = None, *, gt_samples: int = 256, repeats: int = 3, seed: int = 0,
-          error_key: str = "ssm_error", verbose: bool = False) -> dict:
+def sweep(
+    scene_name,
+    kind: str,
+    values=None,
+    methods="pcss",
+    size=(256, 256),
+    params_by_method: dict | None = None,
+    out_png=None,
+    light: str | None = None,
+    *,
+    gt_samples: int = 256,
+    repeats: int = 3,
+    seed: int = 0,
+    error_key: str = "ssm_error",
+    verbose: bool = False,
+) -> dict:
     """Sweep ``kind`` over ``values`` (None: :data:`DEFAULT_SWEEP_VALUES`) on ``scene_name`` (a
     name, file or Scene) for ``methods``; write the plot to ``out_png`` (if given).
 
@@ -286,18 +343,31 @@ def sweep(scene_name, kind: str, values=None, methods="pcss", size=(256, 256), p
             d["time_min_ms"].append(float(np.min(ts)))
             d["time_max_ms"].append(float(np.max(ts)))
             d["metrics"].append(met)
-    for m, d in out.items():
+    for d in out.values():
         for k in ("mae", "rmse", "bias", "ssm_error", "mae_penumbra", "mae_umbra", "mae_lit"):
             d[k] = [mt[k] for mt in d["metrics"]]
-    x_label = {"light-size": "light size factor (x the scene's light)",
-               "occluder-height": "occluder lift dy (world units)",
-               "resolution": f"image width (height = width x {h0}/{w0})",
-               "map-size": "map size (texels per side)",
-               "triangles": "occluder triangles"}[kind]
-    data = {"scene": base.name, "light": base.light.shape, "kind": kind, "values": vals, "x": xs,
-            "x_label": x_label, "size": [w0, h0], "gt_samples": gt_samples, "repeats": int(repeats),
-            "error_key": error_key, "notes": notes, "methods": out,
-            "log_x": kind in ("map-size", "triangles", "resolution")}
+    x_label = {
+        "light-size": "light size factor (x the scene's light)",
+        "occluder-height": "occluder lift dy (world units)",
+        "resolution": f"image width (height = width x {h0}/{w0})",
+        "map-size": "map size (texels per side)",
+        "triangles": "occluder triangles",
+    }[kind]
+    data = {
+        "scene": base.name,
+        "light": base.light.shape,
+        "kind": kind,
+        "values": vals,
+        "x": xs,
+        "x_label": x_label,
+        "size": [w0, h0],
+        "gt_samples": gt_samples,
+        "repeats": int(repeats),
+        "error_key": error_key,
+        "notes": notes,
+        "methods": out,
+        "log_x": kind in ("map-size", "triangles", "resolution"),
+    }
     if out_png:
         sweep_plot(data, out_png, error_key=error_key)
         data["png"] = str(out_png)
@@ -320,9 +390,20 @@ def _cmd_bench(args) -> int:
             values = [int(v) for v in values]
         out_png = args.out or f"sweep-{args.sweep}.png"
         methods = args.methods if args.methods != "all" else "all"
-        data = sweep(args.scene, args.sweep, values, methods, parse_size(args.size), sets, out_png,
-                     light=args.light, gt_samples=args.samples, repeats=args.repeats, seed=args.seed,
-                     verbose=not args.quiet)
+        data = sweep(
+            args.scene,
+            args.sweep,
+            values,
+            methods,
+            parse_size(args.size),
+            sets,
+            out_png,
+            light=args.light,
+            gt_samples=args.samples,
+            repeats=args.repeats,
+            seed=args.seed,
+            verbose=not args.quiet,
+        )
         print(f"{data['scene']} {data['kind']} sweep, {data['size'][0]}x{data['size'][1]}:")
         print(f"{'x':>12}  " + "".join(f"{m[:18]:>20}" for m in data["methods"]) + "   (ms | ssm_error)")
         for i, x in enumerate(data["x"]):
@@ -336,8 +417,17 @@ def _cmd_bench(args) -> int:
             print(f"wrote {args.json}")
         print(f"plot: {out_png}")
         return 0
-    res = bench(args.scene, args.methods, _sizes(args.sizes), args.repeats, args.warmup, params_by_method=sets,
-                light=args.light, seed=args.seed, verbose=not args.quiet)
+    res = bench(
+        args.scene,
+        args.methods,
+        _sizes(args.sizes),
+        args.repeats,
+        args.warmup,
+        params_by_method=sets,
+        light=args.light,
+        seed=args.seed,
+        verbose=not args.quiet,
+    )
     print(format_table(res))
     if args.json:
         with open(args.json, "w") as fh:
@@ -348,9 +438,11 @@ def _cmd_bench(args) -> int:
 
 def register_cli(subparsers) -> None:
     p = subparsers.add_parser(
-        "bench", help="time methods per phase (median, spread, ratio to hard); --sweep plots time and error",
+        "bench",
+        help="time methods per phase (median, spread, ratio to hard); --sweep plots time and error",
         description="Time each method after warm-up, repeated, per phase, with the ratio to 'hard' "
-                    "measured in the same run; or sweep a parameter and plot time and error vs ground truth.")
+        "measured in the same run; or sweep a parameter and plot time and error vs ground truth.",
+    )
     p.add_argument("scene", nargs="?", default="bunny", help="built-in name, TOML scene or mesh file (default bunny)")
     p.add_argument("--methods", default="all", help="'all' (every method but ground-truth) or a comma-separated list")
     p.add_argument("--sizes", default="512", help="comma-separated N (N x N) or WxH (default %(default)s)")

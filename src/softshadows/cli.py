@@ -7,6 +7,7 @@
 
 Bad input prints one line ``softshadows: error: ...`` and exits with code 2.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -62,8 +63,9 @@ def _cmd_render(args) -> int:
     os.makedirs(os.path.dirname(os.path.abspath(out)), exist_ok=True)
     save_png(out, res.image)
     if args.exr:
-        save_exr(args.exr, {"V": res.visibility, "R": res.image[..., 0], "G": res.image[..., 1],
-                            "B": res.image[..., 2]})
+        save_exr(
+            args.exr, {"V": res.visibility, "R": res.image[..., 0], "G": res.image[..., 1], "B": res.image[..., 2]}
+        )
     if args.v_png:
         from .shading import visibility_to_rgb
 
@@ -71,7 +73,9 @@ def _cmd_render(args) -> int:
     if not args.quiet:
         vmask = ~np.isnan(res.visibility)
         ms = "  ".join(f"{k}={v * 1e3:.1f}ms" for k, v in res.timings.items())
-        print(f"{scene.name} ({scene.light.shape} light) {args.method} {w}x{h}: mean V={np.nanmean(res.visibility[vmask]) if vmask.any() else float('nan'):.3f}")
+        print(
+            f"{scene.name} ({scene.light.shape} light) {args.method} {w}x{h}: mean V={np.nanmean(res.visibility[vmask]) if vmask.any() else float('nan'):.3f}"
+        )
         print(f"  {ms}")
         shown = {k: v for k, v in res.stats.items() if not k.startswith("_")}
         if shown:
@@ -97,7 +101,9 @@ def _cmd_list(args) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="softshadows", description="Soft shadows from area lights: methods vs ground truth.")
+    ap = argparse.ArgumentParser(
+        prog="softshadows", description="Soft shadows from area lights: methods vs ground truth."
+    )
     sub = ap.add_subparsers(dest="command")
 
     r = sub.add_parser("render", help="render one method on one scene")
@@ -144,7 +150,9 @@ def main(argv=None) -> int:
         return 2
     with warnings.catch_warnings():
         warnings.simplefilter("always")
-        warnings.showwarning = lambda msg, cat, fn, ln, file=None, line=None: print(f"softshadows: warning: {msg}", file=sys.stderr)
+        warnings.showwarning = lambda msg, cat, fn, ln, file=None, line=None: print(
+            f"softshadows: warning: {msg}", file=sys.stderr
+        )
         try:
             return int(args.func(args) or 0)
         except SoftShadowsError as exc:

@@ -18,6 +18,7 @@ Files written to ``out_dir``:
 Methods whose light shapes do not include the scene's light are skipped with a note in the report;
 a method that fails at run time is reported (note + stderr) and the others still run.
 """
+
 from __future__ import annotations
 
 import json
@@ -78,8 +79,10 @@ def resolve_methods(spec, light_shape: str | None = None, include_reference: boo
         seen.add(n)
         m = reg[n]
         if light_shape is not None and light_shape not in m.light_shapes:
-            skipped[n] = (f"{n} supports {' and '.join(m.light_shapes)} lights only; the scene has a "
-                          f"{light_shape} light (use --light {m.light_shapes[0]} to include it)")
+            skipped[n] = (
+                f"{n} supports {' and '.join(m.light_shapes)} lights only; the scene has a "
+                f"{light_shape} light (use --light {m.light_shapes[0]} to include it)"
+            )
             continue
         run.append(n)
     return run, skipped
@@ -137,8 +140,10 @@ def scene_info(scene, width, height) -> dict:
     flat = scene.flat
     lt = scene.light
     if lt.shape == "rect":
-        ldesc = (f"rect {np.linalg.norm(lt.u):.3g} x {np.linalg.norm(lt.v):.3g} at "
-                 f"({', '.join(f'{c:.3g}' for c in lt.center)}), facing ({', '.join(f'{c:.2g}' for c in lt.normal)})")
+        ldesc = (
+            f"rect {np.linalg.norm(lt.u):.3g} x {np.linalg.norm(lt.v):.3g} at "
+            f"({', '.join(f'{c:.3g}' for c in lt.center)}), facing ({', '.join(f'{c:.2g}' for c in lt.normal)})"
+        )
     else:
         ldesc = f"sphere radius {lt.radius:.3g} at ({', '.join(f'{c:.3g}' for c in lt.center)})"
     cam = scene.camera
@@ -150,8 +155,10 @@ def scene_info(scene, width, height) -> dict:
         "receiver_triangles": int(flat.receiver.sum()),
         "meshes": ", ".join(f"{m.name} ({m.role}, {len(m.faces)})" for m in scene.meshes),
         "light": ldesc,
-        "camera": (f"eye ({', '.join(f'{c:.3g}' for c in cam.eye)}), target "
-                   f"({', '.join(f'{c:.3g}' for c in cam.target)}), fov_y {cam.fov_y:g}"),
+        "camera": (
+            f"eye ({', '.join(f'{c:.3g}' for c in cam.eye)}), target "
+            f"({', '.join(f'{c:.3g}' for c in cam.target)}), fov_y {cam.fov_y:g}"
+        ),
     }
 
 
@@ -171,10 +178,21 @@ def _write(path, data: bytes) -> None:
 
 
 # ---- the comparison ---------------------------------------------------------------------------
-def compare(scene=DEFAULT_SCENE, methods="all", width: int = DEFAULT_SIZE[0], height: int = DEFAULT_SIZE[1],
-            out_dir=DEFAULT_OUT, params_by_method: dict | None = None, gt_samples: int = DEFAULT_GT_SAMPLES,
-            *, light: str | None = None, seed: int = 0, progress: bool = False, verbose: bool = False,
-            command: str | None = None) -> dict:
+def compare(
+    scene=DEFAULT_SCENE,
+    methods="all",
+    width: int = DEFAULT_SIZE[0],
+    height: int = DEFAULT_SIZE[1],
+    out_dir=DEFAULT_OUT,
+    params_by_method: dict | None = None,
+    gt_samples: int = DEFAULT_GT_SAMPLES,
+    *,
+    light: str | None = None,
+    seed: int = 0,
+    progress: bool = False,
+    verbose: bool = False,
+    command: str | None = None,
+) -> dict:
     """Render ``ground-truth`` (``gt_samples`` light samples) once and each of ``methods``
     (``"all"``, ``"a,b"`` or a list) on ``scene`` (a Scene, built-in name or file; ``light``
     swaps its light shape) at ``width`` x ``height``; write images, heat maps, ``grid.png``,
@@ -195,8 +213,9 @@ def compare(scene=DEFAULT_SCENE, methods="all", width: int = DEFAULT_SIZE[0], he
     params_by_method = {k: dict(v) for k, v in (params_by_method or {}).items()}
     for m in params_by_method:
         if m != REFERENCE and m not in names and m not in skipped:
-            raise SoftShadowsError(f"--set names method '{m}', which is not being compared "
-                                   f"(methods: {', '.join(names) or '(none)'})")
+            raise SoftShadowsError(
+                f"--set names method '{m}', which is not being compared (methods: {', '.join(names) or '(none)'})"
+            )
     # validate every parameter before the long renders start
     resolved = {}
     for m in [REFERENCE] + names:
@@ -211,7 +230,9 @@ def compare(scene=DEFAULT_SCENE, methods="all", width: int = DEFAULT_SIZE[0], he
             print(msg, file=sys.stderr, flush=True)
 
     t_start = time.perf_counter()
-    say(f"{sc.name} ({sc.light.shape} light) {width}x{height}: ground truth, {resolved[REFERENCE]['samples']} samples ...")
+    say(
+        f"{sc.name} ({sc.light.shape} light) {width}x{height}: ground truth, {resolved[REFERENCE]['samples']} samples ..."
+    )
     gt = render(sc, REFERENCE, width, height, seed=seed, progress=progress, **resolved[REFERENCE])
     results, failed = {}, {}
     for m in names:
@@ -223,7 +244,7 @@ def compare(scene=DEFAULT_SCENE, methods="all", width: int = DEFAULT_SIZE[0], he
             results[m] = render(sc, m, width, height, seed=seed, **resolved[m])
         except SoftShadowsError:
             raise
-        except Exception as exc:  # noqa: BLE001 - one broken method must not hide the others
+        except Exception as exc:
             failed[m] = f"{type(exc).__name__}: {exc}"
             print(f"softshadows: warning: method '{m}' failed: {failed[m]}", file=sys.stderr)
             if verbose:
@@ -252,9 +273,15 @@ def compare(scene=DEFAULT_SCENE, methods="all", width: int = DEFAULT_SIZE[0], he
         if err is not None:
             e_png = error_heatmap(err, limit, out(f"{name}_error.png"), title=f"{name}: V - V_ref")
             e_raw = _png_bytes(error_rgb(err, limit))
-        return {"name": name, "params": r.params, "timings": r.timings, "stats": jsonable(r.stats),
-                "images": {"image": img_png, "v": v_png, "error": e_png, "error_raw": e_raw},
-                "img8": img8, "v8": v8}
+        return {
+            "name": name,
+            "params": r.params,
+            "timings": r.timings,
+            "stats": jsonable(r.stats),
+            "images": {"image": img_png, "v": v_png, "error": e_png, "error_raw": e_raw},
+            "img8": img8,
+            "v8": v8,
+        }
 
     ref_entry = entry(REFERENCE, gt, None)
     entries = []
@@ -266,15 +293,28 @@ def compare(scene=DEFAULT_SCENE, methods="all", width: int = DEFAULT_SIZE[0], he
     gmeth = get_method(REFERENCE)
     ref_entry.update(summary=gmeth.summary, paper=gmeth.paper)
 
-    rows = [{"label": REFERENCE, "image": ref_entry["img8"], "v": ref_entry["v8"], "error": None,
-             "caption": f"{gt.timings['total'] * 1e3:.0f} ms, {resolved[REFERENCE]['samples']} samples"}]
+    rows = [
+        {
+            "label": REFERENCE,
+            "image": ref_entry["img8"],
+            "v": ref_entry["v8"],
+            "error": None,
+            "caption": f"{gt.timings['total'] * 1e3:.0f} ms, {resolved[REFERENCE]['samples']} samples",
+        }
+    ]
     for e in entries:
         mt = e["metrics"]
-        rows.append({"label": e["name"], "image": e["img8"], "v": e["v8"], "error": errors[e["name"]],
-                     "caption": f"{e['timings']['total'] * 1e3:.0f} ms",
-                     "error_caption": f"MAE {mt['mae']:.4f}  ssm {mt['ssm_error']:.4f}  FLIP {mt.get('flip', float('nan')):.3f}"})
-    grid_png = grid_image(rows, limit, out("grid.png"),
-                          title=f"{sc.name}, {sc.light.shape} light, {width}x{height}")
+        rows.append(
+            {
+                "label": e["name"],
+                "image": e["img8"],
+                "v": e["v8"],
+                "error": errors[e["name"]],
+                "caption": f"{e['timings']['total'] * 1e3:.0f} ms",
+                "error_caption": f"MAE {mt['mae']:.4f}  ssm {mt['ssm_error']:.4f}  FLIP {mt.get('flip', float('nan')):.3f}",
+            }
+        )
+    grid_png = grid_image(rows, limit, out("grid.png"), title=f"{sc.name}, {sc.light.shape} light, {width}x{height}")
 
     notes = [f"skipped {m}: {why}" for m, why in skipped.items()]
     info = scene_info(sc, width, height)
@@ -282,8 +322,10 @@ def compare(scene=DEFAULT_SCENE, methods="all", width: int = DEFAULT_SIZE[0], he
     doc = {
         "scene": info,
         "reference": {"method": REFERENCE, "params": gt.params, "timings": gt.timings, "stats": jsonable(gt.stats)},
-        "methods": {e["name"]: {"metrics": e["metrics"], "timings": e["timings"], "params": e["params"],
-                                "stats": e["stats"]} for e in entries},
+        "methods": {
+            e["name"]: {"metrics": e["metrics"], "timings": e["timings"], "params": e["params"], "stats": e["stats"]}
+            for e in entries
+        },
         "skipped": skipped,
         "failed": failed,
         "error_limit": limit,
@@ -295,8 +337,15 @@ def compare(scene=DEFAULT_SCENE, methods="all", width: int = DEFAULT_SIZE[0], he
         json.dump(jsonable(doc), fh, indent=2)
     ctx = {
         "title": f"softshadows: {sc.name} ({sc.light.shape} light), {len(entries)} method(s) vs ground truth",
-        "scene": info, "reference": ref_entry, "methods": entries, "grid": grid_png, "notes": notes,
-        "failed": failed, "error_limit": limit, "machine": machine, "command": command,
+        "scene": info,
+        "reference": ref_entry,
+        "methods": entries,
+        "grid": grid_png,
+        "notes": notes,
+        "failed": failed,
+        "error_limit": limit,
+        "machine": machine,
+        "command": command,
         "colorbar": colorbar_png(limit),
         "created": time.strftime("%Y-%m-%d %H:%M:%S"),
     }
@@ -322,14 +371,27 @@ def _cmd_compare(args) -> int:
     sets = parse_method_sets(args.set)
     argv = ["softshadows", "compare"] + list(getattr(args, "_argv", []) or [])
     t0 = time.perf_counter()
-    res = compare(args.scene, args.methods, w, h, args.output, sets, args.samples, light=args.light,
-                  seed=args.seed, progress=not args.quiet, verbose=not args.quiet,
-                  command=" ".join(argv) if len(argv) > 2 else None)
+    res = compare(
+        args.scene,
+        args.methods,
+        w,
+        h,
+        args.output,
+        sets,
+        args.samples,
+        light=args.light,
+        seed=args.seed,
+        progress=not args.quiet,
+        verbose=not args.quiet,
+        command=" ".join(argv) if len(argv) > 2 else None,
+    )
     if not args.quiet:
         print(f"{'method':<22}{'MAE':>9}{'ssm':>9}{'bias':>9}{'FLIP':>8}{'ms':>10}")
         for m, mt in res["metrics"].items():
-            print(f"{m:<22}{mt['mae']:9.4f}{mt['ssm_error']:9.4f}{mt['bias']:9.4f}{mt.get('flip', float('nan')):8.4f}"
-                  f"{res['timings'][m]['total'] * 1e3:10.1f}")
+            print(
+                f"{m:<22}{mt['mae']:9.4f}{mt['ssm_error']:9.4f}{mt['bias']:9.4f}{mt.get('flip', float('nan')):8.4f}"
+                f"{res['timings'][m]['total'] * 1e3:10.1f}"
+            )
         for m, why in res["skipped"].items():
             print(f"skipped {m}: {why}")
         print(f"done in {time.perf_counter() - t0:.1f} s")
@@ -339,16 +401,25 @@ def _cmd_compare(args) -> int:
 
 def register_cli(subparsers) -> None:
     p = subparsers.add_parser(
-        "compare", help="ground truth + methods side by side: images, error maps, metrics, report.html",
+        "compare",
+        help="ground truth + methods side by side: images, error maps, metrics, report.html",
         description="Render ground truth once and each method; write images, signed-error heat maps, "
-                    "grid.png, metrics.json and a self-contained report.html.")
-    p.add_argument("scene", nargs="?", default=DEFAULT_SCENE, help=f"built-in name, TOML scene or mesh file (default {DEFAULT_SCENE})")
+        "grid.png, metrics.json and a self-contained report.html.",
+    )
+    p.add_argument(
+        "scene",
+        nargs="?",
+        default=DEFAULT_SCENE,
+        help=f"built-in name, TOML scene or mesh file (default {DEFAULT_SCENE})",
+    )
     p.add_argument("--methods", default="all", help="'all' (default) or a comma-separated list")
     p.add_argument("--size", default=f"{DEFAULT_SIZE[0]}x{DEFAULT_SIZE[1]}", help="WxH (default %(default)s)")
     p.add_argument("--light", choices=("rect", "sphere"), default=None, help="swap in this light shape")
     p.add_argument("-o", "--output", default=DEFAULT_OUT, help="output directory (default %(default)s)")
     p.add_argument("--set", action="append", metavar="METHOD.KEY=VALUE", help="method parameter (repeatable)")
-    p.add_argument("--samples", type=int, default=DEFAULT_GT_SAMPLES, help="ground-truth light samples per pixel (N x N)")
+    p.add_argument(
+        "--samples", type=int, default=DEFAULT_GT_SAMPLES, help="ground-truth light samples per pixel (N x N)"
+    )
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("-q", "--quiet", action="store_true")
     p.set_defaults(func=_cmd_compare)

@@ -23,6 +23,7 @@ Every metric ignores background pixels (NaN in V_ref, i.e. no surface). Errors a
 default, up to 1000 still resolves), so eps below 1/N makes "umbra" mean *no* sample reaches the
 light and "lit" mean *every* sample does, while absorbing float32 rounding.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -71,12 +72,13 @@ def flip_error(image, image_ref, mask=None) -> float:
 
     from .shading import to_srgb8
 
-    test = (to_srgb8(np.asarray(image, np.float32)).astype(np.float32) / 255.0)
-    ref = (to_srgb8(np.asarray(image_ref, np.float32)).astype(np.float32) / 255.0)
+    test = to_srgb8(np.asarray(image, np.float32)).astype(np.float32) / 255.0
+    ref = to_srgb8(np.asarray(image_ref, np.float32)).astype(np.float32) / 255.0
     if test.shape != ref.shape:
         raise ValueError(f"shape mismatch: image {test.shape} vs image_ref {ref.shape}")
-    fmap, _, _ = flip_evaluator.evaluate(np.ascontiguousarray(ref), np.ascontiguousarray(test), "LDR",
-                                         applyMagma=False, computeMeanError=False)
+    fmap, _, _ = flip_evaluator.evaluate(
+        np.ascontiguousarray(ref), np.ascontiguousarray(test), "LDR", applyMagma=False, computeMeanError=False
+    )
     fmap = np.asarray(fmap, np.float64)
     if fmap.ndim == 3:
         fmap = fmap[..., 0]

@@ -6,6 +6,7 @@ Unshadowed direct light at p with normal n, from the light's center c:
 with l = (c - p)/r. Normals are flipped to face the eye (two-sided surfaces). Ground truth's
 ``physical`` mode supplies its own per-pixel irradiance instead (the full area integral).
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -47,9 +48,21 @@ def shade(scene, gbuf, visibility: np.ndarray, shadowed: np.ndarray | None = Non
     pix_albedo = flat.albedo[flat.mesh_id].astype(np.float32)  # per triangle
     use_shadowed = shadowed is not None
     sh = np.asarray(shadowed, np.float64) if use_shadowed else np.zeros((1, 1))
-    return _shade_kernel(gbuf.position, gbuf.normal, gbuf.tri_id, visibility, pix_albedo,
-                         np.asarray(light.center, np.float64), ln, rect, light.intensity * _exposure(scene),
-                         np.asarray(scene.camera.eye, np.float64), AMBIENT, use_shadowed, sh)
+    return _shade_kernel(
+        gbuf.position,
+        gbuf.normal,
+        gbuf.tri_id,
+        visibility,
+        pix_albedo,
+        np.asarray(light.center, np.float64),
+        ln,
+        rect,
+        light.intensity * _exposure(scene),
+        np.asarray(scene.camera.eye, np.float64),
+        AMBIENT,
+        use_shadowed,
+        sh,
+    )
 
 
 @njit(parallel=True, cache=True)
@@ -93,7 +106,7 @@ def _shade_kernel(position, normal, tri_id, vis, tri_albedo, c, ln, rect, scale,
 def _exposure(scene) -> float:
     """Scale so that a receiver straight below the light reads about 1 (scene-independent look):
     the light's height above the lowest point, squared, over its intensity."""
-    lo, hi = scene.bounds()
+    lo, _hi = scene.bounds()
     ground_y = lo[1]
     h = max(scene.light.center[1] - ground_y, 1e-6)
     return h * h / scene.light.intensity if scene.light.intensity > 0 else 1.0

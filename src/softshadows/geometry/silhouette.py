@@ -29,6 +29,7 @@ identity) so that repeated frames of the same geometry pay the build once.
 The functions are vectorized numpy or Numba and take plain arrays: ``vertices`` (V,3) float64,
 ``faces`` (F,3) int64, ``point`` (3,).
 """
+
 from __future__ import annotations
 
 import weakref
@@ -39,8 +40,16 @@ from numba import njit
 
 from ..errors import SoftShadowsError
 
-__all__ = ["EdgeAdjacency", "Silhouette", "build_adjacency", "facing", "find_silhouette",
-           "silhouette_adjacency", "silhouette_brute", "weld_vertices"]
+__all__ = [
+    "EdgeAdjacency",
+    "Silhouette",
+    "build_adjacency",
+    "facing",
+    "find_silhouette",
+    "silhouette_adjacency",
+    "silhouette_brute",
+    "weld_vertices",
+]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -137,8 +146,6 @@ def weld_vertices(vertices: np.ndarray) -> np.ndarray:
     return _weld_kernel(bits)
 
 
-
-
 @njit(cache=True)
 def _mix(a, b, c):
     h = a * np.int64(-7046029254386353131) + b
@@ -229,8 +236,9 @@ def _face_planes(vertices, faces) -> tuple[np.ndarray, np.ndarray]:
 
 def _facing_from_planes(normals, anchors, point) -> np.ndarray:
     p = np.asarray(point, dtype=np.float64).reshape(3)
-    return _facing_planes_kernel(np.ascontiguousarray(normals, dtype=np.float64),
-                                 np.ascontiguousarray(anchors, dtype=np.float64), p)
+    return _facing_planes_kernel(
+        np.ascontiguousarray(normals, dtype=np.float64), np.ascontiguousarray(anchors, dtype=np.float64), p
+    )
 
 
 @njit(cache=True, inline="always")
@@ -261,15 +269,19 @@ def _facing_kernel(v, faces, p):
         e2x = v[k, 0] - v[i, 0]
         e2y = v[k, 1] - v[i, 1]
         e2z = v[k, 2] - v[i, 2]
-        out[f] = _facing_one(e1y * e2z - e1z * e2y, e1z * e2x - e1x * e2z, e1x * e2y - e1y * e2x,
-                             v[i, 0], v[i, 1], v[i, 2], p)
+        out[f] = _facing_one(
+            e1y * e2z - e1z * e2y, e1z * e2x - e1x * e2z, e1x * e2y - e1y * e2x, v[i, 0], v[i, 1], v[i, 2], p
+        )
     return out
 
 
 def facing(vertices: np.ndarray, faces: np.ndarray, point) -> np.ndarray:
     """(F,) bool: triangle faces ``point`` (``((b-a) x (c-a)) . (point - a) > 0``)."""
-    return _facing_kernel(np.ascontiguousarray(vertices, dtype=np.float64), np.ascontiguousarray(faces, np.int64),
-                          np.asarray(point, dtype=np.float64).reshape(3))
+    return _facing_kernel(
+        np.ascontiguousarray(vertices, dtype=np.float64),
+        np.ascontiguousarray(faces, np.int64),
+        np.asarray(point, dtype=np.float64).reshape(3),
+    )
 
 
 def _edge_keys(rep, faces):
@@ -286,9 +298,14 @@ def _finish(edges, edge_faces, boundary, point) -> Silhouette:
         verts, deg = np.unique(edges.ravel(), return_counts=True)
     else:
         verts, deg = np.zeros(0, np.int64), np.zeros(0, np.int64)
-    return Silhouette(edges.astype(np.int64).reshape(-1, 2), edge_faces.astype(np.int64).reshape(-1, 2),
-                      boundary.astype(bool), verts.astype(np.int64), deg.astype(np.int64),
-                      np.asarray(point, np.float64).reshape(3).copy())
+    return Silhouette(
+        edges.astype(np.int64).reshape(-1, 2),
+        edge_faces.astype(np.int64).reshape(-1, 2),
+        boundary.astype(bool),
+        verts.astype(np.int64),
+        deg.astype(np.int64),
+        np.asarray(point, np.float64).reshape(3).copy(),
+    )
 
 
 # ---------------------------------------------------------------------------------------------
@@ -353,7 +370,7 @@ def silhouette_adjacency(adj: EdgeAdjacency, point) -> Silhouette:
     back = np.where(~fr[f0], f0, np.where(~fr[f1], f1, -1))
     # non-manifold edges (>2 faces): the first facing / last non-facing face, as the brute path
     for j in np.flatnonzero(c > 2):
-        grp = adj.edge_faces[s[j]:s[j] + c[j]]
+        grp = adj.edge_faces[s[j] : s[j] + c[j]]
         fg = fr[grp]
         front[j] = grp[fg][0] if fg.any() else -1
         back[j] = grp[~fg][-1] if (~fg).any() else -1
@@ -384,8 +401,9 @@ def cached_adjacency(vertices: np.ndarray, faces: np.ndarray) -> tuple[EdgeAdjac
     return adj, True
 
 
-def find_silhouette(vertices: np.ndarray, faces: np.ndarray, point, method: str = "adjacency",
-                    adjacency: EdgeAdjacency | None = None) -> Silhouette:
+def find_silhouette(
+    vertices: np.ndarray, faces: np.ndarray, point, method: str = "adjacency", adjacency: EdgeAdjacency | None = None
+) -> Silhouette:
     """Silhouette of ``(vertices, faces)`` seen from ``point``; ``method`` is ``brute`` or
     ``adjacency`` (uses ``adjacency`` if given, else a cached one for these arrays)."""
     if method == "brute":

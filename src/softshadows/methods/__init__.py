@@ -1,4 +1,5 @@
 """Soft-shadow methods, one module each, registered by name (see base.py)."""
+
 from __future__ import annotations
 
 import importlib

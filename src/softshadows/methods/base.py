@@ -5,6 +5,7 @@ parameters (:class:`Param`, with the paper's defaults) and ``run(ctx, **params)`
 :class:`MethodOutput` with V per eye pixel. :func:`softshadows.render` builds the eye G-buffer,
 calls the method, shades, and times every phase.
 """
+
 from __future__ import annotations
 
 import time
@@ -13,7 +14,6 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-
 from numba import njit, prange
 
 from ..errors import SoftShadowsError
@@ -106,10 +106,12 @@ class Param:
                 v = t(value)
         except (TypeError, ValueError):
             raise SoftShadowsError(
-                f"method '{method}': parameter '{self.name}' expects {t.__name__}, got {value!r}") from None
+                f"method '{method}': parameter '{self.name}' expects {t.__name__}, got {value!r}"
+            ) from None
         if self.choices is not None and v not in self.choices:
             raise SoftShadowsError(
-                f"method '{method}': parameter '{self.name}' must be one of {', '.join(map(str, self.choices))}, got {v!r}")
+                f"method '{method}': parameter '{self.name}' must be one of {', '.join(map(str, self.choices))}, got {v!r}"
+            )
         if self.min is not None and v < self.min:
             raise SoftShadowsError(f"method '{method}': parameter '{self.name}' must be >= {self.min}, got {v!r}")
         if self.max is not None and v > self.max:
@@ -162,8 +164,9 @@ class FrameContext:
         """(positions (K,3) f64, unit normals turned toward the eye (K,3) f64, flat pixel indices
         (K,) i64) of the eye pixels with a surface, in row-major order. Computed once per frame."""
         if "points" not in self.cache:
-            self.cache["points"] = gather_points(self.eye.position, self.eye.normal, self.eye.mask,
-                                                 np.asarray(self.scene.camera.eye, np.float64))
+            self.cache["points"] = gather_points(
+                self.eye.position, self.eye.normal, self.eye.mask, np.asarray(self.scene.camera.eye, np.float64)
+            )
         return self.cache["points"]
 
 
@@ -196,7 +199,8 @@ class Method:
     def check_light(self, light) -> None:
         if light.shape not in self.light_shapes:
             raise SoftShadowsError(
-                f"method '{self.name}' supports {' and '.join(self.light_shapes)} lights, not '{light.shape}'")
+                f"method '{self.name}' supports {' and '.join(self.light_shapes)} lights, not '{light.shape}'"
+            )
 
 
 _REGISTRY: dict[str, Method] = {}
@@ -212,7 +216,7 @@ def register(cls):
 
 
 def get_method(name: str) -> Method:
-    from . import _load_all  # noqa: F401  (registers built-in methods)
+    from . import _load_all
 
     _load_all()
     if name not in _REGISTRY:

@@ -20,6 +20,7 @@ Speed: Embree's ``run`` (embreex) is single-threaded and holds the GIL; ray gene
 reduction are Numba ``nogil`` kernels run in a worker thread, overlapped with tracing
 (:func:`trace_in_pipeline`), so the method runs at close to raw Embree throughput.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -34,7 +35,7 @@ CHUNK_RAYS = 1 << 20
 
 def build_embree_scene(vertices: np.ndarray, faces: np.ndarray):
     """An Embree scene of the given triangles (float32)."""
-    from embreex import rtcore_scene, mesh_construction
+    from embreex import mesh_construction, rtcore_scene
 
     sc = rtcore_scene.EmbreeScene()
     tris = np.ascontiguousarray(vertices[faces], dtype=np.float32)
@@ -185,8 +186,23 @@ def trace_in_pipeline(esc, pts, nrm, pix, eps, seed, n_side, light, vis, irr, pr
         dirs = np.empty((m * S, 3), np.float32)
         dist = np.empty(m * S, np.float32)
         geo = np.empty(m * S, np.float32)
-        generate_light_rays(pts[start:stop], nrm[start:stop], pix[start:stop], eps, seed, n_side, shape,
-                            center, u, v, radius, org, dirs, dist, geo)
+        generate_light_rays(
+            pts[start:stop],
+            nrm[start:stop],
+            pix[start:stop],
+            eps,
+            seed,
+            n_side,
+            shape,
+            center,
+            u,
+            v,
+            radius,
+            org,
+            dirs,
+            dist,
+            geo,
+        )
         times["gen"] += time.perf_counter() - t0
         return org, dirs, dist, geo
 
@@ -242,7 +258,9 @@ class GroundTruth(Method):
     def run(self, ctx, samples, physical, offset):
         n_side = int(round(np.sqrt(samples)))
         if n_side * n_side != samples:
-            raise SoftShadowsError(f"method 'ground-truth': samples must be a perfect square (N x N strata), got {samples}")
+            raise SoftShadowsError(
+                f"method 'ground-truth': samples must be a perfect square (N x N strata), got {samples}"
+            )
         scene = ctx.scene
         pts, nrm, idx = ctx.points()
         lo, hi = scene.bounds()
@@ -253,17 +271,25 @@ class GroundTruth(Method):
         K = len(pts)
         vis = np.zeros(K, np.float32)
         irr = np.zeros(K, np.float64)
-        trace_t, gen_t, red_t, wall = trace_in_pipeline(esc, pts, nrm, idx, eps, ctx.seed, n_side, scene.light,
-                                                  vis, irr, progress=ctx.progress)
+        trace_t, gen_t, red_t, wall = trace_in_pipeline(
+            esc, pts, nrm, idx, eps, ctx.seed, n_side, scene.light, vis, irr, progress=ctx.progress
+        )
         # generation and reduction overlap tracing: the phase is their wall time; parts go to stats
         ctx.timer.times["rays"] = ctx.timer.times.get("rays", 0.0) + wall
         t_trace = wall
         H, W = ctx.eye.mask.shape
         out = np.ones(H * W, np.float32)
         out[idx] = vis
-        stats = {"samples": S, "rays": int(K * S), "points": int(K), "eps": eps,
-                 "rays_per_second": float(K * S / t_trace) if t_trace > 0 else float("nan"),
-                 "trace_seconds": trace_t, "ray_generation_seconds": gen_t, "reduce_seconds": red_t}
+        stats = {
+            "samples": S,
+            "rays": int(K * S),
+            "points": int(K),
+            "eps": eps,
+            "rays_per_second": float(K * S / t_trace) if t_trace > 0 else float("nan"),
+            "trace_seconds": trace_t,
+            "ray_generation_seconds": gen_t,
+            "reduce_seconds": red_t,
+        }
         if physical:
             radiance = scene.light.intensity / scene.light.area
             e = np.full(H * W, np.nan)

@@ -6,6 +6,7 @@ map and compare depths with constant + slope-scaled bias (in texels, see ``shado
 optional percentage-closer filtering over (2*pcf+1)^2 texels. V is 0 or 1 (fractional with PCF):
 a point light at the area light's center, for either light shape.
 """
+
 from __future__ import annotations
 
 from .base import Method, MethodOutput, Param, register

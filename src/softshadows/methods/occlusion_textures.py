@@ -90,6 +90,7 @@ several slices is counted once per slice and the product (which assumes independ
 its shadow too dark, more so with the leak fix; very fine occluders are
 over- or under-estimated at texel level; the combination assumes uncorrelated occluders.
 """
+
 from __future__ import annotations
 
 import math
@@ -146,8 +147,9 @@ class SlicingSetup:
         """Flat float64 array for kernels: origin(3) right(3) up(3) forward(3) hu hv d l r b t W H."""
         o, r, u, f = self.frame
         l, rr, b, t = self.view.window
-        return np.concatenate([o, r, u, f, [self.half[0], self.half[1], self.d, l, rr, b, t,
-                                            self.view.width, self.view.height]]).astype(np.float64)
+        return np.concatenate(
+            [o, r, u, f, [self.half[0], self.half[1], self.d, l, rr, b, t, self.view.width, self.view.height]]
+        ).astype(np.float64)
 
 
 def light_rect_frame(light):
@@ -208,8 +210,9 @@ def fit_cop_distance(dmax: float, zmax: float, light_size: float) -> float:
     return max(d * 0.98, 0.02 * light_size)
 
 
-def fit_slicing_view(light, occluder_points, fit_points, size: int, slices: int,
-                     cop_distance: float = 0.0) -> SlicingSetup:
+def fit_slicing_view(
+    light, occluder_points, fit_points, size: int, slices: int, cop_distance: float = 0.0
+) -> SlicingSetup:
     """The slicing camera of Sec. 3.4 / Fig. 4-5: COP at distance d behind the light centre, frustum
     fitted to the light (its section at the light plane is the light), d chosen so the frustum
     contains the scene (``fit_points``: occluders and shaded points). Slice planes split the
@@ -298,9 +301,14 @@ def slice_scene(setup: SlicingSetup, vertices, faces, leak_fix: bool = False):
     if len(faces) == 0:
         return tex, 0
     frags = rasterize_fragments(v, vertices, faces, cull="none")
-    _mark_occlusion_textures(np.ascontiguousarray(frags.pixel, dtype=np.int64),
-                             np.ascontiguousarray(frags.depth, dtype=np.float64), float(setup.d),
-                             setup.z_planes, bool(leak_fix), tex)
+    _mark_occlusion_textures(
+        np.ascontiguousarray(frags.pixel, dtype=np.int64),
+        np.ascontiguousarray(frags.depth, dtype=np.float64),
+        float(setup.d),
+        setup.z_planes,
+        bool(leak_fix),
+        tex,
+    )
     return tex, len(frags)
 
 
@@ -337,14 +345,16 @@ def _mip_reduce(pyr, src_off, src_h, src_w, dst_off, dst_h, dst_w):
         i = job - s * dst_h
         for j in range(dst_w):
             a = src_off + (2 * i) * src_w + 2 * j
-            pyr[s, dst_off + i * dst_w + j] = 0.25 * (pyr[s, a] + pyr[s, a + 1] + pyr[s, a + src_w] + pyr[s, a + src_w + 1])
+            pyr[s, dst_off + i * dst_w + j] = 0.25 * (
+                pyr[s, a] + pyr[s, a + 1] + pyr[s, a + src_w] + pyr[s, a + src_w + 1]
+            )
 
 
 def prefilter_mipmap(tex: np.ndarray):
     """GPU mipmap pyramid (dyadic 2x2 box downsampling) of every texture.
 
     Returns (pyramid float32 (N, total), level offsets int64 (L+1,), level sizes int64 (L+1,))."""
-    n, h, w = tex.shape
+    n, _h, w = tex.shape
     sizes = [w]
     while sizes[-1] > 1:
         sizes.append(sizes[-1] // 2)
@@ -568,8 +578,9 @@ def _nb_box(nb, s, lv, sx, sy):
     jb = min(max(j0 + 1, 0), w - 1)
     ia = min(max(i0, 0), h - 1)
     ib = min(max(i0 + 1, 0), h - 1)
-    return ((1 - fv) * ((1 - fu) * nb[s, lv, ia, ja] + fu * nb[s, lv, ia, jb])
-            + fv * ((1 - fu) * nb[s, lv, ib, ja] + fu * nb[s, lv, ib, jb]))
+    return (1 - fv) * ((1 - fu) * nb[s, lv, ia, ja] + fu * nb[s, lv, ia, jb]) + fv * (
+        (1 - fu) * nb[s, lv, ib, ja] + fu * nb[s, lv, ib, jb]
+    )
 
 
 @njit(cache=True)
@@ -643,8 +654,7 @@ def lookup_sat(sat, s, x0, x1, y0, y1):
         if i < 0 or j < 0 or i >= h or j >= w:
             return 0.0
         return float(sat[s, i + 1, j + 1] - sat[s, i, j + 1] - sat[s, i + 1, j] + sat[s, i, j])
-    v = (_sat_at(sat, s, x1, y1) - _sat_at(sat, s, x0, y1) - _sat_at(sat, s, x1, y0)
-         + _sat_at(sat, s, x0, y0)) / area
+    v = (_sat_at(sat, s, x1, y1) - _sat_at(sat, s, x0, y1) - _sat_at(sat, s, x1, y0) + _sat_at(sat, s, x0, y0)) / area
     return min(max(v, 0.0), 1.0)
 
 
@@ -688,8 +698,9 @@ def slice_weight(pz, z_top, z_low, thick, mode):
 # 6. Eye pass (Sec. 3.5): per point, all slices between it and the light
 # =====================================================================================
 @njit(cache=True, parallel=True)
-def eye_pass(pts, sp, z_planes, slot, bbox, filt, combine, self_mode, max_aniso,
-             pyr, offs, sizes, nb, sat, out, nslot=1):
+def eye_pass(
+    pts, sp, z_planes, slot, bbox, filt, combine, self_mode, max_aniso, pyr, offs, sizes, nb, sat, out, nslot=1
+):
     """V for every point ``pts`` (K,3) world. ``slot[k]`` is the index of slice k in the filtered
     arrays, -1 for an empty slice (skipped: its occlusion is 0). ``bbox[slot]`` = (x0, x1, y0, y1)
     texel bounds of the slice's occupied texels: a kernel whose filter support (the rectangle,
@@ -728,8 +739,9 @@ def eye_pass(pts, sp, z_planes, slot, bbox, filt, combine, self_mode, max_aniso,
                     s = slot[k]
                     if w <= 0.0 or s < 0:
                         continue
-                    x0, x1, y0, y1 = _kernel_rect_fast(px, py, pz, ipz, z_planes[k + 1], sp[12], sp[13],
-                                                       kx[k], ky[k], ox, oy)
+                    x0, x1, y0, y1 = _kernel_rect_fast(
+                        px, py, pz, ipz, z_planes[k + 1], sp[12], sp[13], kx[k], ky[k], ox, oy
+                    )
                     if filt == 0:  # probes inside the rectangle read +-1.5 texels of their upper level
                         m = _mip_support(x0, x1, y0, y1, max_aniso, offs.shape[0])
                     elif filt == 1:  # the larger N-Buffer box is at most twice the short side, +1 bilinear
@@ -789,9 +801,21 @@ def prefilter(tex_used: np.ndarray, filt: str, setup: SlicingSetup | None = None
     return (pyr, offs, sizes, nb, sat), st
 
 
-def occlusion_visibility(light, flat, points, slices=16, texture_size=512, filter="nbuffers",
-                         combine="product", cop_distance=0.0, leak_fix=False, anisotropy=16,
-                         self_shadow="fade", timer=None, scene_bounds=None):
+def occlusion_visibility(
+    light,
+    flat,
+    points,
+    slices=16,
+    texture_size=512,
+    filter="nbuffers",
+    combine="product",
+    cop_distance=0.0,
+    leak_fix=False,
+    anisotropy=16,
+    self_shadow="fade",
+    timer=None,
+    scene_bounds=None,
+):
     """The whole method on arbitrary points: V (K,) float64 and stats. ``flat`` is the scene's
     FlatGeometry (occluders = faces of role both|occluder); ``points`` (K,3) world points to shade
     (they also enter the frustum fit). ``timer`` (optional) gets the phases slicing / prefilter /
@@ -808,11 +832,14 @@ def occlusion_visibility(light, flat, points, slices=16, texture_size=512, filte
         own[name] = time.perf_counter() - t
 
     if filter not in FILTERS or combine not in COMBINES or self_shadow not in SELF_SHADOW:
-        raise SoftShadowsError(f"method 'occlusion-textures': bad filter/combine/self_shadow "
-                               f"({filter!r}, {combine!r}, {self_shadow!r})")
+        raise SoftShadowsError(
+            f"method 'occlusion-textures': bad filter/combine/self_shadow ({filter!r}, {combine!r}, {self_shadow!r})"
+        )
     if int(texture_size) not in TEXTURE_SIZES:
-        raise SoftShadowsError(f"method 'occlusion-textures': parameter 'texture_size' must be one of "
-                               f"{', '.join(map(str, TEXTURE_SIZES))}, got {texture_size!r}")
+        raise SoftShadowsError(
+            f"method 'occlusion-textures': parameter 'texture_size' must be one of "
+            f"{', '.join(map(str, TEXTURE_SIZES))}, got {texture_size!r}"
+        )
     stats: dict = {}
     if light.shape == "sphere":
         from ..scene.types import sphere_to_rect
@@ -842,24 +869,44 @@ def occlusion_visibility(light, flat, points, slices=16, texture_size=512, filte
         vis = np.ones(len(pos), np.float64)
         if len(pos) and len(tex_used):
             pyr, offs, sizes, nb, sat = arrays
-            eye_pass(pos, setup.params(), setup.z_planes, slot, bbox, _FILTER_ID[filter], _COMBINE_ID[combine],
-                     _SELF_ID[self_shadow], int(anisotropy), pyr, offs, sizes, nb, sat, vis, numba.get_num_threads())
+            eye_pass(
+                pos,
+                setup.params(),
+                setup.z_planes,
+                slot,
+                bbox,
+                _FILTER_ID[filter],
+                _COMBINE_ID[combine],
+                _SELF_ID[self_shadow],
+                int(anisotropy),
+                pyr,
+                offs,
+                sizes,
+                nb,
+                sat,
+                vis,
+                numba.get_num_threads(),
+            )
 
     l, r, b, t = setup.view.window
-    stats.update({
-        "slices": int(slices),
-        "slices_used": int(nonempty.sum()),
-        "fragments": int(nfrag),
-        "cop_distance": float(setup.d),
-        "fov_deg": float(np.degrees(2 * np.arctan(max(r - l, t - b) / 2))),
-        "texel_size": [float(setup.view.pixel_size_at(setup.d + setup.z_planes[1])),
-                       float(setup.view.pixel_size_at(setup.d + setup.z_planes[-1]))],
-        "slice_range": [float(setup.z_planes[0]), float(setup.z_planes[-1])],
-        "slicing_s": own["slicing"],
-        "prefilter_s": own["prefilter"],
-        f"prefilter_s_{filter}": own["prefilter"],
-        "eye_pass_s": own["eye_pass"],
-    })
+    stats.update(
+        {
+            "slices": int(slices),
+            "slices_used": int(nonempty.sum()),
+            "fragments": int(nfrag),
+            "cop_distance": float(setup.d),
+            "fov_deg": float(np.degrees(2 * np.arctan(max(r - l, t - b) / 2))),
+            "texel_size": [
+                float(setup.view.pixel_size_at(setup.d + setup.z_planes[1])),
+                float(setup.view.pixel_size_at(setup.d + setup.z_planes[-1])),
+            ],
+            "slice_range": [float(setup.z_planes[0]), float(setup.z_planes[-1])],
+            "slicing_s": own["slicing"],
+            "prefilter_s": own["prefilter"],
+            f"prefilter_s_{filter}": own["prefilter"],
+            "eye_pass_s": own["eye_pass"],
+        }
+    )
     stats.update(pst)
     return vis, stats
 
@@ -868,32 +915,70 @@ def occlusion_visibility(light, flat, points, slices=16, texture_size=512, filte
 class OcclusionTextures(Method):
     name = "occlusion-textures"
     light_shapes = ("rect", "sphere")
-    summary = ("Eisemann & Décoret 2006: scene sliced into binary occlusion textures, prefiltered "
-               "(mipmap / N-Buffers / SAT), box-filtered per slice (Eq. 4) and combined as a product (Eq. 5)")
+    summary = (
+        "Eisemann & Décoret 2006: scene sliced into binary occlusion textures, prefiltered "
+        "(mipmap / N-Buffers / SAT), box-filtered per slice (Eq. 4) and combined as a product (Eq. 5)"
+    )
     paper = "eisemann2006-occlusion-textures"
     params = (
         Param("slices", 16, "number of slices parallel to the light (paper: 4-16)", min=1, max=64),
         Param("texture_size", 512, "occlusion texture resolution (square, power of two)", choices=TEXTURE_SIZES),
-        Param("filter", "nbuffers", "prefilter: mipmap (anisotropic), nbuffers, sat (summed-area table)",
-              choices=FILTERS),
-        Param("combine", "product", "combination of the slices: product (Eq. 5), max, sum (clamped)",
-              choices=COMBINES),
-        Param("cop_distance", 0.0, "distance d of the centre of projection behind the light; 0 = automatic "
-              "(largest d whose frustum fitted to the light contains the scene)", min=0.0),
+        Param(
+            "filter", "nbuffers", "prefilter: mipmap (anisotropic), nbuffers, sat (summed-area table)", choices=FILTERS
+        ),
+        Param("combine", "product", "combination of the slices: product (Eq. 5), max, sum (clamped)", choices=COMBINES),
+        Param(
+            "cop_distance",
+            0.0,
+            "distance d of the centre of projection behind the light; 0 = automatic "
+            "(largest d whose frustum fitted to the light contains the scene)",
+            min=0.0,
+        ),
         Param("leak_fix", False, "light-leak fix for thin occluders: also mark the next slice (Fig. 6)"),
-        Param("anisotropy", 16, "maximum anisotropy (mipmap probes; N-Buffer squares per rectangular kernel)",
-              min=1, max=64),
-        Param("self_shadow", "fade", "slice containing P: fade (paper), skip (hard skip, seams), "
-              "include (self-shadowing, Fig. 7)", choices=SELF_SHADOW),
+        Param(
+            "anisotropy",
+            16,
+            "maximum anisotropy (mipmap probes; N-Buffer squares per rectangular kernel)",
+            min=1,
+            max=64,
+        ),
+        Param(
+            "self_shadow",
+            "fade",
+            "slice containing P: fade (paper), skip (hard skip, seams), include (self-shadowing, Fig. 7)",
+            choices=SELF_SHADOW,
+        ),
     )
 
-    def run(self, ctx, slices=16, texture_size=512, filter="nbuffers", combine="product", cop_distance=0.0,
-            leak_fix=False, anisotropy=16, self_shadow="fade") -> MethodOutput:
+    def run(
+        self,
+        ctx,
+        slices=16,
+        texture_size=512,
+        filter="nbuffers",
+        combine="product",
+        cop_distance=0.0,
+        leak_fix=False,
+        anisotropy=16,
+        self_shadow="fade",
+    ) -> MethodOutput:
         pos, _nrm, idx = ctx.points()
         H, W = ctx.eye.depth.shape
-        vis, stats = occlusion_visibility(ctx.light, ctx.flat, pos, slices, texture_size, filter, combine,
-                                          cop_distance, leak_fix, anisotropy, self_shadow, timer=ctx.timer,
-                                          scene_bounds=ctx.scene.bounds())
+        vis, stats = occlusion_visibility(
+            ctx.light,
+            ctx.flat,
+            pos,
+            slices,
+            texture_size,
+            filter,
+            combine,
+            cop_distance,
+            leak_fix,
+            anisotropy,
+            self_shadow,
+            timer=ctx.timer,
+            scene_bounds=ctx.scene.bounds(),
+        )
         v = np.ones(H * W, np.float32)
         v[idx] = vis.astype(np.float32)
         return MethodOutput(visibility=v.reshape(H, W), stats=stats)

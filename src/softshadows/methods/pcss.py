@@ -81,16 +81,16 @@ Statistics: the search/filter tap counts actually used, the fraction of points t
 early out (no blocker), that were fully blocked in the search, the mean blocker count, the mean
 and max search radius and filter radius (texels) and the mean penumbra width (world units).
 """
+
 from __future__ import annotations
 
 import numba
 import numpy as np
 from numba import njit, prange
 
-from .base import Method, MethodOutput, Param, register
 from ..raster.kernels import view_project, view_ray
+from .base import Method, MethodOutput, Param, register
 from .shadowmap import build_shadow_map, fit_light_view, receiver_offset, scatter
-
 
 # ---- sample patterns --------------------------------------------------------------------------
 _PATTERNS: dict = {}
@@ -183,8 +183,11 @@ def _tap_offset(pattern, i, disk, rot, c, s, shx, shy):
 @njit(cache=True, inline="always")
 def _view_normal(vp, nx, ny, nz):
     """The normal in light-view coordinates (right, up, forward components)."""
-    return (nx * vp[3] + ny * vp[4] + nz * vp[5], nx * vp[6] + ny * vp[7] + nz * vp[8],
-            nx * vp[9] + ny * vp[10] + nz * vp[11])
+    return (
+        nx * vp[3] + ny * vp[4] + nz * vp[5],
+        nx * vp[6] + ny * vp[7] + nz * vp[8],
+        nx * vp[9] + ny * vp[10] + nz * vp[11],
+    )
 
 
 @njit(cache=True, inline="always")
@@ -235,8 +238,26 @@ def _cmp_nearest(depth, sx, sy, zt):
 
 
 @njit(parallel=True, cache=True)
-def blocker_search_kernel(vp, depth_map, pts, nrm, bias, slope_bias, half_light, z_near,
-                          pattern, disk, rotate, seed, plane, zr_out, avg_out, nblk_out, search_out, nslot=1):
+def blocker_search_kernel(
+    vp,
+    depth_map,
+    pts,
+    nrm,
+    bias,
+    slope_bias,
+    half_light,
+    z_near,
+    pattern,
+    disk,
+    rotate,
+    seed,
+    plane,
+    zr_out,
+    avg_out,
+    nblk_out,
+    search_out,
+    nslot=1,
+):
     """Step 1. Per point: receiver depth (minus bias), average blocker depth and blocker count
     over the search region (point-sampled taps). ``half_light`` = (half size x, half size y) of
     the light in world units, along the map's right/up axes."""
@@ -255,14 +276,18 @@ def blocker_search_kernel(vp, depth_map, pts, nrm, bias, slope_bias, half_light,
                     nblk_out[k] = 0
                     search_out[k] = 0.0
                     continue
-                off = receiver_offset(vp, pts[k, 0], pts[k, 1], pts[k, 2], nrm[k, 0], nrm[k, 1], nrm[k, 2],
-                                      z, bias, slope_bias)
+                off = receiver_offset(
+                    vp, pts[k, 0], pts[k, 1], pts[k, 2], nrm[k, 0], nrm[k, 1], nrm[k, 2], z, bias, slope_bias
+                )
                 zt = z - off
                 nr, nu, nf = _view_normal(vp, nrm[k, 0], nrm[k, 1], nrm[k, 2])
                 npo = nr * 0.0
                 if plane:  # n.(p - o) in view coordinates: receiver plane through p
-                    npo = (nrm[k, 0] * (pts[k, 0] - vp[0]) + nrm[k, 1] * (pts[k, 1] - vp[1])
-                           + nrm[k, 2] * (pts[k, 2] - vp[2]))
+                    npo = (
+                        nrm[k, 0] * (pts[k, 0] - vp[0])
+                        + nrm[k, 1] * (pts[k, 1] - vp[1])
+                        + nrm[k, 2] * (pts[k, 2] - vp[2])
+                    )
                 # similar triangles: the light seen from p, cut at depth z_near, in map texels
                 f = (z - z_near) / (z * z_near) / texel1
                 rx = half_light[0] * f
@@ -311,8 +336,26 @@ def penumbra_estimation(z_receiver, z_blocker, w_light):
 
 
 @njit(parallel=True, cache=True)
-def filtering_kernel(vp, depth_map, pts, nrm, zr, avg, nblk, light_w, pattern, disk, rotate, seed, bilinear,
-                     plane, out, wp_out, radius_out, nslot=1):
+def filtering_kernel(
+    vp,
+    depth_map,
+    pts,
+    nrm,
+    zr,
+    avg,
+    nblk,
+    light_w,
+    pattern,
+    disk,
+    rotate,
+    seed,
+    bilinear,
+    plane,
+    out,
+    wp_out,
+    radius_out,
+    nslot=1,
+):
     """Steps 2 and 3 per point: penumbra estimation, then percentage-closer filtering with a
     kernel of radius w / 2 (per light axis) in texels at the receiver's depth."""
     n = pts.shape[0]
@@ -337,8 +380,9 @@ def filtering_kernel(vp, depth_map, pts, nrm, zr, avg, nblk, light_w, pattern, d
                 zt = zr[k]
                 off = z - zt
                 nr, nu, nf = _view_normal(vp, nrm[k, 0], nrm[k, 1], nrm[k, 2])
-                npo = (nrm[k, 0] * (pts[k, 0] - vp[0]) + nrm[k, 1] * (pts[k, 1] - vp[1])
-                       + nrm[k, 2] * (pts[k, 2] - vp[2]))
+                npo = (
+                    nrm[k, 0] * (pts[k, 0] - vp[0]) + nrm[k, 1] * (pts[k, 1] - vp[1]) + nrm[k, 2] * (pts[k, 2] - vp[2])
+                )
                 c = 1.0
                 s = 0.0
                 shx = 0.0
@@ -384,9 +428,26 @@ def blocker_search(smap, pts, nrm, light, bias, slope_bias, pattern, disk, rotat
     if not np.isfinite(z_near):
         z_near = float(smap.view.near)
     z_near = max(z_near, 1e-9)
-    blocker_search_kernel(smap.vp, smap.depth, pts, nrm, float(bias), float(slope_bias),
-                          0.5 * light_extent(light), z_near, pattern, disk, rotate, int(seed),
-                          bool(plane), zr, avg, nblk, search, numba.get_num_threads())
+    blocker_search_kernel(
+        smap.vp,
+        smap.depth,
+        pts,
+        nrm,
+        float(bias),
+        float(slope_bias),
+        0.5 * light_extent(light),
+        z_near,
+        pattern,
+        disk,
+        rotate,
+        int(seed),
+        bool(plane),
+        zr,
+        avg,
+        nblk,
+        search,
+        numba.get_num_threads(),
+    )
     return zr, avg, nblk, search
 
 
@@ -397,8 +458,26 @@ def filtering(smap, pts, nrm, zr, avg, nblk, light, pattern, disk, rotate, seed,
     out = np.empty(n, np.float32)
     wp = np.empty(n, np.float64)
     radius = np.empty(n, np.float64)
-    filtering_kernel(smap.vp, smap.depth, pts, nrm, zr, avg, nblk, light_extent(light), pattern, disk, rotate,
-                     int(seed), bool(bilinear), bool(plane), out, wp, radius, numba.get_num_threads())
+    filtering_kernel(
+        smap.vp,
+        smap.depth,
+        pts,
+        nrm,
+        zr,
+        avg,
+        nblk,
+        light_extent(light),
+        pattern,
+        disk,
+        rotate,
+        int(seed),
+        bool(bilinear),
+        bool(plane),
+        out,
+        wp,
+        radius,
+        numba.get_num_threads(),
+    )
     return out, wp, radius
 
 
@@ -417,11 +496,16 @@ class PCSS(Method):
         Param("bilinear", True, "2x2 bilinear comparison per PCF tap (hardware PCF)"),
         Param("bias", 1.0, "constant depth bias, in texels at the receiver", min=0.0),
         Param("slope_bias", 1.0, "slope-scaled bias: texels x tan(angle to light)", min=0.0),
-        Param("receiver_plane", True, "compare each tap against the receiver's tangent plane (off: the sketch's one depth)"),
+        Param(
+            "receiver_plane",
+            True,
+            "compare each tap against the receiver's tangent plane (off: the sketch's one depth)",
+        ),
     )
 
-    def run(self, ctx, map_size, search_samples, filter_samples, pattern, rotate, bilinear, bias, slope_bias,
-            receiver_plane):
+    def run(
+        self, ctx, map_size, search_samples, filter_samples, pattern, rotate, bilinear, bias, slope_bias, receiver_plane
+    ):
         light = ctx.light
         disk = light.shape != "rect"
         pts, nrm, idx = ctx.points()
@@ -433,11 +517,13 @@ class PCSS(Method):
             view = fit_light_view(ctx.scene, map_size)
             smap = build_shadow_map(ctx.scene, view)
         with ctx.timer.phase("blocker_search"):
-            zr, avg, nblk, search = blocker_search(smap, pts, nrm, light, bias, slope_bias, search_pat,
-                                                   disk, rotate, ctx.seed, receiver_plane)
+            zr, avg, nblk, search = blocker_search(
+                smap, pts, nrm, light, bias, slope_bias, search_pat, disk, rotate, ctx.seed, receiver_plane
+            )
         with ctx.timer.phase("filter"):  # penumbra estimation + filtering, one pass over the points
-            v, wp, radius = filtering(smap, pts, nrm, zr, avg, nblk, light, filter_pat, disk, rotate, ctx.seed,
-                                      bilinear, receiver_plane)
+            v, wp, radius = filtering(
+                smap, pts, nrm, zr, avg, nblk, light, filter_pat, disk, rotate, ctx.seed, bilinear, receiver_plane
+            )
             out = scatter(ctx, v, idx)
         n = max(len(pts), 1)
         has = nblk > 0

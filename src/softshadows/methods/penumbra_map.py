@@ -118,6 +118,7 @@ Known limits (the paper's own, shown not hidden; see the README):
   vertices) x (penumbra area in texels): ~6M on ``bunny`` at the default light, hundreds of
   millions on ``plant`` (21k silhouette vertices on open leaves) — seconds per frame on a CPU.
 """
+
 from __future__ import annotations
 
 import math
@@ -165,8 +166,9 @@ class ShadowMapPass:
     border_clipped: bool = False
 
 
-def penumbra_map_view(scene, map_size: int, light_radius: float,
-                      base_view: View | None = None) -> tuple[View, View, tuple, bool]:
+def penumbra_map_view(
+    scene, map_size: int, light_radius: float, base_view: View | None = None
+) -> tuple[View, View, tuple, bool]:
     """(hard's view, grown view, border (l, r, t, b) in texels, clipped?). The border holds the
     outer penumbra: in window units (x/z) the cone of a silhouette vertex at depth z_v reaches at
     most ``L_r (1/z_v - 1/z_max)`` around the vertex's projection (sheets lie between the cones),
@@ -209,8 +211,9 @@ def penumbra_map_view(scene, map_size: int, light_radius: float,
     window = (l - pl * s, r + pr * s, b - pb * s_y, t + pt * s_y)
     near = max(min(hv.near, float(front[:, 2].min()) * 0.98), 1e-6)
     far = max(hv.far, zmax * 1.02)
-    view = View(hv.origin, hv.right, hv.up, hv.forward, window, near, far,
-                hv.width + pl + pr, hv.height + pt + pb, False)
+    view = View(
+        hv.origin, hv.right, hv.up, hv.forward, window, near, far, hv.width + pl + pr, hv.height + pt + pb, False
+    )
     return hv, view, (pl, pr, pt, pb), bool(cl or cr or ct or cb)
 
 
@@ -229,7 +232,7 @@ def shadow_map_pass(scene, map_size: int, light_radius: float, base_view: View |
     else:
         zp = np.full((view.height, view.width), np.inf, np.float32)
     pl, _, pt, _ = border
-    inner = zp[pt:pt + hv.height, pl:pl + hv.width]
+    inner = zp[pt : pt + hv.height, pl : pl + hv.width]
     np.minimum(inner, d_occ, out=inner)
     return ShadowMapPass(hv, view, border, d_occ, zp, clipped)
 
@@ -283,17 +286,22 @@ class Primitives:
     n_two_sided: int = 0  # sheets drawn on both sides
 
     @staticmethod
-    def empty() -> "Primitives":
+    def empty() -> Primitives:
         return Primitives(np.zeros((0, 3)), np.zeros((0, 3), np.int64), np.zeros((0, 3)))
 
 
 def _view_basis(view: View):
-    return np.asarray(view.origin, float), np.asarray(view.right, float), np.asarray(view.up, float), \
-        np.asarray(view.forward, float)
+    return (
+        np.asarray(view.origin, float),
+        np.asarray(view.right, float),
+        np.asarray(view.up, float),
+        np.asarray(view.forward, float),
+    )
 
 
-def build_cones(view: View, positions: np.ndarray, light_radius: float, z_far: float, segments: int,
-                zmax_pyramid=None) -> Primitives:
+def build_cones(
+    view: View, positions: np.ndarray, light_radius: float, z_far: float, segments: int, zmax_pyramid=None
+) -> Primitives:
     """Pass 2b: a cone per silhouette vertex (positions (N,3)): tip at v_i, base circle of radius
     ``C_ri = (Z_far - Z_vi) L_r / Z_vi`` on the far plane around the ray from the light center through
     v_i, as ``segments`` triangles (v_i, B_k, B_k+1). With ``zmax_pyramid`` (early rejection) each
@@ -321,9 +329,18 @@ def build_cones(view: View, positions: np.ndarray, light_radius: float, z_far: f
     zv, bx, by, lam = zv[keep], bx[keep], by[keep], lam[keep]
     m = len(zv)
     o, r, u, f = _view_basis(view)
-    verts, tri, zattr = _cone_triangles(np.ascontiguousarray(tips), np.ascontiguousarray(zv),
-                                        np.ascontiguousarray(bx), np.ascontiguousarray(by),
-                                        np.ascontiguousarray(lam), o, r, u, f, float(z_far))
+    verts, tri, zattr = _cone_triangles(
+        np.ascontiguousarray(tips),
+        np.ascontiguousarray(zv),
+        np.ascontiguousarray(bx),
+        np.ascontiguousarray(by),
+        np.ascontiguousarray(lam),
+        o,
+        r,
+        u,
+        f,
+        float(z_far),
+    )
     return Primitives(verts, tri, zattr, n, n - m)
 
 
@@ -353,9 +370,17 @@ def _cone_triangles(tips, zv, bx, by, lam, o, r, u, f, z_far):
     return verts, tri, zattr
 
 
-def build_sheets(view: View, scene_vertices: np.ndarray, faces: np.ndarray, sil: Silhouette,
-                 light_radius: float, z_far: float, tolerance: float, max_subdiv: int,
-                 zmax_pyramid=None) -> Primitives:
+def build_sheets(
+    view: View,
+    scene_vertices: np.ndarray,
+    faces: np.ndarray,
+    sil: Silhouette,
+    light_radius: float,
+    z_far: float,
+    tolerance: float,
+    max_subdiv: int,
+    zmax_pyramid=None,
+) -> Primitives:
     """Pass 2c: per silhouette edge (v_0, v_1) a sheet from the edge to the outer common tangent of
     the two cones' base circles (far plane), tangent to both cones, on the side away from the
     occluder: the ruled surface of the lines from v(t) = lerp(v_0, v_1, t) to F(t) = lerp(F_0, F_1, t),
@@ -369,9 +394,18 @@ def build_sheets(view: View, scene_vertices: np.ndarray, faces: np.ndarray, sil:
         return Primitives.empty()
     o, r, u, f = _view_basis(view)
     V0, V1, F0, F1, zz0, zz1, n_two = _sheet_quads(
-        np.ascontiguousarray(scene_vertices, dtype=np.float64), np.ascontiguousarray(faces, dtype=np.int64),
-        np.ascontiguousarray(sil.edges, dtype=np.int64), np.ascontiguousarray(sil.edge_faces, dtype=np.int64),
-        o, r, u, f, float(view.near), float(z_far), float(light_radius))
+        np.ascontiguousarray(scene_vertices, dtype=np.float64),
+        np.ascontiguousarray(faces, dtype=np.int64),
+        np.ascontiguousarray(sil.edges, dtype=np.int64),
+        np.ascontiguousarray(sil.edge_faces, dtype=np.int64),
+        o,
+        r,
+        u,
+        f,
+        float(view.near),
+        float(z_far),
+        float(light_radius),
+    )
     n_objects = len(V0)
     keep = np.ones(n_objects, bool)
     if zmax_pyramid is not None and n_objects:
@@ -380,8 +414,9 @@ def build_sheets(view: View, scene_vertices: np.ndarray, faces: np.ndarray, sil:
         # the sub-sheet u in [0, ucut] of every ruling: the same ruled surface, shorter
         F0 = V0 + (F0 - V0) * ucut[:, None]
         F1 = V1 + (F1 - V1) * ucut[:, None]
-    verts, tri, za, n_sub = _sheet_strips(V0[keep], V1[keep], F0[keep], F1[keep], zz0[keep], zz1[keep],
-                                          float(tolerance), int(max_subdiv))
+    verts, tri, za, n_sub = _sheet_strips(
+        V0[keep], V1[keep], F0[keep], F1[keep], zz0[keep], zz1[keep], float(tolerance), int(max_subdiv)
+    )
     return Primitives(verts, tri, za, n_objects, int((~keep).sum()), n_sub, n_two)
 
 
@@ -474,7 +509,7 @@ def _sheet_quads(V, faces, edges, edge_faces, o, r, u, f, near, z_far, lr):
                 px, py = -lx, -ly
             sin_a = (c0[e] - c1[e]) / dlen[e]
             if abs(sin_a) < 1.0:  # outer common tangent; else one circle contains the other
-                cos_a = math.sqrt(min(max(1.0 - sin_a ** 2, 0.0), 1.0))
+                cos_a = math.sqrt(min(max(1.0 - sin_a**2, 0.0), 1.0))
                 nx = cos_a * px + sin_a * ex
                 ny = cos_a * py + sin_a * ey
             else:
@@ -499,8 +534,7 @@ def _to_view(p, o, r, u, f):
     dx = p[0] - o[0]
     dy = p[1] - o[1]
     dz = p[2] - o[2]
-    return (dx * r[0] + dy * r[1] + dz * r[2], dx * u[0] + dy * u[1] + dz * u[2],
-            dx * f[0] + dy * f[1] + dz * f[2])
+    return (dx * r[0] + dy * r[1] + dz * r[2], dx * u[0] + dy * u[1] + dz * u[2], dx * f[0] + dy * f[1] + dz * f[2])
 
 
 @njit(**_JIT)
@@ -641,7 +675,7 @@ def _zmax_rect(data, offs, ws, hs, x0, y0, x1, y1):
     y1 = min(y1, H0 - 1)
     span = max(x1 - x0 + 1, y1 - y0 + 1)
     L = 1
-    while (1 << (L + 3)) < span and L + 1 < len(offs):
+    while span > (1 << (L + 3)) and len(offs) > L + 1:
         L += 1
     m = 0.0
     w = ws[L]
@@ -658,8 +692,16 @@ def _zmax_rect(data, offs, ws, hs, x0, y0, x1, y1):
 def _zmax_bbox(data, offs, ws, hs, xa, ya, xb, yb):
     """Max Z_P under the pixel-coordinate box [xa, xb] x [ya, yb], grown by a texel on every side,
     with a relative margin (a safe upper bound for the early rejection)."""
-    return _zmax_rect(data, offs, ws, hs, int(math.floor(xa)) - 1, int(math.floor(ya)) - 1,
-                      int(math.floor(xb)) + 1, int(math.floor(yb)) + 1) * (1.0 + 1e-6)
+    return _zmax_rect(
+        data,
+        offs,
+        ws,
+        hs,
+        int(math.floor(xa)) - 1,
+        int(math.floor(ya)) - 1,
+        int(math.floor(xb)) + 1,
+        int(math.floor(yb)) + 1,
+    ) * (1.0 + 1e-6)
 
 
 @njit(**_JIT)
@@ -682,8 +724,9 @@ def _wedge_zmax(wl, wt, sxs, sys_, tx, ty, ux0, uy0, ux1, uy1, fa, fb, data, off
 
 
 @njit(parallel=True, **_JIT)
-def _cone_reject_kernel(wl, wt, sx_scale, sy_scale, qx, qy, zv, bx, by, z_far, iters, pieces, data, offs, ws,
-                        hs, eps, lam, keep):
+def _cone_reject_kernel(
+    wl, wt, sx_scale, sy_scale, qx, qy, zv, bx, by, z_far, iters, pieces, data, offs, ws, hs, eps, lam, keep
+):
     """Per cone (row) and base vertex k: lam[i,k] in [0,1] (fraction of the ruling to the far plane
     that can carry kept fragments); keep[i] false when no triangle of the cone can.
 
@@ -721,8 +764,7 @@ def _cone_reject_kernel(wl, wt, sx_scale, sy_scale, qx, qy, zv, bx, by, z_far, i
                     fb = fhi * (m + 1) / pieces
                     za = 1.0 / (iz - fa * (iz - izf))
                     zb = 1.0 / (iz - fb * (iz - izf))
-                    zm = _wedge_zmax(wl, wt, sx_scale, sy_scale, tx, ty, ux0, uy0, ux1, uy1, fa, fb, data, offs,
-                                     ws, hs)
+                    zm = _wedge_zmax(wl, wt, sx_scale, sy_scale, tx, ty, ux0, uy0, ux1, uy1, fa, fb, data, offs, ws, hs)
                     if zm > za + eps:
                         zlast = min(zb, zm)
                         break
@@ -748,9 +790,27 @@ def _reject_cones(view, q, zv, bx, by, z_far, pyr):
     lam = np.ones((n, seg))
     keep = np.ones(n, bool)
     eps = 1e-9 * z_far
-    _cone_reject_kernel(l, t, view.width / (r - l), view.height / (t - b), np.ascontiguousarray(q[:, 0]),
-                        np.ascontiguousarray(q[:, 1]), np.ascontiguousarray(zv), np.ascontiguousarray(bx),
-                        np.ascontiguousarray(by), float(z_far), REJECT_ITERATIONS, REJECT_PIECES, data, offs, ws, hs, eps, lam, keep)
+    _cone_reject_kernel(
+        l,
+        t,
+        view.width / (r - l),
+        view.height / (t - b),
+        np.ascontiguousarray(q[:, 0]),
+        np.ascontiguousarray(q[:, 1]),
+        np.ascontiguousarray(zv),
+        np.ascontiguousarray(bx),
+        np.ascontiguousarray(by),
+        float(z_far),
+        REJECT_ITERATIONS,
+        REJECT_PIECES,
+        data,
+        offs,
+        ws,
+        hs,
+        eps,
+        lam,
+        keep,
+    )
     return lam, keep
 
 
@@ -819,9 +879,20 @@ def _reject_sheets(view, V0, V1, F0, F1, z0, z1, z_far, pyr):
     pts = np.stack([V0, V1, F1, F0], axis=1).reshape(-1, 3)
     sx, sy, _ = view.project(pts)
     ucut = np.ones(len(V0))
-    _sheet_reject_kernel(np.ascontiguousarray(sx.reshape(-1, 4)), np.ascontiguousarray(sy.reshape(-1, 4)),
-                         np.ascontiguousarray(np.stack([z0, z1], 1), dtype=np.float64), float(z_far),
-                         REJECT_ITERATIONS, REJECT_PIECES, 1e-9, data, offs, ws, hs, ucut)
+    _sheet_reject_kernel(
+        np.ascontiguousarray(sx.reshape(-1, 4)),
+        np.ascontiguousarray(sy.reshape(-1, 4)),
+        np.ascontiguousarray(np.stack([z0, z1], 1), dtype=np.float64),
+        float(z_far),
+        REJECT_ITERATIONS,
+        REJECT_PIECES,
+        1e-9,
+        data,
+        offs,
+        ws,
+        hs,
+        ucut,
+    )
     return ucut
 
 
@@ -832,9 +903,17 @@ def _reject_sheets(view, V0, V1, F0, F1, z0, z1, z_far, pyr):
 fragment_intensity = penumbra_intensity
 
 
-def penumbra_fragment_program(view: View, prims: Primitives, n_cone_tris: int, zp: np.ndarray, bias: float,
-                              bernstein: bool, pm: np.ndarray, cull_discarded: bool = True,
-                              needed: np.ndarray | None = None) -> dict:
+def penumbra_fragment_program(
+    view: View,
+    prims: Primitives,
+    n_cone_tris: int,
+    zp: np.ndarray,
+    bias: float,
+    bernstein: bool,
+    pm: np.ndarray,
+    cull_discarded: bool = True,
+    needed: np.ndarray | None = None,
+) -> dict:
     """Pass 2d: rasterize cones and sheets with the shared rasterizer and run the fragment program
     on every fragment, MIN-blending into the penumbra map ``pm`` (H,W) float32 in place
     (``rasterize_min_blend``: fused, nothing is written per fragment). ``cull_discarded``: skip the
@@ -846,14 +925,36 @@ def penumbra_fragment_program(view: View, prims: Primitives, n_cone_tris: int, z
     zpf = np.ascontiguousarray(zp, dtype=np.float32)
     zattr = np.ascontiguousarray(prims.zv, dtype=np.float64)
     if len(prims.triangles) == 0:
-        return {"cone_fragments": 0, "sheet_fragments": 0, "cone_fragments_kept": 0, "sheet_fragments_kept": 0,
-                "culled_tile_pieces": 0, "value_culled_tile_pieces": 0}
-    c = rasterize_min_blend(view, prims.vertices, prims.triangles, PROGRAM_PENUMBRA, zattr, zpf,
-                            (float(bias), tex_scale, 1.0 if bernstein else 0.0), pm, cull="none",
-                            split=n_cone_tris, cull_discarded=cull_discarded, mask=needed)
-    return {"cone_fragments": c["fragments_a"], "sheet_fragments": c["fragments_b"],
-            "cone_fragments_kept": c["kept_a"], "sheet_fragments_kept": c["kept_b"],
-            "culled_tile_pieces": c["culled_pieces"], "value_culled_tile_pieces": c["value_culled_pieces"]}
+        return {
+            "cone_fragments": 0,
+            "sheet_fragments": 0,
+            "cone_fragments_kept": 0,
+            "sheet_fragments_kept": 0,
+            "culled_tile_pieces": 0,
+            "value_culled_tile_pieces": 0,
+        }
+    c = rasterize_min_blend(
+        view,
+        prims.vertices,
+        prims.triangles,
+        PROGRAM_PENUMBRA,
+        zattr,
+        zpf,
+        (float(bias), tex_scale, 1.0 if bernstein else 0.0),
+        pm,
+        cull="none",
+        split=n_cone_tris,
+        cull_discarded=cull_discarded,
+        mask=needed,
+    )
+    return {
+        "cone_fragments": c["fragments_a"],
+        "sheet_fragments": c["fragments_b"],
+        "cone_fragments_kept": c["kept_a"],
+        "sheet_fragments_kept": c["kept_b"],
+        "culled_tile_pieces": c["culled_pieces"],
+        "value_culled_tile_pieces": c["value_culled_pieces"],
+    }
 
 
 @njit(parallel=True, **_JIT)
@@ -876,10 +977,21 @@ class PenumbraMap:
     stats: dict = field(default_factory=dict)
 
 
-def render_penumbra_map(scene, smp: ShadowMapPass, light_radius: float, *, silhouettes: str = "brute",
-                        smoothstep: str = "bernstein", bias: float = 1.0, cone_segments: int = 16,
-                        sheet_tolerance: float = 0.005, sheet_max_subdiv: int = 16, early_reject: bool = True,
-                        needed: np.ndarray | None = None, timer=None) -> PenumbraMap:
+def render_penumbra_map(
+    scene,
+    smp: ShadowMapPass,
+    light_radius: float,
+    *,
+    silhouettes: str = "brute",
+    smoothstep: str = "bernstein",
+    bias: float = 1.0,
+    cone_segments: int = 16,
+    sheet_tolerance: float = 0.005,
+    sheet_max_subdiv: int = 16,
+    early_reject: bool = True,
+    needed: np.ndarray | None = None,
+    timer=None,
+) -> PenumbraMap:
     """Pass 2: clear to white, find silhouettes, draw cones and sheets through the fragment program.
     ``needed`` (H,W) uint8 of the map: shade only these texels (the others stay white), e.g. the
     texels the eye pass reads (:func:`eye_lookups`); None: every texel (the paper)."""
@@ -898,17 +1010,37 @@ def render_penumbra_map(scene, smp: ShadowMapPass, light_radius: float, *, silho
             pyr = None
         faces = flat.faces if flat.occluder.all() else flat.faces[flat.occluder]
         cones = build_cones(view, flat.vertices[sil.vertices], light_radius, z_far, cone_segments, pyr)
-        sheets = build_sheets(view, flat.vertices, faces, sil, light_radius, z_far, sheet_tolerance,
-                              sheet_max_subdiv, pyr)
+        sheets = build_sheets(
+            view, flat.vertices, faces, sil, light_radius, z_far, sheet_tolerance, sheet_max_subdiv, pyr
+        )
         nv = len(cones.vertices)
         verts = np.concatenate([cones.vertices, sheets.vertices])
         tris = np.concatenate([cones.triangles, sheets.triangles + nv])
         zattr = np.concatenate([cones.zv, sheets.zv])
         prims = Primitives(verts, tris, zattr)
-        rview = View(view.origin, view.right, view.up, view.forward, view.window, view.near,
-                     max(z_far * (1.0 + 1e-4), view.near * 2), view.width, view.height, False)
-        fst = penumbra_fragment_program(rview, prims, len(cones.triangles), zp, bias, smoothstep == "bernstein", pm,
-                                        cull_discarded=early_reject, needed=needed)
+        rview = View(
+            view.origin,
+            view.right,
+            view.up,
+            view.forward,
+            view.window,
+            view.near,
+            max(z_far * (1.0 + 1e-4), view.near * 2),
+            view.width,
+            view.height,
+            False,
+        )
+        fst = penumbra_fragment_program(
+            rview,
+            prims,
+            len(cones.triangles),
+            zp,
+            bias,
+            smoothstep == "bernstein",
+            pm,
+            cull_discarded=early_reject,
+            needed=needed,
+        )
     stats = {
         "silhouette_edges": sil.n_edges,
         "silhouette_vertices": sil.n_vertices,
@@ -936,8 +1068,9 @@ def render_penumbra_map(scene, smp: ShadowMapPass, light_radius: float, *, silho
 # 3. the eye pass
 # ==============================================================================================
 @njit(parallel=True, **_JIT)
-def _eye_lookup_kernel(vp, d_occ, W, H, PW, PH, pad_l, pad_t, pts, nrm, bias, slope_bias, tex_out, umbra_out,
-                       needed, mark):
+def _eye_lookup_kernel(
+    vp, d_occ, W, H, PW, PH, pad_l, pad_t, pts, nrm, bias, slope_bias, tex_out, umbra_out, needed, mark
+):
     """Per eye point: the shadow-map test exactly as ``hard`` (its view ``vp`` and W x H map
     ``d_occ``; umbra), else the flat index of the penumbra-map texel it reads (the same texel
     grid, shifted by the border; -1: outside the map, V = 1). With ``mark``, the texels read are
@@ -946,8 +1079,9 @@ def _eye_lookup_kernel(vp, d_occ, W, H, PW, PH, pad_l, pad_t, pts, nrm, bias, sl
     for k in prange(n):
         umbra_out[k] = False
         tex_out[k] = -1
-        ok, sx, sy, zt = biased_light_depth(vp, pts[k, 0], pts[k, 1], pts[k, 2], nrm[k, 0], nrm[k, 1],
-                                            nrm[k, 2], bias, slope_bias)
+        ok, sx, sy, zt = biased_light_depth(
+            vp, pts[k, 0], pts[k, 1], pts[k, 2], nrm[k, 0], nrm[k, 1], nrm[k, 2], bias, slope_bias
+        )
         if not ok:
             continue
         fx = math.floor(sx)
@@ -985,8 +1119,9 @@ class EyeLookups:
     needed: np.ndarray | None
 
 
-def eye_lookups(smp: ShadowMapPass, points: np.ndarray, normals: np.ndarray, bias: float, slope_bias: float,
-                mark: bool = True) -> EyeLookups:
+def eye_lookups(
+    smp: ShadowMapPass, points: np.ndarray, normals: np.ndarray, bias: float, slope_bias: float, mark: bool = True
+) -> EyeLookups:
     """Pass 3a: the shadow-map test of every eye point and the penumbra-map texel each reads."""
     pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
     nrm = np.ascontiguousarray(normals, dtype=np.float64).reshape(-1, 3)
@@ -995,13 +1130,36 @@ def eye_lookups(smp: ShadowMapPass, points: np.ndarray, normals: np.ndarray, bia
     PH, PW = smp.view.height, smp.view.width
     needed = np.zeros((PH, PW), np.uint8) if mark else np.zeros((0, 0), np.uint8)
     pl, _, pt, _ = smp.border
-    _eye_lookup_kernel(smp.hard_view.params(), smp.occluder_depth, smp.hard_view.width, smp.hard_view.height,
-                       PW, PH, int(pl), int(pt), pts, nrm, float(bias), float(slope_bias), tex, um, needed, bool(mark))
+    _eye_lookup_kernel(
+        smp.hard_view.params(),
+        smp.occluder_depth,
+        smp.hard_view.width,
+        smp.hard_view.height,
+        PW,
+        PH,
+        int(pl),
+        int(pt),
+        pts,
+        nrm,
+        float(bias),
+        float(slope_bias),
+        tex,
+        um,
+        needed,
+        bool(mark),
+    )
     return EyeLookups(tex, um, needed if mark else None)
 
 
-def eye_pass(smp: ShadowMapPass, pmap: PenumbraMap, points: np.ndarray, normals: np.ndarray, bias: float,
-             slope_bias: float, lookups: EyeLookups | None = None) -> tuple[np.ndarray, np.ndarray]:
+def eye_pass(
+    smp: ShadowMapPass,
+    pmap: PenumbraMap,
+    points: np.ndarray,
+    normals: np.ndarray,
+    bias: float,
+    slope_bias: float,
+    lookups: EyeLookups | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
     """Pass 3: (V (K,) float32, umbra (K,) bool) at world points with normals facing the viewer:
     0 in the umbra (shadow-map test), else the penumbra-map texel (1 outside the map).
     ``lookups``: those of :func:`eye_lookups` for the same points (made before pass 2)."""
@@ -1024,31 +1182,76 @@ def light_radius_of(light) -> float:
 class PenumbraMapMethod(Method):
     name = "penumbra-map"
     light_shapes = ("sphere", "rect")
-    summary = ("shadow map + penumbra map of cones and sheets at the silhouettes from the light center: "
-               "outer penumbra only")
+    summary = (
+        "shadow map + penumbra map of cones and sheets at the silhouettes from the light center: outer penumbra only"
+    )
     paper = "Wyman & Hansen 2003, Penumbra Maps: Approximate Soft Shadows in Real-Time"
     params = (
-        Param("map_size", 1024, "shadow/penumbra map resolution over the occluders (as hard); "
-              "the penumbra map adds a border for the outer penumbra", min=16, max=16384),
-        Param("bias", 1.0, "constant depth bias in texels at the receiver (as hard); also the "
-              "fragment discard tolerance", min=0.0),
+        Param(
+            "map_size",
+            1024,
+            "shadow/penumbra map resolution over the occluders (as hard); "
+            "the penumbra map adds a border for the outer penumbra",
+            min=16,
+            max=16384,
+        ),
+        Param(
+            "bias",
+            1.0,
+            "constant depth bias in texels at the receiver (as hard); also the fragment discard tolerance",
+            min=0.0,
+        ),
         Param("slope_bias", 1.0, "slope-scaled bias: texels x tan(angle to light) (as hard)", min=0.0),
-        Param("smoothstep", "bernstein", "intensity falloff: bernstein 3I^2-2I^3 (paper) or linear",
-              choices=("bernstein", "linear")),
-        Param("silhouettes", "brute", "silhouette extraction: brute (per frame, the paper) or "
-              "adjacency (edge table built once)", choices=("brute", "adjacency")),
+        Param(
+            "smoothstep",
+            "bernstein",
+            "intensity falloff: bernstein 3I^2-2I^3 (paper) or linear",
+            choices=("bernstein", "linear"),
+        ),
+        Param(
+            "silhouettes",
+            "brute",
+            "silhouette extraction: brute (per frame, the paper) or adjacency (edge table built once)",
+            choices=("brute", "adjacency"),
+        ),
         Param("cone_segments", 16, "triangles per cone", min=3, max=256),
-        Param("sheet_tolerance", 0.005, "split a sheet into ceil(q / tolerance) strips, q = how far it is "
-              "from a parallelogram, |(F1 - V1) - (F0 - V0)| / length (0: always sheet_max_subdiv)", min=0.0),
+        Param(
+            "sheet_tolerance",
+            0.005,
+            "split a sheet into ceil(q / tolerance) strips, q = how far it is "
+            "from a parallelogram, |(F1 - V1) - (F0 - V0)| / length (0: always sheet_max_subdiv)",
+            min=0.0,
+        ),
         Param("sheet_max_subdiv", 16, "most strips per sheet", min=1, max=256),
-        Param("early_reject", True, "shorten/drop cones and sheets, and skip their pieces per tile, "
-              "where they can only produce discarded fragments or no darker texel (same result, faster)"),
-        Param("texels", "read", "penumbra-map texels shaded: read (only those the eye pass reads: same V, "
-              "faster) or all (the paper's whole map)", choices=("read", "all")),
+        Param(
+            "early_reject",
+            True,
+            "shorten/drop cones and sheets, and skip their pieces per tile, "
+            "where they can only produce discarded fragments or no darker texel (same result, faster)",
+        ),
+        Param(
+            "texels",
+            "read",
+            "penumbra-map texels shaded: read (only those the eye pass reads: same V, "
+            "faster) or all (the paper's whole map)",
+            choices=("read", "all"),
+        ),
     )
 
-    def run(self, ctx, map_size, bias, slope_bias, smoothstep, silhouettes, cone_segments, sheet_tolerance,
-            sheet_max_subdiv, early_reject, texels):
+    def run(
+        self,
+        ctx,
+        map_size,
+        bias,
+        slope_bias,
+        smoothstep,
+        silhouettes,
+        cone_segments,
+        sheet_tolerance,
+        sheet_max_subdiv,
+        early_reject,
+        texels,
+    ):
         scene = ctx.scene
         lr = light_radius_of(scene.light)
         pts, nrm, idx = ctx.points()
@@ -1056,26 +1259,39 @@ class PenumbraMapMethod(Method):
             smp = shadow_map_pass(scene, map_size, lr)
         with ctx.timer.phase("eye_pass"):  # its lookups first: the texels it will read
             look = eye_lookups(smp, pts, nrm, bias, slope_bias, mark=texels == "read")
-        pmap = render_penumbra_map(scene, smp, lr, silhouettes=silhouettes, smoothstep=smoothstep, bias=bias,
-                                   cone_segments=cone_segments, sheet_tolerance=sheet_tolerance,
-                                   sheet_max_subdiv=sheet_max_subdiv, early_reject=early_reject,
-                                   needed=look.needed, timer=ctx.timer)
+        pmap = render_penumbra_map(
+            scene,
+            smp,
+            lr,
+            silhouettes=silhouettes,
+            smoothstep=smoothstep,
+            bias=bias,
+            cone_segments=cone_segments,
+            sheet_tolerance=sheet_tolerance,
+            sheet_max_subdiv=sheet_max_subdiv,
+            early_reject=early_reject,
+            needed=look.needed,
+            timer=ctx.timer,
+        )
         with ctx.timer.phase("eye_pass"):
             v, umbra = eye_pass(smp, pmap, pts, nrm, bias, slope_bias, lookups=look)
             out = scatter(ctx, v, idx)
         st = dict(pmap.stats)
-        st.update({
-            "map_size": map_size,
-            "texels": texels,
-            "texels_shaded": int(np.count_nonzero(look.needed)) if look.needed is not None
-            else int(smp.view.width * smp.view.height),
-            "penumbra_map_width": smp.view.width,
-            "penumbra_map_height": smp.view.height,
-            "border_texels": list(smp.border),
-            "border_clipped": smp.border_clipped,
-            "light_radius": lr,
-            "light_radius_equivalent": scene.light.shape != "sphere",
-            "umbra_pixels": int(umbra.sum()),
-            "penumbra_pixels": int(((v > 0) & (v < 1)).sum()),
-        })
+        st.update(
+            {
+                "map_size": map_size,
+                "texels": texels,
+                "texels_shaded": int(np.count_nonzero(look.needed))
+                if look.needed is not None
+                else int(smp.view.width * smp.view.height),
+                "penumbra_map_width": smp.view.width,
+                "penumbra_map_height": smp.view.height,
+                "border_texels": list(smp.border),
+                "border_clipped": smp.border_clipped,
+                "light_radius": lr,
+                "light_radius_equivalent": scene.light.shape != "sphere",
+                "umbra_pixels": int(umbra.sum()),
+                "penumbra_pixels": int(((v > 0) & (v < 1)).sum()),
+            }
+        )
         return MethodOutput(out, st)

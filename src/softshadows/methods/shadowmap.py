@@ -13,6 +13,7 @@ that the same defaults work on scenes of any scale. The effective depth offset i
 and the direction to the light (tan clamped to 10), the software equivalent of
 ``glPolygonOffset(slope, constant)``.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -23,7 +24,6 @@ from numba import njit, prange
 from ..raster import View, rasterize_depth
 from ..raster.kernels import view_project
 from ..raster.view import light_view
-
 
 
 @dataclass
@@ -47,8 +47,9 @@ def occluder_faces(scene, which: str = "occluder") -> np.ndarray:
     return np.ones(len(flat.faces), bool)
 
 
-def fit_light_view(scene, size: int, which: str = "occluder", ortho: bool = False,
-                   height: int | None = None, margin: float = 0.02) -> View:
+def fit_light_view(
+    scene, size: int, which: str = "occluder", ortho: bool = False, height: int | None = None, margin: float = 0.02
+) -> View:
     """View from the light's center covering the vertices of the selected faces (square pixels)."""
     flat = scene.flat
     mask = occluder_faces(scene, which)
@@ -107,8 +108,9 @@ def shadow_lookup(vp, depth_map, pts, nrm, bias, slope_bias, pcf_radius):
     H, W = depth_map.shape
     out = np.empty(n, np.float32)
     for k in prange(n):
-        ok, sx, sy, zt = biased_light_depth(vp, pts[k, 0], pts[k, 1], pts[k, 2], nrm[k, 0], nrm[k, 1],
-                                            nrm[k, 2], bias, slope_bias)
+        ok, sx, sy, zt = biased_light_depth(
+            vp, pts[k, 0], pts[k, 1], pts[k, 2], nrm[k, 0], nrm[k, 1], nrm[k, 2], bias, slope_bias
+        )
         if not ok:
             out[k] = 1.0
             continue
@@ -121,18 +123,24 @@ def shadow_lookup(vp, depth_map, pts, nrm, bias, slope_bias, pcf_radius):
             for dc in range(-pcf_radius, pcf_radius + 1):
                 c = ci + dc
                 cnt += 1
-                if r < 0 or r >= H or c < 0 or c >= W:
-                    lit += 1
-                elif not (depth_map[r, c] < zt):
+                if r < 0 or r >= H or c < 0 or c >= W or not (depth_map[r, c] < zt):
                     lit += 1
         out[k] = lit / cnt
     return out
 
 
-def lookup_points(smap: ShadowMap, pts: np.ndarray, nrm: np.ndarray, bias: float, slope_bias: float,
-                  pcf_radius: int = 0) -> np.ndarray:
-    return shadow_lookup(smap.vp, smap.depth, np.ascontiguousarray(pts, dtype=np.float64),
-                         np.ascontiguousarray(nrm, dtype=np.float64), float(bias), float(slope_bias), int(pcf_radius))
+def lookup_points(
+    smap: ShadowMap, pts: np.ndarray, nrm: np.ndarray, bias: float, slope_bias: float, pcf_radius: int = 0
+) -> np.ndarray:
+    return shadow_lookup(
+        smap.vp,
+        smap.depth,
+        np.ascontiguousarray(pts, dtype=np.float64),
+        np.ascontiguousarray(nrm, dtype=np.float64),
+        float(bias),
+        float(slope_bias),
+        int(pcf_radius),
+    )
 
 
 def scatter(ctx, values: np.ndarray, idx: np.ndarray, fill: float = 1.0) -> np.ndarray:

@@ -82,6 +82,7 @@ between neighbouring micro-patch back-projections (Sec. 5.1.2); receivers are no
 other receivers, and a receiver point farther from the light than the receiver map's surface at
 its texel reads that surface's value.
 """
+
 from __future__ import annotations
 
 import math
@@ -135,8 +136,9 @@ def compute_map_views(scene, map_size: int, ssm_size: int, margin: float = 0.02)
     ov = light_view(light, occ_pts, map_size, map_size, margin=margin)
     hx, hy = light_half_extents(light, ov)
     aspect = hx / hy
-    ov = View(ov.origin, ov.right, ov.up, ov.forward, _with_aspect(ov.window, aspect), ov.near, ov.far,
-              map_size, map_size)
+    ov = View(
+        ov.origin, ov.right, ov.up, ov.forward, _with_aspect(ov.window, aspect), ov.near, ov.far, map_size, map_size
+    )
     rv = light_view(light, rec_pts, ssm_size, ssm_size, margin=0.0)
     # Widest penumbra around the occluder window (projective units): a point at depth z_P, seen
     # from any light point, lands within hx (1/z_P - 1/z_R) of its central projection at depth z_R.
@@ -192,8 +194,12 @@ def compute_occluder_depth_map(scene, view: View, side: str = "nearest") -> tupl
     faces = np.ascontiguousarray(flat.faces[idx])
     if side == "back":
         fr = rasterize_fragments(view, flat.vertices, faces, cull="front")
-        d, tri = _max_depth_per_pixel(np.asarray(fr.pixel, np.int64), np.asarray(fr.depth, np.float32),
-                                      np.asarray(fr.tri, np.int32), view.width * view.height)
+        d, tri = _max_depth_per_pixel(
+            np.asarray(fr.pixel, np.int64),
+            np.asarray(fr.depth, np.float32),
+            np.asarray(fr.tri, np.int32),
+            view.width * view.height,
+        )
         depth, tri = d.reshape(view.height, view.width), tri.reshape(view.height, view.width)
     else:
         depth, tri = rasterize_depth(view, flat.vertices, faces, cull="back" if side == "front" else "none")
@@ -267,10 +273,12 @@ def penumbra_extents(patches, hx, hy, z_plane, svp):
         out[k, 3] = 0
         if not (z < z_plane):
             continue
-        x_lo, x_hi = _pyramid_section(0.5 * (patches[k, 0] + patches[k, 1]), 0.5 * (patches[k, 1] - patches[k, 0]),
-                                      z, hx, z_plane)
-        y_lo, y_hi = _pyramid_section(0.5 * (patches[k, 2] + patches[k, 3]), 0.5 * (patches[k, 3] - patches[k, 2]),
-                                      z, hy, z_plane)
+        x_lo, x_hi = _pyramid_section(
+            0.5 * (patches[k, 0] + patches[k, 1]), 0.5 * (patches[k, 1] - patches[k, 0]), z, hx, z_plane
+        )
+        y_lo, y_hi = _pyramid_section(
+            0.5 * (patches[k, 2] + patches[k, 3]), 0.5 * (patches[k, 3] - patches[k, 2]), z, hy, z_plane
+        )
         # projective SSM coordinates -> texel index ranges (texel centers at half-integers)
         fj0 = math.ceil((x_lo / z_plane - l) / dxs - 0.5)
         fj1 = math.floor((x_hi / z_plane - l) / dxs - 0.5)
@@ -344,8 +352,15 @@ def occlusion_percentage_at(patch, ux, uy, z_r, hx, hy) -> float:
     if not z_r > zo:
         return 0.0
     k = z_r / (z_r - zo)
-    return float(occlusion_percentage(k, (x0 - ux * zo) / (2 * hx), (x1 - ux * zo) / (2 * hx),
-                                      (y0 - uy * zo) / (2 * hy), (y1 - uy * zo) / (2 * hy)))
+    return float(
+        occlusion_percentage(
+            k,
+            (x0 - ux * zo) / (2 * hx),
+            (x1 - ux * zo) / (2 * hx),
+            (y0 - uy * zo) / (2 * hy),
+            (y1 - uy * zo) / (2 * hy),
+        )
+    )
 
 
 # ---- 7. accumulation into the soft shadow map --------------------------------------------------
@@ -357,7 +372,7 @@ def round_half(x, toward_zero=False):
     overflow -> 65504."""
     if x == 0.0 or not math.isfinite(x):
         return x
-    m, e = math.frexp(x)  # x = m 2^e, 0.5 <= |m| < 1
+    _m, e = math.frexp(x)  # x = m 2^e, 0.5 <= |m| < 1
     if e < -13:
         e = -13  # subnormal range: fixed spacing 2^-24
     ulp = math.ldexp(1.0, e - 11)
@@ -393,8 +408,24 @@ def bin_patches_by_band(ext, n_bands, band_rows):
 
 
 @njit(parallel=True, **_JIT)
-def accumulate_soft_shadow_map(patches, pmesh, ext, band_ptr, band_idx, band_rows, recv_depth, recv_mesh,
-                               svp, hx, hy, fp16, rtz, check_mesh, ssm, nslot=1):
+def accumulate_soft_shadow_map(
+    patches,
+    pmesh,
+    ext,
+    band_ptr,
+    band_idx,
+    band_rows,
+    recv_depth,
+    recv_mesh,
+    svp,
+    hx,
+    hy,
+    fp16,
+    rtz,
+    check_mesh,
+    ssm,
+    nslot=1,
+):
     """Add every micro-patch's occlusion percentage into ``ssm`` (H,W) float32 at the texels of
     its penumbra extent. One thread per band of rows, micro-patches in draw order: race-free and
     with the same per-texel order of additions as GPU blending. ``fp16``: round the running sum to
@@ -545,11 +576,19 @@ def check_roles(scene) -> None:
     if not scene.has_roles:
         raise SoftShadowsError(
             f"soft-shadow-map: scene '{scene.name}' has no occluder/receiver roles (every mesh is 'both'); "
-            "set role = 'occluder' or 'receiver' on its meshes (the paper splits occluders from receivers)")
+            "set role = 'occluder' or 'receiver' on its meshes (the paper splits occluders from receivers)"
+        )
 
 
-def compute_soft_shadow_map(scene, map_size: int = 256, ssm_size: int = 256, two_pass: bool = False,
-                            accumulate: str = "float32", margin: float = 0.02, timer=None) -> SoftShadowMap:
+def compute_soft_shadow_map(
+    scene,
+    map_size: int = 256,
+    ssm_size: int = 256,
+    two_pass: bool = False,
+    accumulate: str = "float32",
+    margin: float = 0.02,
+    timer=None,
+) -> SoftShadowMap:
     """Steps 1-8 for ``scene`` (rectangle light): the clamped soft shadow map and statistics."""
     timer = timer or _NullTimer()
     if scene.light.shape != "rect":
@@ -557,11 +596,16 @@ def compute_soft_shadow_map(scene, map_size: int = 256, ssm_size: int = 256, two
     check_roles(scene)
     flat = scene.flat
     fp16 = accumulate.startswith("float16")
-    stats = {"map_size": int(map_size), "ssm_size": int(ssm_size), "two_pass": bool(two_pass),
-             "accumulate": accumulate, "micro_patches": 0, "texels_touched": 0}
+    stats = {
+        "map_size": int(map_size),
+        "ssm_size": int(ssm_size),
+        "two_pass": bool(two_pass),
+        "accumulate": accumulate,
+        "micro_patches": 0,
+        "texels_touched": 0,
+    }
     if not flat.occluder.any() or not flat.receiver.any():
-        v = View.frame(scene.light.center, scene.light.normal, (0, 1, 0), (-1, 1, -1, 1), 1e-3, 1.0,
-                       ssm_size, ssm_size)
+        v = View.frame(scene.light.center, scene.light.normal, (0, 1, 0), (-1, 1, -1, 1), 1e-3, 1.0, ssm_size, ssm_size)
         z = np.zeros((ssm_size, ssm_size), np.float32)
         return SoftShadowMap(v, z, np.full_like(z, np.inf), v, {}, stats)
     with timer.phase("receiver_map"):
@@ -586,9 +630,24 @@ def compute_soft_shadow_map(scene, map_size: int = 256, ssm_size: int = 256, two
             ptr, idx = bin_patches_by_band(ext, n_bands, BAND_ROWS)
         with timer.phase("soft_shadow_map"):
             ssm = np.zeros((ssm_size, ssm_size), np.float32)
-            touched = accumulate_soft_shadow_map(patches, pmesh, ext, ptr, idx, BAND_ROWS, rdepth0, rmesh, svp,
-                                                 hx, hy, fp16, accumulate == "float16-rtz", check_mesh, ssm,
-                                                 numba.get_num_threads())
+            touched = accumulate_soft_shadow_map(
+                patches,
+                pmesh,
+                ext,
+                ptr,
+                idx,
+                BAND_ROWS,
+                rdepth0,
+                rmesh,
+                svp,
+                hx,
+                hy,
+                fp16,
+                accumulate == "float16-rtz",
+                check_mesh,
+                ssm,
+                numba.get_num_threads(),
+            )
             clamp_soft_shadow_map(ssm)
         passes[s] = ssm
         stats[f"micro_patches_{s}"] = int(len(patches))
@@ -624,9 +683,13 @@ class SoftShadowMapMethod(Method):
         Param("map_size", 256, "occluder map resolution N (N x N, light's aspect ratio)", min=8, max=4096),
         Param("ssm_size", 256, "soft shadow map resolution (N x N texels)", min=8, max=4096),
         Param("two_pass", False, "front-face and back-face occluder maps, SSMs merged by max (Sec. 3.5)"),
-        Param("accumulate", "float32", "precision of the blended sum; float16 (round to nearest) and float16-rtz "
-              "(truncate) reproduce the paper's FP16 failure",
-              choices=("float32", "float16", "float16-rtz")),
+        Param(
+            "accumulate",
+            "float32",
+            "precision of the blended sum; float16 (round to nearest) and float16-rtz "
+            "(truncate) reproduce the paper's FP16 failure",
+            choices=("float32", "float16", "float16-rtz"),
+        ),
         Param("margin", 0.02, "border added around the occluders in the occluder map (fraction)", min=0.0, max=1.0),
     )
 

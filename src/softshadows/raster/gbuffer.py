@@ -1,4 +1,5 @@
 """Result types of the shared rasterizer."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass

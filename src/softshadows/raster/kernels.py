@@ -12,6 +12,7 @@ view-space z (distance along ``forward``, world units).
 They are compiled with ``error_model="numpy"``: a division by zero gives inf/NaN instead of raising,
 so a perspective projection of a point at depth 0 yields non-finite screen coordinates.
 """
+
 from __future__ import annotations
 
 import math

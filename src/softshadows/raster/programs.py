@@ -13,6 +13,7 @@ Programs are selected by an integer so that the tile kernel stays cacheable (Num
 kernels that take functions as arguments). Add a program here, give it a code, and dispatch it in
 :func:`run_program`.
 """
+
 from __future__ import annotations
 
 import numpy as np

@@ -58,6 +58,7 @@ Hot loops index scratch arrays with 2-D subscripts instead of taking row views: 
 atomic reference-count update on the shared parent array, and with two threads these contended
 updates cost more than the rasterization itself.
 """
+
 from __future__ import annotations
 
 import math
@@ -107,7 +108,7 @@ def _clip_point(xi, yi, zi, xo, yo, zo, near):
 # ax - 0.5, the margin M of the fast path and the kind of bound (1: the edge bounds the covered
 # columns from above, -1: from below, 0: dy == 0, the edge passes or rejects whole rows).
 _CE_W = 10
-_U = 2.0 ** -53  # unit roundoff of float64
+_U = 2.0**-53  # unit roundoff of float64
 _ROBUST = 1e150  # coordinates below this never overflow the edge functions (no inf - inf = NaN)
 
 
@@ -177,8 +178,14 @@ def _setup_piece(vp, slot, x0, y0, z0, x1, y1, z1, x2, y2, z2, far, CB, CE, CZ):
     sy1 = _snap(sy1)
     sx2 = _snap(sx2)
     sy2 = _snap(sy2)
-    if not (math.isfinite(sx0) and math.isfinite(sy0) and math.isfinite(sx1) and math.isfinite(sy1)
-            and math.isfinite(sx2) and math.isfinite(sy2)):
+    if not (
+        math.isfinite(sx0)
+        and math.isfinite(sy0)
+        and math.isfinite(sx1)
+        and math.isfinite(sy1)
+        and math.isfinite(sx2)
+        and math.isfinite(sy2)
+    ):
         return 0
     xmin = min(sx0, min(sx1, sx2))
     xmax = max(sx0, max(sx1, sx2))
@@ -495,8 +502,11 @@ def _edge_in(r, ax, dy, sg, inc, j):
 
 @njit(**_JIT)
 def _covered(j, r0, ax0, dy0, sg0, in0, r1, ax1, dy1, sg1, in1, r2, ax2, dy2, sg2, in2):
-    return (_edge_in(r0, ax0, dy0, sg0, in0, j) and _edge_in(r1, ax1, dy1, sg1, in1, j)
-            and _edge_in(r2, ax2, dy2, sg2, in2, j))
+    return (
+        _edge_in(r0, ax0, dy0, sg0, in0, j)
+        and _edge_in(r1, ax1, dy1, sg1, in1, j)
+        and _edge_in(r2, ax2, dy2, sg2, in2, j)
+    )
 
 
 @njit(**_JIT)
@@ -617,7 +627,7 @@ def _rect_min_depth(ortho, pnx, pny, pnz, pd, wl, wt, wsx, wsy, i0, i1, j0, j1):
     ya = wt - (i0 + 0.5) * wsy
     yb = wt - (i1 + 0.5) * wsy
     if ortho:
-        if not (pnz != 0.0):
+        if pnz == 0.0:
             return -np.inf
     else:
         da = pny * ya + pnz
@@ -630,8 +640,10 @@ def _rect_min_depth(ortho, pnx, pny, pnz, pd, wl, wt, wsx, wsy, i0, i1, j0, j1):
         neg = (d00 < 0.0) & (d01 < 0.0) & (d10 < 0.0) & (d11 < 0.0)
         if not (pos or neg):
             return -np.inf
-    z = min(min(_plane_depth(ortho, pnx, pny, pnz, pd, xa, ya), _plane_depth(ortho, pnx, pny, pnz, pd, xb, ya)),
-            min(_plane_depth(ortho, pnx, pny, pnz, pd, xa, yb), _plane_depth(ortho, pnx, pny, pnz, pd, xb, yb)))
+    z = min(
+        min(_plane_depth(ortho, pnx, pny, pnz, pd, xa, ya), _plane_depth(ortho, pnx, pny, pnz, pd, xb, ya)),
+        min(_plane_depth(ortho, pnx, pny, pnz, pd, xa, yb), _plane_depth(ortho, pnx, pny, pnz, pd, xb, yb)),
+    )
     return z if z == z else -np.inf
 
 
@@ -641,9 +653,48 @@ def _make_tiles_kernel(mode, prog=0):
     branches, so that they vectorize, and their register allocation clean)."""
 
     @njit(parallel=True, **_JIT)
-    def tiles(vp, near, T, ntx, nty, bstart, bins, CB, CE, CZ, PL, NW, scratch, tscratch, iscratch, fscratch, xscratch,
-               depth_out, tri_out, pos_out, nrm_out, bary_out, mask_out, fcount, foff, fpix, ftri, fbary,
-               fdepth, program, pparams, cattr, img, blend, bstats, split, cull_discarded, rowbits, use_mask, nslot):
+    def tiles(
+        vp,
+        near,
+        T,
+        ntx,
+        nty,
+        bstart,
+        bins,
+        CB,
+        CE,
+        CZ,
+        PL,
+        NW,
+        scratch,
+        tscratch,
+        iscratch,
+        fscratch,
+        xscratch,
+        depth_out,
+        tri_out,
+        pos_out,
+        nrm_out,
+        bary_out,
+        mask_out,
+        fcount,
+        foff,
+        fpix,
+        ftri,
+        fbary,
+        fdepth,
+        program,
+        pparams,
+        cattr,
+        img,
+        blend,
+        bstats,
+        split,
+        cull_discarded,
+        rowbits,
+        use_mask,
+        nslot,
+    ):
         """mode 0: depth + tri; 1: full G-buffer; 2: count fragments per tile; 3: write fragments;
         4: run a fragment program per fragment and MIN-blend its value into ``blend`` (bstats[tile] =
         fragments and kept fragments for triangles below / from ``split``, pieces culled by depth,
@@ -856,12 +907,15 @@ def _make_tiles_kernel(mode, prog=0):
                         # the spans of all the tile's rows at once (vectorizes)
                         for k in range(LO.shape[0]):
                             py = (y0 + k) + 0.5
-                            lo, hi, slow = _fast_bound(j0, j1, False, py, j0, j1, ax0, ay0, dx0, dy0, sg0, in0,
-                                                       iv0, c00, M0, k0)
-                            lo, hi, slow = _fast_bound(lo, hi, slow, py, j0, j1, ax1, ay1, dx1, dy1, sg1, in1,
-                                                       iv1, c01, M1, k1)
-                            lo, hi, slow = _fast_bound(lo, hi, slow, py, j0, j1, ax2, ay2, dx2, dy2, sg2, in2,
-                                                       iv2, c02, M2, k2)
+                            lo, hi, slow = _fast_bound(
+                                j0, j1, False, py, j0, j1, ax0, ay0, dx0, dy0, sg0, in0, iv0, c00, M0, k0
+                            )
+                            lo, hi, slow = _fast_bound(
+                                lo, hi, slow, py, j0, j1, ax1, ay1, dx1, dy1, sg1, in1, iv1, c01, M1, k1
+                            )
+                            lo, hi, slow = _fast_bound(
+                                lo, hi, slow, py, j0, j1, ax2, ay2, dx2, dy2, sg2, in2, iv2, c02, M2, k2
+                            )
                             LO[k] = lo
                             HI[k] = hi
                             EX[k] = slow
@@ -929,8 +983,9 @@ def _make_tiles_kernel(mode, prog=0):
                             r0 = dx0 * (py - ay0)
                             r1 = dx1 * (py - ay1)
                             r2 = dx2 * (py - ay2)
-                            lo, hi = _scan_run(j0, j1, r0, ax0, dy0, sg0, in0, r1, ax1, dy1, sg1, in1,
-                                               r2, ax2, dy2, sg2, in2)
+                            lo, hi = _scan_run(
+                                j0, j1, r0, ax0, dy0, sg0, in0, r1, ax1, dy1, sg1, in1, r2, ax2, dy2, sg2, in2
+                            )
                         while lo <= hi:
                             if mode <= 2:
                                 # the whole tile row at once (vectorizes), masked to the span
@@ -990,8 +1045,25 @@ def _make_tiles_kernel(mode, prog=0):
                                 if use_mask and ((rn >> klo) & ((np.int64(1) << (khi - klo + 1)) - 1)) == 0:
                                     if full or robust:
                                         break
-                                    lo, hi = _scan_run(hi + 1, j1, r0, ax0, dy0, sg0, in0, r1, ax1, dy1, sg1, in1,
-                                                       r2, ax2, dy2, sg2, in2)
+                                    lo, hi = _scan_run(
+                                        hi + 1,
+                                        j1,
+                                        r0,
+                                        ax0,
+                                        dy0,
+                                        sg0,
+                                        in0,
+                                        r1,
+                                        ax1,
+                                        dy1,
+                                        sg1,
+                                        in1,
+                                        r2,
+                                        ax2,
+                                        dy2,
+                                        sg2,
+                                        in2,
+                                    )
                                     continue  # no texel of the span to shade
                                 cin = 0  # fragments and kept fragments of the row (reductions in the vector loop)
                                 ckp = 0
@@ -1069,14 +1141,15 @@ def _make_tiles_kernel(mode, prog=0):
                                     w += 1
                             if full or robust:
                                 break
-                            lo, hi = _scan_run(hi + 1, j1, r0, ax0, dy0, sg0, in0, r1, ax1, dy1, sg1, in1,
-                                               r2, ax2, dy2, sg2, in2)
+                            lo, hi = _scan_run(
+                                hi + 1, j1, r0, ax0, dy0, sg0, in0, r1, ax1, dy1, sg1, in1, r2, ax2, dy2, sg2, in2
+                            )
                 if mode == 0:
                     for i in range(y0, y1 + 1):
                         zr = zb[i - y0]
                         tr = tb[i - y0]
-                        drow = depth_out[i, x0:x1 + 1]
-                        trow = tri_out[i, x0:x1 + 1]
+                        drow = depth_out[i, x0 : x1 + 1]
+                        trow = tri_out[i, x0 : x1 + 1]
                         for k in range(drow.shape[0]):
                             drow[k] = zr[k]
                             trow[k] = tr[k]
@@ -1098,12 +1171,12 @@ def _make_tiles_kernel(mode, prog=0):
                         yw = wt - (i + 0.5) * wsy
                         zr = zb[i - y0]
                         tr = tb[i - y0]
-                        trow = tri_out[i, x0:x1 + 1]
-                        drow = depth_out[i, x0:x1 + 1]
-                        mrow = mask_out[i, x0:x1 + 1]
-                        prow = pos_out[i, x0:x1 + 1]
-                        nrow = nrm_out[i, x0:x1 + 1]
-                        brow = bary_out[i, x0:x1 + 1]
+                        trow = tri_out[i, x0 : x1 + 1]
+                        drow = depth_out[i, x0 : x1 + 1]
+                        mrow = mask_out[i, x0 : x1 + 1]
+                        prow = pos_out[i, x0 : x1 + 1]
+                        nrow = nrm_out[i, x0 : x1 + 1]
+                        brow = bary_out[i, x0 : x1 + 1]
                         if ortho:
                             for k in range(drow.shape[0]):
                                 t = tr[k]
@@ -1111,8 +1184,20 @@ def _make_tiles_kernel(mode, prog=0):
                                 tt = max(t, 0)  # PL, NW have a row 0 (read, then discarded, where no hit)
                                 z = zr[k]  # +inf where no hit
                                 xw = wl + ((x0 + k) + 0.5) * wsx
-                                b1, b2 = _bary_c(PL[tt, 4], PL[tt, 5], PL[tt, 6], PL[tt, 7], PL[tt, 8], PL[tt, 9],
-                                                 PL[tt, 10], PL[tt, 11], xw, yw, z, True)
+                                b1, b2 = _bary_c(
+                                    PL[tt, 4],
+                                    PL[tt, 5],
+                                    PL[tt, 6],
+                                    PL[tt, 7],
+                                    PL[tt, 8],
+                                    PL[tt, 9],
+                                    PL[tt, 10],
+                                    PL[tt, 11],
+                                    xw,
+                                    yw,
+                                    z,
+                                    True,
+                                )
                                 vx = xw
                                 vy = yw
                                 trow[k] = t
@@ -1133,8 +1218,20 @@ def _make_tiles_kernel(mode, prog=0):
                                 tt = max(t, 0)  # PL, NW have a row 0 (read, then discarded, where no hit)
                                 z = zr[k]  # +inf where no hit
                                 xw = wl + ((x0 + k) + 0.5) * wsx
-                                b1, b2 = _bary_c(PL[tt, 4], PL[tt, 5], PL[tt, 6], PL[tt, 7], PL[tt, 8], PL[tt, 9],
-                                                 PL[tt, 10], PL[tt, 11], xw, yw, z, False)
+                                b1, b2 = _bary_c(
+                                    PL[tt, 4],
+                                    PL[tt, 5],
+                                    PL[tt, 6],
+                                    PL[tt, 7],
+                                    PL[tt, 8],
+                                    PL[tt, 9],
+                                    PL[tt, 10],
+                                    PL[tt, 11],
+                                    xw,
+                                    yw,
+                                    z,
+                                    False,
+                                )
                                 vx = xw * z
                                 vy = yw * z
                                 trow[k] = t
@@ -1159,7 +1256,7 @@ def _make_tiles_kernel(mode, prog=0):
                     bstats[tile, 5] += nvculled
                     for i in range(y0, y1 + 1):
                         zr = zb[i - y0]
-                        brow = blend[i, x0:x1 + 1]
+                        brow = blend[i, x0 : x1 + 1]
                         for k in range(brow.shape[0]):
                             brow[k] = zr[k]
 
@@ -1284,10 +1381,31 @@ _ECA = np.empty((0, 3), dtype=np.float64)
 _EBS = np.empty((0, 5), dtype=np.int64)
 
 
-def _run_tiles(mode, vp, fe, depth=_E2F, tri=_E2I, pos=_E3F, nrm=_E3F, bary=_E3F, mask=_E2B,
-               fcount=_E1, foff=_E1, fpix=_E1, ftri=_E1I, fbary=_EFB, fdepth=_E1F,
-               program=0, pparams=_EP, cattr=_ECA, img=_E2F, blend=_E2F, bstats=_EBS, split=0,
-               cull_discarded=False):
+def _run_tiles(
+    mode,
+    vp,
+    fe,
+    depth=_E2F,
+    tri=_E2I,
+    pos=_E3F,
+    nrm=_E3F,
+    bary=_E3F,
+    mask=_E2B,
+    fcount=_E1,
+    foff=_E1,
+    fpix=_E1,
+    ftri=_E1I,
+    fbary=_EFB,
+    fdepth=_E1F,
+    program=0,
+    pparams=_EP,
+    cattr=_ECA,
+    img=_E2F,
+    blend=_E2F,
+    bstats=_EBS,
+    split=0,
+    cull_discarded=False,
+):
     T, ntx, nty, bstart, bins, CB, CE, CZ, PL, NW, near, rowbits = fe
     nthreads = numba.config.NUMBA_NUM_THREADS
     scratch = np.empty((nthreads, T, T), dtype=np.float64)
@@ -1301,10 +1419,47 @@ def _run_tiles(mode, vp, fe, depth=_E2F, tri=_E2I, pos=_E3F, nrm=_E3F, bary=_E3F
     # (dense modes) from p on: every thread gets a share of every busy region.
     nslot = numba.get_num_threads()
     _KERNELS[(mode, program if mode == _M_MINBLEND else 0)](
-        vp, near, T, ntx, nty, bstart, bins, CB, CE, CZ, PL, NW, scratch, tscratch, iscratch, fscratch, xscratch,
-        depth, tri,
-        pos, nrm, bary, mask, fcount, foff, fpix, ftri, fbary, fdepth, program, pparams, cattr, img, blend, bstats,
-        split, bool(cull_discarded), rowbits, rowbits.size > 0, int(nslot))
+        vp,
+        near,
+        T,
+        ntx,
+        nty,
+        bstart,
+        bins,
+        CB,
+        CE,
+        CZ,
+        PL,
+        NW,
+        scratch,
+        tscratch,
+        iscratch,
+        fscratch,
+        xscratch,
+        depth,
+        tri,
+        pos,
+        nrm,
+        bary,
+        mask,
+        fcount,
+        foff,
+        fpix,
+        ftri,
+        fbary,
+        fdepth,
+        program,
+        pparams,
+        cattr,
+        img,
+        blend,
+        bstats,
+        split,
+        bool(cull_discarded),
+        rowbits,
+        rowbits.size > 0,
+        int(nslot),
+    )
 
 
 def rasterize(view, vertices, faces, cull: str = "none") -> GBuffer:
@@ -1358,13 +1513,24 @@ def rasterize_fragments(view, vertices, faces, cull: str = "none") -> Fragments:
     ftri = np.empty(K, dtype=np.int32)
     fbary = np.empty((K, 2), dtype=np.float32)
     fdepth = np.empty(K, dtype=np.float32)
-    _run_tiles(_M_FFILL, vp, fe, fcount=fcount, foff=foff, fpix=fpix, ftri=ftri, fbary=fbary,
-               fdepth=fdepth)
+    _run_tiles(_M_FFILL, vp, fe, fcount=fcount, foff=foff, fpix=fpix, ftri=ftri, fbary=fbary, fdepth=fdepth)
     return Fragments(pixel=fpix, tri=ftri, bary=fbary, depth=fdepth, width=W, height=H)
 
 
-def rasterize_min_blend(view, vertices, faces, program: int, corner_attr, image, params, out,
-                        cull: str = "none", split: int = 0, cull_discarded: bool = False, mask=None) -> dict:
+def rasterize_min_blend(
+    view,
+    vertices,
+    faces,
+    program: int,
+    corner_attr,
+    image,
+    params,
+    out,
+    cull: str = "none",
+    split: int = 0,
+    cull_discarded: bool = False,
+    mask=None,
+) -> dict:
     """Run a fragment program on every fragment and MIN-blend its value into ``out`` (H,W) float32
     in place: the equivalent of a GPU fragment program with MIN blending (or of writing the value
     as depth with a LESS depth test). No depth test on the geometry itself.
@@ -1400,14 +1566,34 @@ def rasterize_min_blend(view, vertices, faces, program: int, corner_attr, image,
         raise ValueError(f"image must have shape {(H, W)}, got {im.shape}")
     mk = None
     if mask is not None:
-        mk = np.ascontiguousarray(mask).view(np.uint8) if np.asarray(mask).dtype == np.bool_ else \
-            np.ascontiguousarray(mask, dtype=np.uint8)
+        mk = (
+            np.ascontiguousarray(mask).view(np.uint8)
+            if np.asarray(mask).dtype == np.bool_
+            else np.ascontiguousarray(mask, dtype=np.uint8)
+        )
         if mk.shape != (H, W):
             raise ValueError(f"mask must have shape {(H, W)}, got {mk.shape}")
     fe = _front_end(vp, W, H, verts, fcs, code, near, mk)
     bstats = np.zeros((fe[1] * fe[2], 6), dtype=np.int64)
-    _run_tiles(_M_MINBLEND, vp, fe, program=int(program), pparams=np.asarray(params, dtype=np.float64),
-               cattr=ca, img=im, blend=out, bstats=bstats, split=int(split), cull_discarded=cull_discarded)
+    _run_tiles(
+        _M_MINBLEND,
+        vp,
+        fe,
+        program=int(program),
+        pparams=np.asarray(params, dtype=np.float64),
+        cattr=ca,
+        img=im,
+        blend=out,
+        bstats=bstats,
+        split=int(split),
+        cull_discarded=cull_discarded,
+    )
     tot = bstats.sum(axis=0)
-    return {"fragments_a": int(tot[0]), "fragments_b": int(tot[1]), "kept_a": int(tot[2]), "kept_b": int(tot[3]),
-            "culled_pieces": int(tot[4]), "value_culled_pieces": int(tot[5])}
+    return {
+        "fragments_a": int(tot[0]),
+        "fragments_b": int(tot[1]),
+        "kept_a": int(tot[2]),
+        "kept_b": int(tot[3]),
+        "culled_pieces": int(tot[4]),
+        "value_culled_pieces": int(tot[5]),
+    }

@@ -11,6 +11,7 @@ A :class:`View` is an orthonormal frame (origin, right, up, forward) plus a wind
   ``x' = x/z`` (perspective) or ``x`` (ortho). Row 0 is the top; pixel (i, j) has its center at
   ``(j + 0.5, i + 0.5)``.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -41,7 +42,7 @@ class View:
 
     # ---- constructors -------------------------------------------------------------------
     @staticmethod
-    def frame(origin, forward, up_hint, window, near, far, width, height, ortho=False) -> "View":
+    def frame(origin, forward, up_hint, window, near, far, width, height, ortho=False) -> View:
         """Frame with ``right = forward x up_hint`` and ``up = right x forward`` (OpenGL camera
         convention: the image is not mirrored for a camera looking along ``forward``)."""
         f = _unit(forward)
@@ -50,24 +51,53 @@ class View:
             r = np.cross(f, np.array([1.0, 0.0, 0.0]) if abs(f[0]) < 0.9 else np.array([0.0, 0.0, 1.0]))
         r = _unit(r)
         u = np.cross(r, f)
-        return View(np.asarray(origin, float).copy(), r, u, f, tuple(float(x) for x in window),
-                    float(near), float(far), int(width), int(height), bool(ortho))
+        return View(
+            np.asarray(origin, float).copy(),
+            r,
+            u,
+            f,
+            tuple(float(x) for x in window),
+            float(near),
+            float(far),
+            int(width),
+            int(height),
+            bool(ortho),
+        )
 
     @staticmethod
-    def look_at(eye, target, up, fov_y, width, height, near=1e-3, far=1e6) -> "View":
+    def look_at(eye, target, up, fov_y, width, height, near=1e-3, far=1e6) -> View:
         """Symmetric perspective view; ``fov_y`` in degrees, aspect from width/height."""
         t = np.tan(np.radians(fov_y) / 2.0)
         a = width / height
-        return View.frame(eye, np.asarray(target, float) - np.asarray(eye, float), up,
-                          (-t * a, t * a, -t, t), near, far, width, height, False)
+        return View.frame(
+            eye,
+            np.asarray(target, float) - np.asarray(eye, float),
+            up,
+            (-t * a, t * a, -t, t),
+            near,
+            far,
+            width,
+            height,
+            False,
+        )
 
     @staticmethod
-    def from_camera(camera, width, height, near=1e-3, far=1e6) -> "View":
+    def from_camera(camera, width, height, near=1e-3, far=1e6) -> View:
         return View.look_at(camera.eye, camera.target, camera.up, camera.fov_y, width, height, near, far)
 
-    def resized(self, width, height) -> "View":
-        return View(self.origin, self.right, self.up, self.forward, self.window, self.near, self.far,
-                    int(width), int(height), self.ortho)
+    def resized(self, width, height) -> View:
+        return View(
+            self.origin,
+            self.right,
+            self.up,
+            self.forward,
+            self.window,
+            self.near,
+            self.far,
+            int(width),
+            int(height),
+            self.ortho,
+        )
 
     # ---- transforms ----------------------------------------------------------------------
     def rotation(self) -> np.ndarray:
@@ -81,8 +111,15 @@ class View:
     def params(self) -> np.ndarray:
         """Flat float64 array for kernels: origin(3) right(3) up(3) forward(3) l r b t near far W H ortho."""
         l, r, b, t = self.window
-        return np.concatenate([self.origin, self.right, self.up, self.forward,
-                               [l, r, b, t, self.near, self.far, self.width, self.height, 1.0 if self.ortho else 0.0]])
+        return np.concatenate(
+            [
+                self.origin,
+                self.right,
+                self.up,
+                self.forward,
+                [l, r, b, t, self.near, self.far, self.width, self.height, 1.0 if self.ortho else 0.0],
+            ]
+        )
 
     def project(self, points) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """World points -> (sx, sy, depth): continuous pixel coordinates and view depth."""
@@ -110,7 +147,7 @@ class View:
         d = np.asarray(depth, float)
         if not self.ortho:
             x, y = x * d, y * d
-        return (self.origin + x[..., None] * self.right + y[..., None] * self.up + d[..., None] * self.forward)
+        return self.origin + x[..., None] * self.right + y[..., None] * self.up + d[..., None] * self.forward
 
 
 def fit_window(view_frame: View, points, margin: float = 0.0) -> tuple:
@@ -141,8 +178,16 @@ def light_frame(light, toward=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]
     return r, u, f
 
 
-def light_view(light, points, width, height, ortho: bool = False, margin: float = 0.02,
-               near_min: float = 1e-3, square_pixels: bool = False) -> View:
+def light_view(
+    light,
+    points,
+    width,
+    height,
+    ortho: bool = False,
+    margin: float = 0.02,
+    near_min: float = 1e-3,
+    square_pixels: bool = False,
+) -> View:
     """A view from the light's center (rect: along its normal; sphere: toward the points' centroid)
     whose window fits ``points`` (e.g. the scene's bounding-box corners or vertices in front of
     the light). near/far bracket the points' depths."""

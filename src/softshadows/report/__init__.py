@@ -6,8 +6,18 @@
 * :func:`sweep_plot` — frame time and error against a swept parameter (``softshadows bench --sweep``);
 * :func:`write_html` — the self-contained ``report.html``; :func:`machine_info`.
 """
+
 from .figures import colorbar_png, error_heatmap, error_limit, error_rgb, grid_image, sweep_plot
 from .html import machine_info, render_html, write_html
 
-__all__ = ["colorbar_png", "error_heatmap", "error_limit", "error_rgb", "grid_image", "machine_info", "render_html",
-           "sweep_plot", "write_html"]
+__all__ = [
+    "colorbar_png",
+    "error_heatmap",
+    "error_limit",
+    "error_rgb",
+    "grid_image",
+    "machine_info",
+    "render_html",
+    "sweep_plot",
+    "write_html",
+]

@@ -4,6 +4,7 @@ Colours of the error maps (``V - V_ref``): a diverging map (matplotlib ``RdBu``)
 limits ``[-L, L]``: **red = darker than truth** (V < V_ref, too much shadow), **blue = brighter**
 (V > V_ref, too little shadow), white = exact; background (no surface) is light grey.
 """
+
 from __future__ import annotations
 
 import io
@@ -115,11 +116,20 @@ def grid_image(rows: list[dict], limit: float, path=None, title: str | None = No
                 ax.set_title(("shaded image", "visibility V", "signed error V - V_ref")[j], fontsize=10)
             if key == "error":
                 if r.get("error") is None:
-                    ax.text(0.5, 0.5, "reference", ha="center", va="center", fontsize=10, color="0.4",
-                            transform=ax.transAxes)
+                    ax.text(
+                        0.5,
+                        0.5,
+                        "reference",
+                        ha="center",
+                        va="center",
+                        fontsize=10,
+                        color="0.4",
+                        transform=ax.transAxes,
+                    )
                     continue
-                im = ax.imshow(np.ma.masked_invalid(r["error"]), cmap=_cmap(), vmin=-limit, vmax=limit,
-                               interpolation="nearest")
+                im = ax.imshow(
+                    np.ma.masked_invalid(r["error"]), cmap=_cmap(), vmin=-limit, vmax=limit, interpolation="nearest"
+                )
             else:
                 ax.imshow(r[key], interpolation="nearest")
         axes[i, 0].set_ylabel(r["label"], fontsize=10, fontweight="bold")
@@ -155,15 +165,20 @@ def sweep_plot(data: dict, path=None, error_key: str = "ssm_error") -> bytes:
     a1.set_xlabel(data["x_label"])
     a2.set_xlabel(data["x_label"])
     a1.set_ylabel("frame time (ms, median; band: min-max)")
-    a2.set_ylabel({"ssm_error": "error: mean |dV| over umbra+penumbra", "mae": "mean |V - V_ref|"}.get(error_key, error_key))
+    a2.set_ylabel(
+        {"ssm_error": "error: mean |dV| over umbra+penumbra", "mae": "mean |V - V_ref|"}.get(error_key, error_key)
+    )
     for ax in (a1, a2):
         ax.grid(alpha=0.3)
         if data.get("log_x"):
             ax.set_xscale("log")
     a1.set_yscale("log")
     a1.legend(fontsize=8)
-    fig.suptitle(f"{data['scene']}: {data['kind']} sweep ({data['size'][0]}x{data['size'][1]}, "
-                 f"ground truth {data['gt_samples']} samples)", fontsize=10)
+    fig.suptitle(
+        f"{data['scene']}: {data['kind']} sweep ({data['size'][0]}x{data['size'][1]}, "
+        f"ground truth {data['gt_samples']} samples)",
+        fontsize=10,
+    )
     fig.tight_layout()
     out = _fig_png(fig, 110)
     if path is not None:

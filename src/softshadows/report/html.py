@@ -1,8 +1,10 @@
 """A self-contained ``report.html``: every image is embedded as a base64 data URI, the tables sort
 on a click of their header (a few lines of inline JavaScript), no external file or network use."""
+
 from __future__ import annotations
 
 import base64
+import contextlib
 import datetime as _dt
 import html
 import math
@@ -25,10 +27,8 @@ def machine_info() -> dict:
     except OSError:
         pass
     info = {"cpu": cpu or platform.machine(), "logical_cores": os.cpu_count()}
-    try:
+    with contextlib.suppress(AttributeError):
         info["usable_cores"] = len(os.sched_getaffinity(0))
-    except AttributeError:
-        pass
     from importlib import metadata
 
     vers = {"python": sys.version.split()[0]}
@@ -41,13 +41,13 @@ def machine_info() -> dict:
         import numba
 
         info["numba_threads"] = int(numba.get_num_threads())
-    except Exception:  # noqa: BLE001
+    except Exception:
         pass
     try:
         from .. import __version__
 
         vers["softshadows"] = __version__
-    except Exception:  # noqa: BLE001
+    except Exception:
         pass
     info["os"] = f"{platform.system()} {platform.release()}"
     info["versions"] = vers
@@ -86,8 +86,10 @@ def _ms(v) -> tuple[str, str]:
 
 def _table(tid: str, header: list[tuple[str, str]], rows: list[list]) -> str:
     """A sortable table. header: (label, tooltip); rows: cells as (text, key) or raw values."""
-    h = "".join(f'<th title="{_e(t)}" onclick="sortTable(\'{tid}\',{i})">{_e(lbl)}<span class="arr"></span></th>'
-                for i, (lbl, t) in enumerate(header))
+    h = "".join(
+        f'<th title="{_e(t)}" onclick="sortTable(\'{tid}\',{i})">{_e(lbl)}<span class="arr"></span></th>'
+        for i, (lbl, t) in enumerate(header)
+    )
     body = []
     for r in rows:
         cells = []
@@ -163,13 +165,18 @@ def render_html(ctx: dict) -> str:
     sc = ctx["scene"]
     ref = ctx["reference"]
     methods = ctx["methods"]
-    parts = [f"<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'><title>{_e(ctx['title'])}</title>",
-             f"<style>{_CSS}</style><script>{_JS}</script></head><body>"]
+    parts = [
+        f"<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'><title>{_e(ctx['title'])}</title>",
+        f"<style>{_CSS}</style><script>{_JS}</script></head><body>",
+    ]
     parts.append(f"<h1>{_e(ctx['title'])}</h1>")
-    parts.append(f"<div class='sub'>{_e(ctx.get('created', _dt.datetime.now().isoformat(timespec='seconds')))}"
-                 f" &middot; {sc['size'][0]}x{sc['size'][1]} pixels &middot; reference: <b>{_e(ref['name'])}</b>"
-                 f" ({_e(ref['params'].get('samples', '?'))} light samples per pixel)"
-                 + (f" &middot; <code>{_e(ctx['command'])}</code>" if ctx.get("command") else "") + "</div>")
+    parts.append(
+        f"<div class='sub'>{_e(ctx.get('created', _dt.datetime.now().isoformat(timespec='seconds')))}"
+        f" &middot; {sc['size'][0]}x{sc['size'][1]} pixels &middot; reference: <b>{_e(ref['name'])}</b>"
+        f" ({_e(ref['params'].get('samples', '?'))} light samples per pixel)"
+        + (f" &middot; <code>{_e(ctx['command'])}</code>" if ctx.get("command") else "")
+        + "</div>"
+    )
     for n in ctx.get("notes", []):
         parts.append(f"<div class='note'>{_e(n)}</div>")
     for m, why in ctx.get("failed", {}).items():
@@ -177,32 +184,51 @@ def render_html(ctx: dict) -> str:
 
     # metrics table
     parts.append("<h2>Error against ground truth</h2>")
-    parts.append("<div class='sub'>Visibility V in [0,1]; errors are V - V_ref over surface pixels "
-                 "(background excluded). Click a column header to sort. Hover a header for its meaning.</div>")
-    header = [("method", "")] + [(k, METRIC_HELP.get(k, k)) for k in METRIC_COLS] + \
-             [("px shadow", "pixels in umbra or penumbra of either image (the ssm_error set)"),
-              ("total ms", "frame time, all phases, after JIT warm-up")]
+    parts.append(
+        "<div class='sub'>Visibility V in [0,1]; errors are V - V_ref over surface pixels "
+        "(background excluded). Click a column header to sort. Hover a header for its meaning.</div>"
+    )
+    header = (
+        [("method", "")]
+        + [(k, METRIC_HELP.get(k, k)) for k in METRIC_COLS]
+        + [
+            ("px shadow", "pixels in umbra or penumbra of either image (the ssm_error set)"),
+            ("total ms", "frame time, all phases, after JIT warm-up"),
+        ]
+    )
     rows = []
     for m in methods:
         mt = m["metrics"]
-        rows.append([(_e(m["name"]), _e(m["name"]))] + [mt.get(k) for k in METRIC_COLS] +
-                    [mt.get("n_shadow"), _ms(m["timings"].get("total", float("nan")) * 1e3)])
+        rows.append(
+            [(_e(m["name"]), _e(m["name"]))]
+            + [mt.get(k) for k in METRIC_COLS]
+            + [mt.get("n_shadow"), _ms(m["timings"].get("total", float("nan")) * 1e3)]
+        )
     parts.append(_table("metrics", header, rows))
     if methods:
         mt = methods[0]["metrics"]
-        parts.append(f"<div class='sub'>Ground-truth regions (eps = {mt.get('eps', 0.001):g}): "
-                     f"{mt.get('n_umbra', 0):,} umbra, {mt.get('n_penumbra', 0):,} penumbra, {mt.get('n_lit', 0):,} lit "
-                     f"of {mt.get('n_pixels', 0):,} surface pixels.</div>")
+        parts.append(
+            f"<div class='sub'>Ground-truth regions (eps = {mt.get('eps', 0.001):g}): "
+            f"{mt.get('n_umbra', 0):,} umbra, {mt.get('n_penumbra', 0):,} penumbra, {mt.get('n_lit', 0):,} lit "
+            f"of {mt.get('n_pixels', 0):,} surface pixels.</div>"
+        )
 
     # timings table (long format: stays narrow whatever the number of phases)
     parts.append("<h2>Time per phase (milliseconds)</h2>")
-    parts.append("<div class='sub'>One frame per method after a JIT warm-up render. <code>eye_gbuffer</code> and "
-                 "<code>shading</code> are shared by all methods (<i>shared</i> column); <i>method ms</i> is the "
-                 "frame minus them. For repeated timings with spread and ratios use <code>softshadows bench</code>."
-                 "</div>")
+    parts.append(
+        "<div class='sub'>One frame per method after a JIT warm-up render. <code>eye_gbuffer</code> and "
+        "<code>shading</code> are shared by all methods (<i>shared</i> column); <i>method ms</i> is the "
+        "frame minus them. For repeated timings with spread and ratios use <code>softshadows bench</code>."
+        "</div>"
+    )
     allm = [ref] + list(methods)
-    header = [("method", ""), ("phase", "a timed phase of the frame"), ("ms", "milliseconds"),
-              ("% of frame", "share of the whole frame"), ("shared", "phase common to all methods")]
+    header = [
+        ("method", ""),
+        ("phase", "a timed phase of the frame"),
+        ("ms", "milliseconds"),
+        ("% of frame", "share of the whole frame"),
+        ("shared", "phase common to all methods"),
+    ]
     rows = []
     for m in allm:
         tot = m["timings"].get("total", float("nan"))
@@ -210,29 +236,52 @@ def render_html(ctx: dict) -> str:
             if p == "total":
                 continue
             shared = p in ("eye_gbuffer", "shading")
-            rows.append([(_e(m["name"]), _e(m["name"])), (_e(p), _e(p)), _ms(t * 1e3),
-                         _ms(100.0 * t / tot if tot > 0 else None), ("yes" if shared else "", "1" if shared else "0")])
-    summary = [("method", ""), ("total ms", "whole frame"), ("method ms", "frame minus eye_gbuffer and shading"),
-               ("slowest phase", "")]
+            rows.append(
+                [
+                    (_e(m["name"]), _e(m["name"])),
+                    (_e(p), _e(p)),
+                    _ms(t * 1e3),
+                    _ms(100.0 * t / tot if tot > 0 else None),
+                    ("yes" if shared else "", "1" if shared else "0"),
+                ]
+            )
+    summary = [
+        ("method", ""),
+        ("total ms", "whole frame"),
+        ("method ms", "frame minus eye_gbuffer and shading"),
+        ("slowest phase", ""),
+    ]
     srows = []
     for m in allm:
         t = m["timings"]
         own = {k: v for k, v in t.items() if k not in ("total", "eye_gbuffer", "shading")}
         slow = max(own, key=own.get) if own else ""
-        srows.append([(_e(m["name"]), _e(m["name"])), _ms(t.get("total", float("nan")) * 1e3),
-                      _ms((t.get("total", float("nan")) - t.get("eye_gbuffer", 0.0) - t.get("shading", 0.0)) * 1e3),
-                      (_e(slow), _e(slow))])
-    parts.append("<div class='meta'><div>" + _table("timesum", summary, srows) + "</div><div>"
-                 + _table("timings", header, rows) + "</div></div>")
+        srows.append(
+            [
+                (_e(m["name"]), _e(m["name"])),
+                _ms(t.get("total", float("nan")) * 1e3),
+                _ms((t.get("total", float("nan")) - t.get("eye_gbuffer", 0.0) - t.get("shading", 0.0)) * 1e3),
+                (_e(slow), _e(slow)),
+            ]
+        )
+    parts.append(
+        "<div class='meta'><div>"
+        + _table("timesum", summary, srows)
+        + "</div><div>"
+        + _table("timings", header, rows)
+        + "</div></div>"
+    )
 
     if ctx.get("grid"):
         parts.append("<h2>All methods</h2>")
         parts.append(f"<div class='grid'><img alt='comparison grid' src='{data_uri(ctx['grid'])}'></div>")
 
     parts.append("<h2>Per method</h2>")
-    parts.append(f"<div class='sub'>Error maps share the colour limits &plusmn;{ctx['error_limit']:.2f}: "
-                 "<span style='color:#b2182b'><b>red = darker than truth</b></span>, "
-                 "<span style='color:#2166ac'><b>blue = brighter than truth</b></span>, grey = background.</div>")
+    parts.append(
+        f"<div class='sub'>Error maps share the colour limits &plusmn;{ctx['error_limit']:.2f}: "
+        "<span style='color:#b2182b'><b>red = darker than truth</b></span>, "
+        "<span style='color:#2166ac'><b>blue = brighter than truth</b></span>, grey = background.</div>"
+    )
     if ctx.get("colorbar"):
         parts.append(f"<img alt='error colour scale' src='{data_uri(ctx['colorbar'])}'>")
     parts.append("<div class='cards'>")
@@ -240,17 +289,24 @@ def render_html(ctx: dict) -> str:
         figs = []
         for key, cap in (("image", "shaded"), ("v", "V"), ("error_raw", "signed error")):
             if m["images"].get(key):
-                figs.append(f"<figure><img alt='{_e(m['name'])} {cap}' src='{data_uri(m['images'][key])}'>"
-                            f"<figcaption>{cap}</figcaption></figure>")
+                figs.append(
+                    f"<figure><img alt='{_e(m['name'])} {cap}' src='{data_uri(m['images'][key])}'>"
+                    f"<figcaption>{cap}</figcaption></figure>"
+                )
         mt = m.get("metrics")
-        line = (f"MAE {mt['mae']:.4f} &middot; ssm {mt['ssm_error']:.4f} &middot; FLIP {mt.get('flip', float('nan')):.4f}"
-                if mt else "reference")
-        parts.append(f"<div class='card'><h3>{_e(m['name'])}</h3><div class='sub'>{_e(m.get('summary', ''))}"
-                     f"<br><i>{_e(m.get('paper', ''))}</i><br>{line} &middot; "
-                     f"{m['timings'].get('total', float('nan')) * 1e3:.1f} ms</div>"
-                     f"<div class='imgs'>{''.join(figs)}</div>"
-                     f"<details open><summary>parameters</summary>{_kv(m['params'])}</details>"
-                     f"<details><summary>statistics</summary>{_kv(m.get('stats', {}))}</details></div>")
+        line = (
+            f"MAE {mt['mae']:.4f} &middot; ssm {mt['ssm_error']:.4f} &middot; FLIP {mt.get('flip', float('nan')):.4f}"
+            if mt
+            else "reference"
+        )
+        parts.append(
+            f"<div class='card'><h3>{_e(m['name'])}</h3><div class='sub'>{_e(m.get('summary', ''))}"
+            f"<br><i>{_e(m.get('paper', ''))}</i><br>{line} &middot; "
+            f"{m['timings'].get('total', float('nan')) * 1e3:.1f} ms</div>"
+            f"<div class='imgs'>{''.join(figs)}</div>"
+            f"<details open><summary>parameters</summary>{_kv(m['params'])}</details>"
+            f"<details><summary>statistics</summary>{_kv(m.get('stats', {}))}</details></div>"
+        )
     parts.append("</div>")
 
     parts.append("<h2>Scene and machine</h2><div class='meta'>")

@@ -10,6 +10,7 @@ both 4:3 and 1:1. The coordinates are documented in each builder (tests depend o
 :func:`shadow_footprint` and :func:`frame_camera` are the helpers that placed these cameras; the
 loaders use them to frame scenes that come without a camera.
 """
+
 from __future__ import annotations
 
 import functools
@@ -17,13 +18,25 @@ from importlib import resources
 
 import numpy as np
 
+from ..errors import SceneError
 from . import primitives as prim
 from .types import Camera, Mesh, RectLight, Scene, rect_to_sphere, sphere_to_rect
-from ..errors import SceneError
 
-__all__ = ["BUILTIN", "builtin_scenes", "build", "with_light_shape", "frame_camera", "shadow_footprint",
-           "square_visibility", "SQUARE_OCCLUDER_Y", "SQUARE_OCCLUDER_SIDE", "SQUARE_LIGHT_Y",
-           "SQUARE_LIGHT_SIDE", "GROUND_SIZE", "GROUND_ALBEDO"]
+__all__ = [
+    "BUILTIN",
+    "GROUND_ALBEDO",
+    "GROUND_SIZE",
+    "SQUARE_LIGHT_SIDE",
+    "SQUARE_LIGHT_Y",
+    "SQUARE_OCCLUDER_SIDE",
+    "SQUARE_OCCLUDER_Y",
+    "build",
+    "builtin_scenes",
+    "frame_camera",
+    "shadow_footprint",
+    "square_visibility",
+    "with_light_shape",
+]
 
 GROUND_SIZE = 8.0
 GROUND_CELLS = 8
@@ -75,8 +88,14 @@ def shadow_footprint(light, points, ground_y: float = 0.0) -> np.ndarray:
     return np.concatenate(out) if out else np.zeros((0, 3))
 
 
-def frame_camera(points, target=None, azimuth_deg: float = 20.0, elevation_deg: float = 38.0,
-                 fov_y: float = 40.0, margin: float = 0.1) -> Camera:
+def frame_camera(
+    points,
+    target=None,
+    azimuth_deg: float = 20.0,
+    elevation_deg: float = 38.0,
+    fov_y: float = 40.0,
+    margin: float = 0.1,
+) -> Camera:
     """A camera looking at ``target`` (default: the points' bounding-box center) from
     ``elevation_deg`` above the horizon and ``azimuth_deg`` around y (0 = from +z), as close as
     possible while every point lies inside the central ``1 - margin`` of a square (1:1) image,
@@ -109,8 +128,9 @@ def frame_camera(points, target=None, azimuth_deg: float = 20.0, elevation_deg: 
     return Camera(tgt + d * hi, tgt, (0.0, 1.0, 0.0), fov_y)
 
 
-def _ground(size: float = GROUND_SIZE, y: float = 0.0, center=(0.0, 0.0, 0.0), albedo=GROUND_ALBEDO,
-            cells: int = GROUND_CELLS) -> Mesh:
+def _ground(
+    size: float = GROUND_SIZE, y: float = 0.0, center=(0.0, 0.0, 0.0), albedo=GROUND_ALBEDO, cells: int = GROUND_CELLS
+) -> Mesh:
     v, f = prim.plane(size, size, cells, cells, y=y, center=center)
     return Mesh(v, f, albedo, "receiver", "ground")
 
@@ -152,8 +172,9 @@ def square_visibility(points) -> np.ndarray:
     from ..analytic import rect_occluder_visibility
 
     ho, hl = SQUARE_OCCLUDER_SIDE / 2, SQUARE_LIGHT_SIDE / 2
-    return rect_occluder_visibility(points, (0.0, SQUARE_OCCLUDER_Y, 0.0), (ho, ho),
-                                    (0.0, SQUARE_LIGHT_Y, 0.0), (hl, hl))
+    return rect_occluder_visibility(
+        points, (0.0, SQUARE_OCCLUDER_Y, 0.0), (ho, ho), (0.0, SQUARE_LIGHT_Y, 0.0), (hl, hl)
+    )
 
 
 def spheres(light: str = "rect", object_role: str = "occluder") -> Scene:
@@ -166,9 +187,11 @@ def spheres(light: str = "rect", object_role: str = "occluder") -> Scene:
     * light: center (0.5, 3.2, 0.4), side 0.8 (u = 0.8 x, v = 0.8 z, facing -y).
     * camera: eye (1.25, 4.62, 4.10), target (-0.37, 0.92, -0.35), fov_y 40.
     """
-    specs = [((-0.5, 1.0, -0.2), 0.5, (0.85, 0.25, 0.2), "red sphere"),
-             ((0.35, 1.4, -0.1), 0.45, (0.3, 0.7, 0.3), "green sphere"),
-             ((-0.05, 0.75, 0.45), 0.4, (0.25, 0.4, 0.85), "blue sphere")]
+    specs = [
+        ((-0.5, 1.0, -0.2), 0.5, (0.85, 0.25, 0.2), "red sphere"),
+        ((0.35, 1.4, -0.1), 0.45, (0.3, 0.7, 0.3), "green sphere"),
+        ((-0.05, 0.75, 0.45), 0.4, (0.25, 0.4, 0.85), "blue sphere"),
+    ]
     meshes = [_ground()]
     for c, r, alb, nm in specs:
         v, f = prim.icosphere(r, c, 3)
@@ -282,10 +305,12 @@ def plant(light: str = "rect", object_role: str = "occluder") -> Scene:
     * camera: eye (1.02, 3.43, 3.34), target (-0.24, 0.85, -0.12), fov_y 40.
     """
     pot, stem, leaves = _plant_geometry()
-    meshes = [_ground(),
-              Mesh(*pot, (0.7, 0.35, 0.2), object_role, "pot"),
-              Mesh(*stem, (0.4, 0.3, 0.15), object_role, "stem"),
-              Mesh(*leaves, (0.25, 0.6, 0.2), object_role, "leaves")]
+    meshes = [
+        _ground(),
+        Mesh(*pot, (0.7, 0.35, 0.2), object_role, "pot"),
+        Mesh(*stem, (0.4, 0.3, 0.15), object_role, "stem"),
+        Mesh(*leaves, (0.25, 0.6, 0.2), object_role, "leaves"),
+    ]
     lt = _down_light((0.3, 3.5, 0.2), 0.7)
     cam = Camera((1.02, 3.43, 3.34), (-0.24, 0.85, -0.12), (0.0, 1.0, 0.0), 40.0)
     return _finish("plant", meshes, lt, cam, light)

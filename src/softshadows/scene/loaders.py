@@ -1,4 +1,4 @@
-'''Loading scenes: built-in names, TOML scene files, and bare mesh files.
+"""Loading scenes: built-in names, TOML scene files, and bare mesh files.
 
 :func:`load_scene` accepts
 
@@ -67,7 +67,8 @@ A full example (every key shown; the comments say which are optional)::
 
 
 Unknown keys are errors (a typo should not be silently ignored).
-'''
+"""
+
 from __future__ import annotations
 
 import math
@@ -76,12 +77,12 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import SceneError
 from . import primitives as prim
 from .builtin import BUILTIN, build, frame_camera, shadow_footprint, with_light_shape
 from .types import ROLES, Camera, Mesh, RectLight, Scene, SphereLight
-from ..errors import SceneError
 
-__all__ = ["load_scene", "load_toml", "read_mesh_file", "scene_from_mesh", "MESH_EXTENSIONS"]
+__all__ = ["MESH_EXTENSIONS", "load_scene", "load_toml", "read_mesh_file", "scene_from_mesh"]
 
 MESH_EXTENSIONS = (".obj", ".ply", ".glb", ".gltf", ".stl", ".off")
 
@@ -108,12 +109,11 @@ def _one_line(text) -> str:
 def _strip(exc, prefix: str) -> str:
     """A constructor's message without its own 'camera: ' / 'light: ' prefix."""
     msg = _one_line(exc)
-    return msg[len(prefix) + 2:] if msg.startswith(prefix + ": ") else msg
+    return msg[len(prefix) + 2 :] if msg.startswith(prefix + ": ") else msg
 
 
 def _choices() -> str:
-    return (f"built-in scenes: {', '.join(BUILTIN)}; or a .toml scene file or a mesh file "
-            f"({' '.join(MESH_EXTENSIONS)})")
+    return f"built-in scenes: {', '.join(BUILTIN)}; or a .toml scene file or a mesh file ({' '.join(MESH_EXTENSIONS)})"
 
 
 # ---- entry point -----------------------------------------------------------------------------
@@ -150,7 +150,7 @@ def read_mesh_file(path, label: str | None = None) -> tuple[np.ndarray, np.ndarr
         raise SceneError(f"{label}: file not found")
     try:
         obj = trimesh.load(str(path), process=False)
-    except Exception as exc:  # noqa: BLE001 - any parser failure is bad input
+    except Exception as exc:
         raise SceneError(f"{label}: cannot read mesh: {_one_line(exc) or type(exc).__name__}") from None
     parts = []
     if isinstance(obj, trimesh.Scene):
@@ -228,8 +228,7 @@ class _Fields:
         unknown = [k for k in table if k not in allowed]
         if unknown:
             names = ", ".join(f"'{k}'" for k in unknown)
-            self.fail(f"{where}: unknown key{'s' if len(unknown) > 1 else ''} {names}; "
-                      f"valid: {', '.join(allowed)}")
+            self.fail(f"{where}: unknown key{'s' if len(unknown) > 1 else ''} {names}; valid: {', '.join(allowed)}")
 
     def field(self, key: str) -> str:
         return f"{self.where}{self.sep}{key}"
@@ -265,8 +264,19 @@ class _Fields:
             self.fail(f"{self.field(key)} must be <= {le}, got {x!r}")
         return int(x) if integer else float(x)
 
-    def vec(self, key, n: int = 3, default=_REQUIRED, *, scalar_ok=False, gt=None, ge=None, le=None,
-            nonzero=False, integer=False):
+    def vec(
+        self,
+        key,
+        n: int = 3,
+        default=_REQUIRED,
+        *,
+        scalar_ok=False,
+        gt=None,
+        ge=None,
+        le=None,
+        nonzero=False,
+        integer=False,
+    ):
         x, given = self._get(key, default)
         if not given:
             return None if x is None else np.asarray(x, np.float64)
@@ -301,9 +311,13 @@ class _Fields:
 
     def matrix4(self, key) -> np.ndarray:
         x = self.t[key]
-        ok = (isinstance(x, list) and len(x) == 4
-              and all(isinstance(r, list) and len(r) == 4 and all(self._is_num(e) and math.isfinite(e) for e in r)
-                      for r in x))
+        ok = (
+            isinstance(x, list)
+            and len(x) == 4
+            and all(
+                isinstance(r, list) and len(r) == 4 and all(self._is_num(e) and math.isfinite(e) for e in r) for r in x
+            )
+        )
         if not ok:
             self.fail(f"{self.field(key)} must be 4 rows of 4 numbers, got {_one_line(repr(x))}")
         m = np.asarray(x, np.float64)
@@ -351,8 +365,7 @@ def _primitive(fl: _Fields, kind: str) -> tuple[np.ndarray, np.ndarray]:
     if kind == "box":
         return prim.box(fl.vec("size", default=[1.0, 1.0, 1.0], scalar_ok=True, gt=0), center)
     if kind == "sphere":
-        return prim.icosphere(fl.num("radius", 1.0, gt=0), center,
-                              fl.num("subdivisions", 3, integer=True, ge=0, le=6))
+        return prim.icosphere(fl.num("radius", 1.0, gt=0), center, fl.num("subdivisions", 3, integer=True, ge=0, le=6))
     if kind == "quad":
         u, v = fl.vec("u"), fl.vec("v")
         if np.linalg.norm(np.cross(u, v)) <= 1e-12:
@@ -468,9 +481,16 @@ def load_toml(path) -> Scene:
             if not isinstance(g, dict):
                 raise SceneError(f"{file}: ground must be a table or true, got {g!r}")
             gf = _Fields(file, g, "ground", _GROUND_KEYS)
-            meshes.append(_ground_mesh(lo, hi, size=gf.num("size", None, gt=0), y=gf.num("y", None),
-                                       albedo=gf.vec("albedo", default=[0.8, 0.8, 0.8], scalar_ok=True, ge=0, le=1),
-                                       cells=gf.num("cells", 8, integer=True, ge=1, le=1000)))
+            meshes.append(
+                _ground_mesh(
+                    lo,
+                    hi,
+                    size=gf.num("size", None, gt=0),
+                    y=gf.num("y", None),
+                    albedo=gf.vec("albedo", default=[0.8, 0.8, 0.8], scalar_ok=True, ge=0, le=1),
+                    cells=gf.num("cells", 8, integer=True, ge=1, le=1000),
+                )
+            )
     if "light" in doc:
         light = _light(file, doc["light"])
     else:

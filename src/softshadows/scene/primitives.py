@@ -12,11 +12,12 @@ outward normals; every triangle ``(a, b, c)`` is counter-clockwise seen from the
 * :func:`ellipse_fans` - many small planar ellipses at once (the plant's leaves)
 * :func:`merge`     - concatenate several ``(vertices, faces)`` pairs
 """
+
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["plane", "quad", "box", "icosphere", "cylinder", "ellipse_fans", "merge", "face_normals"]
+__all__ = ["box", "cylinder", "ellipse_fans", "face_normals", "icosphere", "merge", "plane", "quad"]
 
 
 def _v3(x, what: str = "vector") -> np.ndarray:
@@ -46,8 +47,9 @@ def merge(*parts) -> tuple[np.ndarray, np.ndarray]:
     return np.concatenate(vs), np.concatenate(fs)
 
 
-def plane(size_x: float, size_z: float, nx: int = 1, nz: int = 1, y: float = 0.0,
-          center=(0.0, 0.0, 0.0)) -> tuple[np.ndarray, np.ndarray]:
+def plane(
+    size_x: float, size_z: float, nx: int = 1, nz: int = 1, y: float = 0.0, center=(0.0, 0.0, 0.0)
+) -> tuple[np.ndarray, np.ndarray]:
     """Horizontal ``size_x`` by ``size_z`` rectangle split into ``nx`` by ``nz`` cells (2 triangles
     each), facing +y. It spans ``center.x +- size_x/2``, ``center.z +- size_z/2`` at height
     ``center.y + y``."""
@@ -101,13 +103,48 @@ def box(size=1.0, center=(0.0, 0.0, 0.0)) -> tuple[np.ndarray, np.ndarray]:
 def icosphere(radius: float = 1.0, center=(0.0, 0.0, 0.0), subdivisions: int = 3) -> tuple[np.ndarray, np.ndarray]:
     """Sphere from an icosahedron subdivided ``subdivisions`` times (20 * 4**subdivisions triangles)."""
     t = (1.0 + 5.0**0.5) / 2.0
-    v = np.array([[-1, t, 0], [1, t, 0], [-1, -t, 0], [1, -t, 0],
-                  [0, -1, t], [0, 1, t], [0, -1, -t], [0, 1, -t],
-                  [t, 0, -1], [t, 0, 1], [-t, 0, -1], [-t, 0, 1]], dtype=np.float64)
-    f = np.array([[0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11],
-                  [1, 5, 9], [5, 11, 4], [11, 10, 2], [10, 7, 6], [7, 1, 8],
-                  [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8], [3, 8, 9],
-                  [4, 9, 5], [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1]], dtype=np.int64)
+    v = np.array(
+        [
+            [-1, t, 0],
+            [1, t, 0],
+            [-1, -t, 0],
+            [1, -t, 0],
+            [0, -1, t],
+            [0, 1, t],
+            [0, -1, -t],
+            [0, 1, -t],
+            [t, 0, -1],
+            [t, 0, 1],
+            [-t, 0, -1],
+            [-t, 0, 1],
+        ],
+        dtype=np.float64,
+    )
+    f = np.array(
+        [
+            [0, 11, 5],
+            [0, 5, 1],
+            [0, 1, 7],
+            [0, 7, 10],
+            [0, 10, 11],
+            [1, 5, 9],
+            [5, 11, 4],
+            [11, 10, 2],
+            [10, 7, 6],
+            [7, 1, 8],
+            [3, 9, 4],
+            [3, 4, 2],
+            [3, 2, 6],
+            [3, 6, 8],
+            [3, 8, 9],
+            [4, 9, 5],
+            [2, 4, 11],
+            [6, 2, 10],
+            [8, 6, 7],
+            [9, 8, 1],
+        ],
+        dtype=np.int64,
+    )
     v /= np.linalg.norm(v, axis=1, keepdims=True)
     for _ in range(int(subdivisions)):
         edges = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
@@ -116,8 +153,14 @@ def icosphere(radius: float = 1.0, center=(0.0, 0.0, 0.0), subdivisions: int = 3
         mid /= np.linalg.norm(mid, axis=1, keepdims=True)
         m = inv.reshape(3, -1) + len(v)  # midpoints of edges 01, 12, 20 of each face
         a, b, c = f[:, 0], f[:, 1], f[:, 2]
-        f = np.concatenate([np.stack([a, m[0], m[2]], 1), np.stack([b, m[1], m[0]], 1),
-                            np.stack([c, m[2], m[1]], 1), np.stack([m[0], m[1], m[2]], 1)])
+        f = np.concatenate(
+            [
+                np.stack([a, m[0], m[2]], 1),
+                np.stack([b, m[1], m[0]], 1),
+                np.stack([c, m[2], m[1]], 1),
+                np.stack([m[0], m[1], m[2]], 1),
+            ]
+        )
         v = np.concatenate([v, mid])
     return v * float(radius) + _v3(center, "icosphere center"), f
 
@@ -150,13 +193,16 @@ def cylinder(radius: float, p0, p1, segments: int = 16, caps: bool = True) -> tu
     if caps:
         verts += [p0[None], p1[None]]
         cb, ct = 2 * n, 2 * n + 1
-        faces += [np.stack([np.full(n, cb), k1, k], 1),  # faces -d
-                  np.stack([np.full(n, ct), n + k, n + k1], 1)]  # faces +d
+        faces += [
+            np.stack([np.full(n, cb), k1, k], 1),  # faces -d
+            np.stack([np.full(n, ct), n + k, n + k1], 1),
+        ]  # faces +d
     return np.concatenate(verts), np.concatenate(faces).astype(np.int64)
 
 
-def ellipse_fans(centers, major, normals, length, width, segments: int = 6,
-                 cup: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+def ellipse_fans(
+    centers, major, normals, length, width, segments: int = 6, cup: float = 0.0
+) -> tuple[np.ndarray, np.ndarray]:
     """K small ellipses at once, each a fan of ``segments`` triangles around its center.
 
     ``centers`` (K,3); ``major`` (K,3) direction of the long axis; ``normals`` (K,3) the side the
@@ -174,8 +220,11 @@ def ellipse_fans(centers, major, normals, length, width, segments: int = 6,
     L = np.broadcast_to(np.asarray(length, float), (k,))[:, None]
     W = np.broadcast_to(np.asarray(width, float), (k,))[:, None]
     ang = np.linspace(0.0, 2.0 * np.pi, segments, endpoint=False)
-    rim = (c[:, None, :] + (L / 2)[..., None] * np.cos(ang)[None, :, None] * d[:, None, :]
-           + (W / 2)[..., None] * np.sin(ang)[None, :, None] * s[:, None, :])  # (K, S, 3)
+    rim = (
+        c[:, None, :]
+        + (L / 2)[..., None] * np.cos(ang)[None, :, None] * d[:, None, :]
+        + (W / 2)[..., None] * np.sin(ang)[None, :, None] * s[:, None, :]
+    )  # (K, S, 3)
     mid = c + cup * W * n
     stride = segments + 1
     verts = np.concatenate([mid[:, None, :], rim], axis=1).reshape(-1, 3)

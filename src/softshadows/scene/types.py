@@ -2,6 +2,7 @@
 
 All geometry is float64 in world space; right-handed, y up by default.
 """
+
 from __future__ import annotations
 
 import warnings
@@ -17,7 +18,7 @@ ROLES = ("both", "occluder", "receiver")
 def _vec3(x, what: str) -> np.ndarray:
     try:
         a = np.asarray(x, dtype=np.float64).reshape(3)
-    except Exception as exc:  # noqa: BLE001
+    except Exception as exc:
         raise SceneError(f"{what}: expected 3 numbers, got {x!r}") from exc
     if not np.all(np.isfinite(a)):
         raise SceneError(f"{what}: non-finite value {a.tolist()}")
@@ -41,9 +42,8 @@ class Mesh:
         if not np.all(np.isfinite(v)):
             bad = int(np.argwhere(~np.isfinite(v).all(axis=1))[0, 0])
             raise SceneError(f"mesh '{name}': vertex {bad} is not finite ({v[bad].tolist()})")
-        if f.size and (not np.issubdtype(f.dtype, np.integer)):
-            if not np.all(np.equal(np.mod(f, 1), 0)):
-                raise SceneError(f"mesh '{name}': face indices must be integers")
+        if f.size and (not np.issubdtype(f.dtype, np.integer)) and not np.all(np.equal(np.mod(f, 1), 0)):
+            raise SceneError(f"mesh '{name}': face indices must be integers")
         f = f.astype(np.int64)
         if f.size and (f.min() < 0 or f.max() >= len(v)):
             raise SceneError(f"mesh '{name}': face index out of range [0, {len(v)})")
@@ -71,7 +71,7 @@ class Mesh:
         self.role = role
         self.name = name
 
-    def transformed(self, matrix: np.ndarray) -> "Mesh":
+    def transformed(self, matrix: np.ndarray) -> Mesh:
         m = np.asarray(matrix, dtype=np.float64)
         vh = np.c_[self.vertices, np.ones(len(self.vertices))] @ m.T
         faces = self.faces if np.linalg.det(m[:3, :3]) > 0 else self.faces[:, ::-1]
@@ -116,7 +116,7 @@ class RectLight:
         """Radius of the disk with the same area (used by sphere-light methods)."""
         return float(np.sqrt(self.area / np.pi))
 
-    def scaled(self, factor: float) -> "RectLight":
+    def scaled(self, factor: float) -> RectLight:
         return RectLight(self.center, self.u * factor, self.v * factor, self.intensity)
 
     def __repr__(self) -> str:
@@ -149,7 +149,7 @@ class SphereLight:
     def equivalent_radius(self) -> float:
         return self.radius
 
-    def scaled(self, factor: float) -> "SphereLight":
+    def scaled(self, factor: float) -> SphereLight:
         return SphereLight(self.center, self.radius * factor, self.intensity)
 
     def __repr__(self) -> str:
@@ -267,10 +267,10 @@ class Scene:
         v = self.flat.vertices
         return v.min(axis=0), v.max(axis=0)
 
-    def with_light(self, light) -> "Scene":
+    def with_light(self, light) -> Scene:
         return Scene(self.meshes, light, self.camera, self.name)
 
-    def with_camera(self, camera) -> "Scene":
+    def with_camera(self, camera) -> Scene:
         return Scene(self.meshes, self.light, camera, self.name)
 
 
