@@ -75,4 +75,7 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
+    from softshadows import tune_malloc
+
+    tune_malloc()  # a benchmark owns its process: the CLI's allocator setting (softshadows._malloc)
     sys.exit(main())

@@ -218,4 +218,7 @@ def main():
 
 
 if __name__ == "__main__":
+    from softshadows import tune_malloc
+
+    tune_malloc()  # a benchmark owns its process: the CLI's allocator setting (softshadows._malloc)
     main()

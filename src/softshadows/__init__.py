@@ -40,7 +40,6 @@ __all__ = [
     "load_scene",
     "methods",
     "render",
+    "tune_malloc",
 ]
 __version__ = "0.1.0"
-
-tune_malloc()  # keep frame buffers in the heap between frames (see softshadows._malloc)

@@ -7,8 +7,10 @@ measured on ``bunny`` at 512x512, ~4,000 faults and ~10 ms of a 52 ms ``penumbra
 (~140 faults for ``hard``). Raising the mmap and trim thresholds keeps that memory in the heap,
 where the next frame reuses it: the same frame then takes ~42 ms with ~5 faults.
 
-:func:`tune_malloc` runs once when ``softshadows`` is imported, unless the environment sets
-``SOFTSHADOWS_TUNE_MALLOC=0``. The cost is that the process keeps up to
+:func:`tune_malloc` changes the whole process's allocator, so importing the library never calls
+it: the ``softshadows`` command line and the benchmarks call it at start-up (they own the
+process), unless the environment sets ``SOFTSHADOWS_TUNE_MALLOC=0``; a program that embeds the
+library may call ``softshadows.tune_malloc()`` itself for the same ~20% on page-fault-heavy frames. The cost is that the process keeps up to
 ``TRIM_THRESHOLD`` bytes of freed memory instead of returning it to the system. On other C
 libraries (macOS, musl) it does nothing.
 """

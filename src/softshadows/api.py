@@ -83,8 +83,7 @@ def _render(scene, m, width, height, resolved, seed, progress) -> Result:
         raise RuntimeError(f"method {m.name} returned V of shape {v.shape}, expected {(height, width)}")
     v = np.where(g.mask, v, np.float32(np.nan)).astype(np.float32)
     with timer.phase("shading"):
-        shadowed = out.stats.pop("_direct_shadowed", None)
-        img = shading.shade(scene, g, v, shadowed=shadowed)
+        img = shading.shade(scene, g, v, shadowed=out.direct_shadowed)
     timings = dict(timer.times)
     timings["total"] = time.perf_counter() - t0
     return Result(

@@ -139,6 +139,9 @@ class _Parser(argparse.ArgumentParser):
 
 
 def main(argv=None) -> int:
+    from ._malloc import tune_malloc
+
+    tune_malloc()  # the CLI owns the process: keep frame buffers in the heap (softshadows._malloc)
     ap = build_parser()
     # argparse errors (unknown option, bad choice) exit 2 with a usage line already
     argv = list(sys.argv[1:] if argv is None else argv)

@@ -10,8 +10,10 @@ with l = (c - p)/r. Normals are flipped to face the eye (two-sided surfaces). Gr
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, prange
+from numba import prange
 from PIL import Image
+
+from ._jit import kernel
 
 AMBIENT = 0.04
 
@@ -65,7 +67,7 @@ def shade(scene, gbuf, visibility: np.ndarray, shadowed: np.ndarray | None = Non
     )
 
 
-@njit(parallel=True, cache=True)
+@kernel(parallel=True)
 def _shade_kernel(position, normal, tri_id, vis, tri_albedo, c, ln, rect, scale, eye, ambient, use_shadowed, shadowed):
     H, W = vis.shape
     img = np.zeros((H, W, 3), np.float32)

@@ -36,8 +36,8 @@ import weakref
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
 
+from .._jit import kernel
 from ..errors import SoftShadowsError
 
 __all__ = [
@@ -146,7 +146,7 @@ def weld_vertices(vertices: np.ndarray) -> np.ndarray:
     return _weld_kernel(bits)
 
 
-@njit(cache=True)
+@kernel
 def _mix(a, b, c):
     h = a * np.int64(-7046029254386353131) + b
     h = (h ^ (h >> np.int64(29))) * np.int64(-4658895280553007687) + c
@@ -154,7 +154,7 @@ def _mix(a, b, c):
     return h ^ (h >> np.int64(29))
 
 
-@njit(cache=True)
+@kernel
 def _hash_table(min_size):
     """An empty open-addressing table (-1 = free) of a power-of-two size >= min_size, and its mask."""
     size = 16
@@ -163,7 +163,7 @@ def _hash_table(min_size):
     return np.full(size, -1, np.int64), size - 1
 
 
-@njit(cache=True)
+@kernel
 def _weld_kernel(bits):
     n = bits.shape[0]
     table, mask = _hash_table(2 * n)
@@ -186,7 +186,7 @@ def _weld_kernel(bits):
     return rep
 
 
-@njit(cache=True)
+@kernel
 def _edge_table(rep, faces, fr):
     """Every welded edge of the triangles once, in order of first appearance: (lo, hi, count of
     triangles, count of facing ones, lowest facing triangle, highest non-facing triangle)."""
@@ -241,14 +241,14 @@ def _facing_from_planes(normals, anchors, point) -> np.ndarray:
     )
 
 
-@njit(cache=True, inline="always")
+@kernel(inline=True)
 def _facing_one(nx, ny, nz, ax, ay, az, p):
     """The facing test of one triangle; every path computes it with these operations in this order
     (so brute force and adjacency agree bit for bit)."""
     return nx * (p[0] - ax) + ny * (p[1] - ay) + nz * (p[2] - az) > 0.0
 
 
-@njit(cache=True)
+@kernel
 def _facing_planes_kernel(n, a, p):
     out = np.empty(n.shape[0], np.bool_)
     for f in range(n.shape[0]):
@@ -256,7 +256,7 @@ def _facing_planes_kernel(n, a, p):
     return out
 
 
-@njit(cache=True)
+@kernel
 def _facing_kernel(v, faces, p):
     """Facing of every triangle straight from the vertices: the normal as ``np.cross(b - a, c - a)``
     computes it, then :func:`_facing_one`."""

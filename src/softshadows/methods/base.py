@@ -14,54 +14,9 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from numba import njit, prange
 
 from ..errors import SoftShadowsError
-
-
-@njit(cache=True)
-def _row_counts(mask):
-    H, W = mask.shape
-    c = np.zeros(H + 1, np.int64)
-    for i in range(H):
-        n = 0
-        for j in range(W):
-            if mask[i, j]:
-                n += 1
-        c[i + 1] = c[i] + n
-    return c
-
-
-@njit(parallel=True, cache=True)
-def _gather(position, normal, mask, eye, offs, pts, nrm, idx):
-    H, W = mask.shape
-    for i in prange(H):
-        k = offs[i]
-        for j in range(W):
-            if mask[i, j]:
-                px, py, pz = position[i, j, 0], position[i, j, 1], position[i, j, 2]
-                nx, ny, nz = normal[i, j, 0], normal[i, j, 1], normal[i, j, 2]
-                if nx * (eye[0] - px) + ny * (eye[1] - py) + nz * (eye[2] - pz) < 0.0:
-                    nx, ny, nz = -nx, -ny, -nz
-                pts[k, 0] = px
-                pts[k, 1] = py
-                pts[k, 2] = pz
-                nrm[k, 0] = nx
-                nrm[k, 1] = ny
-                nrm[k, 2] = nz
-                idx[k] = i * W + j
-                k += 1
-
-
-def gather_points(position, normal, mask, eye):
-    """Compact the surface pixels of a G-buffer: positions, eye-facing normals, flat indices."""
-    offs = _row_counts(mask)
-    K = int(offs[-1])
-    pts = np.empty((K, 3), np.float64)
-    nrm = np.empty((K, 3), np.float64)
-    idx = np.empty(K, np.int64)
-    _gather(position, normal, mask, eye, offs, pts, nrm, idx)
-    return pts, nrm, idx
+from ..raster.gbuffer import gather_points
 
 
 @dataclass(frozen=True)
@@ -72,6 +27,8 @@ class Param:
     choices: tuple | None = None
     min: float | None = None
     max: float | None = None
+    #: optional extra rule: ``check(value)`` returns None when valid, else what is expected
+    check: Any = None
 
     @property
     def type(self) -> type:
@@ -116,6 +73,8 @@ class Param:
             raise SoftShadowsError(f"method '{method}': parameter '{self.name}' must be >= {self.min}, got {v!r}")
         if self.max is not None and v > self.max:
             raise SoftShadowsError(f"method '{method}': parameter '{self.name}' must be <= {self.max}, got {v!r}")
+        if self.check is not None and (why := self.check(v)) is not None:
+            raise SoftShadowsError(f"method '{method}': parameter '{self.name}' must be {why}, got {v!r}")
         return v
 
     def describe(self) -> str:
@@ -169,11 +128,29 @@ class FrameContext:
             )
         return self.cache["points"]
 
+    def scatter(self, values: np.ndarray, idx: np.ndarray, fill: float = 1.0) -> np.ndarray:
+        """Per-point values at flat pixel indices ``idx`` -> (H,W) float32 image of the eye view;
+        pixels not in ``idx`` get ``fill`` (render() sets pixels without a surface to NaN)."""
+        H, W = self.eye.mask.shape
+        out = np.full(H * W, fill, np.float32)
+        out[idx] = values
+        return out.reshape(H, W)
+
 
 @dataclass
 class MethodOutput:
-    visibility: np.ndarray  # (H,W) float32; values on masked pixels only (others ignored)
+    """What a method returns.
+
+    visibility:      (H,W) float32 V; only pixels with a surface are read.
+    stats:           method statistics (JSON-able numbers, strings, small lists).
+    direct_shadowed: optional (H,W) float32 shadowed direct light computed by the method itself
+                     (ground truth's ``shading=physical``); shading uses it instead of
+                     unshadowed light x V.
+    """
+
+    visibility: np.ndarray
     stats: dict = field(default_factory=dict)
+    direct_shadowed: np.ndarray | None = None
 
 
 class Method:

@@ -24,9 +24,9 @@ reduction are Numba ``nogil`` kernels run in a worker thread, overlapped with tr
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, prange
+from numba import prange
 
-from ..errors import SoftShadowsError
+from .._jit import kernel
 from ..shading import exposure
 from .base import Method, MethodOutput, Param, register
 
@@ -43,7 +43,7 @@ def build_embree_scene(vertices: np.ndarray, faces: np.ndarray):
     return sc
 
 
-@njit(cache=True, inline="always")
+@kernel(inline=True)
 def _concentric(a, b):
     """Shirley-Chiu concentric map of [0,1)^2 to the unit disk."""
     x = 2.0 * a - 1.0
@@ -59,7 +59,7 @@ def _concentric(a, b):
     return r * np.cos(phi), r * np.sin(phi)
 
 
-@njit(cache=True, inline="always")
+@kernel(inline=True)
 def _mix64(z):
     """splitmix64 finalizer: a well-mixed 64-bit hash."""
     z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
@@ -67,7 +67,7 @@ def _mix64(z):
     return z ^ (z >> np.uint64(31))
 
 
-@njit(cache=True, inline="always")
+@kernel(inline=True)
 def jitter_pair(seed, pixel, sample):
     """Two uniforms in [0,1) for (seed, pixel, sample): counter-based, so results do not depend
     on how pixels are split into chunks or threads."""
@@ -78,7 +78,7 @@ def jitter_pair(seed, pixel, sample):
     return a, b
 
 
-@njit(parallel=True, cache=True, nogil=True)
+@kernel(parallel=True, nogil=True)
 def generate_light_rays(pts, nrm, pix, eps, seed, n_side, shape, center, u, v, radius, org, dirs, dist, geo):
     """Fill origins/directions/lengths for len(pts) points x n_side^2 samples (sample s of point k
     at row k*S+s). geo = cos_p * cos_l / r^2 (for the physical mode). ``pix``: global pixel ids
@@ -148,7 +148,7 @@ def generate_light_rays(pts, nrm, pix, eps, seed, n_side, shape, center, u, v, r
                 geo[q] = cp * cl / (rl * rl)
 
 
-@njit(parallel=True, cache=True, nogil=True)
+@kernel(parallel=True, nogil=True)
 def reduce_visibility(hits, geo, S, vis, irr, offset):
     """vis[k] = unoccluded fraction; irr[k] = sum of geo over unoccluded samples / S."""
     n = hits.shape[0] // S
@@ -250,17 +250,20 @@ class GroundTruth(Method):
     summary = "Embree occlusion rays to N x N stratified jittered light samples (reference)"
     paper = "distribution ray tracing (Cook et al. 1984) with Embree"
     params = (
-        Param("samples", 256, "light samples per pixel (a perfect square: N x N strata)", min=1, max=65536),
+        Param(
+            "samples",
+            256,
+            "light samples per pixel (a perfect square: N x N strata)",
+            min=1,
+            max=65536,
+            check=lambda n: None if round(n**0.5) ** 2 == n else "a perfect square (N x N strata)",
+        ),
         Param("physical", False, "image = full area-light integral (cosines, 1/r^2) per sample"),
         Param("offset", 1e-4, "ray origin offset along the normal, x scene diagonal", min=0.0),
     )
 
     def run(self, ctx, samples, physical, offset):
         n_side = int(round(np.sqrt(samples)))
-        if n_side * n_side != samples:
-            raise SoftShadowsError(
-                f"method 'ground-truth': samples must be a perfect square (N x N strata), got {samples}"
-            )
         scene = ctx.scene
         pts, nrm, idx = ctx.points()
         lo, hi = scene.bounds()
@@ -277,9 +280,7 @@ class GroundTruth(Method):
         # generation and reduction overlap tracing: the phase is their wall time; parts go to stats
         ctx.timer.times["rays"] = ctx.timer.times.get("rays", 0.0) + wall
         t_trace = wall
-        H, W = ctx.eye.mask.shape
-        out = np.ones(H * W, np.float32)
-        out[idx] = vis
+        out = ctx.scatter(vis, idx)
         stats = {
             "samples": S,
             "rays": int(K * S),
@@ -290,12 +291,13 @@ class GroundTruth(Method):
             "ray_generation_seconds": gen_t,
             "reduce_seconds": red_t,
         }
+        shadowed = None
         if physical:
             radiance = scene.light.intensity / scene.light.area
-            e = np.full(H * W, np.nan)
-            e[idx] = irr * radiance * scene.light.area * exposure(scene)
-            stats["_direct_shadowed"] = e.reshape(H, W)
-        return MethodOutput(out.reshape(H, W), stats)
+            shadowed = np.full(out.size, np.nan)  # float64: the irradiance sum's precision
+            shadowed[idx] = irr * radiance * scene.light.area * exposure(scene)
+            shadowed = shadowed.reshape(out.shape)
+        return MethodOutput(out, stats, direct_shadowed=shadowed)
 
 
 _EMBREE_CACHE: dict = {}

@@ -10,7 +10,7 @@ a point light at the area light's center, for either light shape.
 from __future__ import annotations
 
 from .base import Method, MethodOutput, Param, register
-from .shadowmap import build_shadow_map, fit_light_view, lookup_points, scatter
+from .shadowmap import build_shadow_map, fit_light_view, lookup_points
 
 
 @register
@@ -33,6 +33,6 @@ class Hard(Method):
             smap = build_shadow_map(ctx.scene, view)
         with ctx.timer.phase("eye_pass"):
             v = lookup_points(smap, pts, nrm, bias, slope_bias, pcf)
-            out = scatter(ctx, v, idx)
+            out = ctx.scatter(v, idx)
         stats = {"map_size": map_size, "map_coverage": float((smap.tri_id >= 0).mean())}
         return MethodOutput(out, stats)

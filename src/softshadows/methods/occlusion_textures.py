@@ -99,8 +99,9 @@ from dataclasses import dataclass
 
 import numba
 import numpy as np
-from numba import njit, prange
+from numba import prange
 
+from .._jit import kernel
 from ..errors import SoftShadowsError
 from ..raster import View, rasterize_fragments
 from ..raster.view import light_frame
@@ -168,7 +169,7 @@ def to_light_frame(points, frame) -> np.ndarray:
     return np.stack([q @ r, q @ u, q @ f], axis=1)
 
 
-@njit(cache=True, parallel=True)
+@kernel(parallel=True)
 def _fit_reduce(pts, o, r, u, f, hu, hv, eps):
     """Per point in front of the light (z > eps): the largest d keeping it in the frustum
     (hu z / (|x| - hu) when |x| > hu, likewise in y; inf otherwise); also max z. Parallel chunks
@@ -258,7 +259,7 @@ def fit_slicing_view(
     return SlicingSetup(view, frame, (hu, hv), d, z_planes, scene_depth)
 
 
-@njit(cache=True)
+@kernel
 def _mark_occlusion_textures(pixel, depth, d, z_planes, leak_fix, tex):
     """Binary occlusion textures: texel of every fragment set in its slice (and in the next one
     with the leak fix). Serial: a texel may be hit by many fragments."""
@@ -328,7 +329,7 @@ def occupied_bounds(tex: np.ndarray) -> np.ndarray:
 # =====================================================================================
 # 2. Prefiltering (Sec. 3.2)
 # =====================================================================================
-@njit(cache=True, parallel=True)
+@kernel(parallel=True)
 def _mip_level0(tex, pyr):
     n, h, w = tex.shape
     for s in prange(n):
@@ -337,7 +338,7 @@ def _mip_level0(tex, pyr):
                 pyr[s, i * w + j] = tex[s, i, j]
 
 
-@njit(cache=True, parallel=True)
+@kernel(parallel=True)
 def _mip_reduce(pyr, src_off, src_h, src_w, dst_off, dst_h, dst_w):
     n = pyr.shape[0]
     for job in prange(n * dst_h):
@@ -367,7 +368,7 @@ def prefilter_mipmap(tex: np.ndarray):
     return pyr, offs, np.asarray(sizes, np.int64)
 
 
-@njit(cache=True, parallel=True)
+@kernel(parallel=True)
 def _nbuffer_levels(tex, nb):
     """nb[s, l, i, j] = mean of tex[s] over rows [i, i+2^l) x cols [j, j+2^l) (zero outside):
     level l from four lookups in level l-1 at offsets 0 and 2^(l-1) (Décoret's N-Buffers)."""
@@ -409,7 +410,7 @@ def prefilter_nbuffers(tex: np.ndarray, levels: int | None = None) -> np.ndarray
     return nb
 
 
-@njit(cache=True, parallel=True)
+@kernel(parallel=True)
 def _sat_build(tex, sat):
     n, h, w = tex.shape
     for s in prange(n):
@@ -436,7 +437,7 @@ def prefilter_sat(tex: np.ndarray) -> np.ndarray:
 # =====================================================================================
 # 3. Kernel size (Eq. 4) and filtered lookups
 # =====================================================================================
-@njit(cache=True)
+@kernel
 def kernel_rect(px, py, pz, zs, sp):
     """Eq. 4: the pyramid (P, light) cut by the slice plane z = zs is the rectangle centred at
     P * zs / pz (the light centre being the origin) of half sizes hu |pz - zs| / pz and
@@ -467,7 +468,7 @@ def kernel_rect(px, py, pz, zs, sp):
     return x0, x1, y0, y1
 
 
-@njit(cache=True, inline="always")
+@kernel(inline=True)
 def _kernel_rect_fast(px, py, pz, ipz, zs, hu, hv, kx, ky, ox, oy):
     """:func:`kernel_rect` with its per-slice constants precomputed (``kx = W / ((r - l)(d + zs))``,
     ``ky``, ``ox = l W / (r - l)``, ``oy = t H / (t - b)``) and ``ipz = 1 / pz``: no division (the
@@ -480,14 +481,14 @@ def _kernel_rect_fast(px, py, pz, ipz, zs, hu, hv, kx, ky, ox, oy):
     return (cx - ax) * kx - ox, (cx + ax) * kx - ox, oy - (cy + ay) * ky, oy - (cy - ay) * ky
 
 
-@njit(cache=True, inline="always")
+@kernel(inline=True)
 def _mip_fetch(pyr, s, off, size, i, j):
     if i < 0 or j < 0 or i >= size or j >= size:
         return 0.0  # CLAMP_TO_BORDER, border 0 (nothing outside the frustum)
     return pyr[s, off + i * size + j]
 
 
-@njit(cache=True)
+@kernel
 def _mip_bilinear(pyr, s, off, size, scale, x, y):
     """Bilinear sample of one mip level at level-0 texel coordinates (x, y)."""
     u = x / scale - 0.5
@@ -503,7 +504,7 @@ def _mip_bilinear(pyr, s, off, size, scale, x, y):
     return (1 - fv) * ((1 - fu) * a + fu * b) + fv * ((1 - fu) * c + fu * e)
 
 
-@njit(cache=True)
+@kernel
 def _mip_trilinear(pyr, s, offs, sizes, lod, x, y):
     nl = offs.shape[0]
     if lod <= 0.0:
@@ -517,7 +518,7 @@ def _mip_trilinear(pyr, s, offs, sizes, lod, x, y):
     return (1 - f) * a + f * b
 
 
-@njit(cache=True, inline="always")
+@kernel(inline=True)
 def _probe_count(wx, wy, max_probes):
     """Probes along the long side of a wx x wy footprint: ceil(long / short), in [1, max_probes]
     (max_probes for a degenerate footprint). Shared by the mipmap and N-Buffer lookups."""
@@ -527,7 +528,7 @@ def _probe_count(wx, wy, max_probes):
     return max(1, min(n, max_probes))
 
 
-@njit(cache=True)
+@kernel
 def lookup_mipmap(pyr, s, offs, sizes, max_aniso, x0, x1, y0, y1):
     """Rectangular kernel through anisotropic mipmap filtering (EXT_texture_filter_anisotropic):
     Pmax, Pmin = footprint sides; N = min(ceil(Pmax/Pmin), max_aniso) trilinear probes along the
@@ -549,7 +550,7 @@ def lookup_mipmap(pyr, s, offs, sizes, max_aniso, x0, x1, y0, y1):
     return acc / n
 
 
-@njit(cache=True)
+@kernel
 def _mip_support(x0, x1, y0, y1, max_aniso, nl):
     """How far (level-0 texels) beyond the rectangle :func:`lookup_mipmap` reads: its probes lie
     inside the rectangle and each bilinear tap reaches 1.5 texels of the coarser level used."""
@@ -564,7 +565,7 @@ def _mip_support(x0, x1, y0, y1, max_aniso, nl):
     return 1.5 * (1 << lv) + 1e-6
 
 
-@njit(cache=True)
+@kernel
 def _nb_box(nb, s, lv, sx, sy):
     """Bilinear lookup of N-Buffer level lv at continuous box origin (sx, sy) (texel (i, j) holds
     the box whose corner is (j, i)); clamp-to-edge."""
@@ -583,7 +584,7 @@ def _nb_box(nb, s, lv, sx, sy):
     )
 
 
-@njit(cache=True)
+@kernel
 def _nb_square(nb, s, cx, cy, size):
     """Box response of a size x size square centred at (cx, cy): the two levels bracketing the
     size, interpolated linearly in size."""
@@ -602,7 +603,7 @@ def _nb_square(nb, s, cx, cy, size):
     return (1 - t) * a + t * b
 
 
-@njit(cache=True)
+@kernel
 def lookup_nbuffers(nb, s, max_probes, x0, x1, y0, y1):
     """Rectangular kernel from square N-Buffer lookups: ceil(long/short) squares of the short side
     spread along the long side (one for a square light)."""
@@ -623,7 +624,7 @@ def lookup_nbuffers(nb, s, max_probes, x0, x1, y0, y1):
     return acc / n
 
 
-@njit(cache=True)
+@kernel
 def _sat_at(sat, s, x, y):
     """The SAT as a continuous function: bilinear between integer corners (exact integral of the
     piecewise-constant texture), clamped (zero occlusion outside the texture)."""
@@ -642,7 +643,7 @@ def _sat_at(sat, s, x, y):
     return (1 - fv) * ((1 - fu) * a + fu * b) + fv * ((1 - fu) * c + fu * e)
 
 
-@njit(cache=True)
+@kernel
 def lookup_sat(sat, s, x0, x1, y0, y1):
     """Exact box filter: (S(x1,y1) - S(x0,y1) - S(x1,y0) + S(x0,y0)) / area."""
     area = (x1 - x0) * (y1 - y0)
@@ -661,7 +662,7 @@ def lookup_sat(sat, s, x0, x1, y0, y1):
 # =====================================================================================
 # 4. Combination (Sec. 3.3, Eq. 5) and 5. self-shadowing weight (Sec. 3.4)
 # =====================================================================================
-@njit(cache=True, inline="always")
+@kernel(inline=True)
 def combine_occlusion(acc, occ, mode):
     """Accumulate one slice's (weighted) occlusion ``occ``: product -> acc = prod (1 - I_k)
     (Eq. 5, acc starts at 1); max -> acc = max I_k; sum -> acc = sum I_k (both start at 0)."""
@@ -672,14 +673,14 @@ def combine_occlusion(acc, occ, mode):
     return acc + occ
 
 
-@njit(cache=True, inline="always")
+@kernel(inline=True)
 def finish_visibility(acc, mode):
     if mode == 0:
         return acc
     return min(max(1.0 - acc, 0.0), 1.0)
 
 
-@njit(cache=True, inline="always")
+@kernel(inline=True)
 def slice_weight(pz, z_top, z_low, thick, mode):
     """Weight of slice [z_top, z_low) (texture on z_low) for a point at depth pz.
 
@@ -697,7 +698,7 @@ def slice_weight(pz, z_top, z_low, thick, mode):
 # =====================================================================================
 # 6. Eye pass (Sec. 3.5): per point, all slices between it and the light
 # =====================================================================================
-@njit(cache=True, parallel=True)
+@kernel(parallel=True)
 def eye_pass(
     pts, sp, z_planes, slot, bbox, filt, combine, self_mode, max_aniso, pyr, offs, sizes, nb, sat, out, nslot=1
 ):
@@ -831,15 +832,6 @@ def occlusion_visibility(
             yield
         own[name] = time.perf_counter() - t
 
-    if filter not in FILTERS or combine not in COMBINES or self_shadow not in SELF_SHADOW:
-        raise SoftShadowsError(
-            f"method 'occlusion-textures': bad filter/combine/self_shadow ({filter!r}, {combine!r}, {self_shadow!r})"
-        )
-    if int(texture_size) not in TEXTURE_SIZES:
-        raise SoftShadowsError(
-            f"method 'occlusion-textures': parameter 'texture_size' must be one of "
-            f"{', '.join(map(str, TEXTURE_SIZES))}, got {texture_size!r}"
-        )
     stats: dict = {}
     if light.shape == "sphere":
         from ..scene.types import sphere_to_rect
@@ -963,7 +955,6 @@ class OcclusionTextures(Method):
         self_shadow="fade",
     ) -> MethodOutput:
         pos, _nrm, idx = ctx.points()
-        H, W = ctx.eye.depth.shape
         vis, stats = occlusion_visibility(
             ctx.light,
             ctx.flat,
@@ -979,6 +970,4 @@ class OcclusionTextures(Method):
             timer=ctx.timer,
             scene_bounds=ctx.scene.bounds(),
         )
-        v = np.ones(H * W, np.float32)
-        v[idx] = vis.astype(np.float32)
-        return MethodOutput(visibility=v.reshape(H, W), stats=stats)
+        return MethodOutput(visibility=ctx.scatter(vis.astype(np.float32), idx), stats=stats)

@@ -86,11 +86,12 @@ from __future__ import annotations
 
 import numba
 import numpy as np
-from numba import njit, prange
+from numba import prange
 
+from .._jit import kernel
 from ..raster.kernels import view_project, view_ray
 from .base import Method, MethodOutput, Param, register
-from .shadowmap import build_shadow_map, fit_light_view, receiver_offset, scatter
+from .shadowmap import build_shadow_map, fit_light_view, receiver_offset
 
 # ---- sample patterns --------------------------------------------------------------------------
 _PATTERNS: dict = {}
@@ -151,7 +152,7 @@ def sample_pattern(n: int, kind: str, disk: bool) -> np.ndarray:
 
 
 # ---- kernels (plain arrays in, plain arrays out) ----------------------------------------------
-@njit(cache=True, inline="always")
+@kernel(inline=True)
 def _hash01(k, seed):
     """A uniform number in [0,1) from a point index (per-pixel pattern rotation)."""
     h = (np.uint64(k) * np.uint64(0x9E3779B97F4A7C15)) ^ np.uint64(seed * 0x85EBCA6B + 0x27D4EB2F)
@@ -163,7 +164,7 @@ def _hash01(k, seed):
     return float(h >> np.uint64(11)) / 9007199254740992.0
 
 
-@njit(cache=True, inline="always")
+@kernel(inline=True)
 def _tap_offset(pattern, i, disk, rot, c, s, shx, shy):
     """Pattern tap i, rotated (disk) or toroidally shifted (square) when ``rot``."""
     x = pattern[i, 0]
@@ -180,7 +181,7 @@ def _tap_offset(pattern, i, disk, rot, c, s, shx, shy):
     return x, y
 
 
-@njit(cache=True, inline="always")
+@kernel(inline=True)
 def _view_normal(vp, nx, ny, nz):
     """The normal in light-view coordinates (right, up, forward components)."""
     return (
@@ -190,7 +191,7 @@ def _view_normal(vp, nx, ny, nz):
     )
 
 
-@njit(cache=True, inline="always")
+@kernel(inline=True)
 def _plane_depth(vp, nr, nu, nf, npo, sx, sy, z_center):
     """Depth of the receiver's tangent plane along the map ray through (sx, sy) (perspective map):
     plane n.(X - o) = npo, ray X = o + s (x' right + y' up + forward), depth = s. Falls back to
@@ -205,7 +206,7 @@ def _plane_depth(vp, nr, nu, nf, npo, sx, sy, z_center):
     return d
 
 
-@njit(cache=True, inline="always")
+@kernel(inline=True)
 def _cmp_bilinear(depth, sx, sy, zt):
     """Hardware-PCF equivalent: 2x2 bilinearly weighted 'lit' tests (texels outside the map are lit)."""
     H, W = depth.shape
@@ -227,7 +228,7 @@ def _cmp_bilinear(depth, sx, sy, zt):
     return acc
 
 
-@njit(cache=True, inline="always")
+@kernel(inline=True)
 def _cmp_nearest(depth, sx, sy, zt):
     H, W = depth.shape
     c = int(np.floor(sx))
@@ -237,7 +238,7 @@ def _cmp_nearest(depth, sx, sy, zt):
     return 0.0
 
 
-@njit(parallel=True, cache=True)
+@kernel(parallel=True)
 def blocker_search_kernel(
     vp,
     depth_map,
@@ -325,7 +326,7 @@ def blocker_search_kernel(
                 search_out[k] = max(rx, ry)
 
 
-@njit(cache=True, inline="always")
+@kernel(inline=True)
 def penumbra_estimation(z_receiver, z_blocker, w_light):
     """Step 2 (per point and light axis): the parallel-plane penumbra width on the receiver,
     ``(z_receiver - z_blocker) * w_light / z_blocker`` (world units; 0 if the blocker is not in
@@ -335,7 +336,7 @@ def penumbra_estimation(z_receiver, z_blocker, w_light):
     return (z_receiver - z_blocker) * w_light / z_blocker
 
 
-@njit(parallel=True, cache=True)
+@kernel(parallel=True)
 def filtering_kernel(
     vp,
     depth_map,
@@ -524,7 +525,7 @@ class PCSS(Method):
             v, wp, radius = filtering(
                 smap, pts, nrm, zr, avg, nblk, light, filter_pat, disk, rotate, ctx.seed, bilinear, receiver_plane
             )
-            out = scatter(ctx, v, idx)
+            out = ctx.scatter(v, idx)
         n = max(len(pts), 1)
         has = nblk > 0
         stats = {

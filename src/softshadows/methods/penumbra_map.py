@@ -128,16 +128,14 @@ from contextlib import nullcontext
 from dataclasses import dataclass, field
 
 import numpy as np
-from numba import njit, prange
+from numba import prange
 
-from ..errors import SoftShadowsError
+from .._jit import kernel
 from ..geometry.silhouette import Silhouette, cached_adjacency, silhouette_adjacency, silhouette_brute
 from ..raster import View, rasterize_depth, rasterize_min_blend
 from ..raster.programs import PROGRAM_PENUMBRA, penumbra_intensity, smoothstep_bernstein  # noqa: F401
 from .base import Method, MethodOutput, Param, register
-from .shadowmap import biased_light_depth, fit_light_view, scatter
-
-_JIT = dict(cache=True)
+from .shadowmap import biased_light_depth, fit_light_view
 
 #: most fragments rasterized at once (memory bound: 24 bytes each)
 #: border of the penumbra map, at most this fraction of ``map_size`` per side
@@ -247,14 +245,13 @@ def find_silhouettes(scene, point, method: str = "brute") -> tuple[Silhouette, f
     faces = flat.faces if flat.occluder.all() else np.ascontiguousarray(flat.faces[flat.occluder])
     if method == "brute":
         return silhouette_brute(flat.vertices, faces, point), 0.0
-    if method == "adjacency":
-        t0 = time.perf_counter()
-        # cache on the scene's flat arrays; the occluder subset is cached per flat geometry
-        key_faces = _occluder_faces_cached(flat)
-        adj, built = cached_adjacency(flat.vertices, key_faces)
-        t_build = time.perf_counter() - t0 if built else 0.0
-        return silhouette_adjacency(adj, point), t_build
-    raise SoftShadowsError(f"method 'penumbra-map': parameter 'silhouettes' must be brute or adjacency, got {method!r}")
+    # "adjacency" (the Param's choices admit nothing else)
+    t0 = time.perf_counter()
+    # cache on the scene's flat arrays; the occluder subset is cached per flat geometry
+    key_faces = _occluder_faces_cached(flat)
+    adj, built = cached_adjacency(flat.vertices, key_faces)
+    t_build = time.perf_counter() - t0 if built else 0.0
+    return silhouette_adjacency(adj, point), t_build
 
 
 _OCC_FACES: dict = {}
@@ -344,7 +341,7 @@ def build_cones(
     return Primitives(verts, tri, zattr, n, n - m)
 
 
-@njit(**_JIT)
+@kernel
 def _cone_triangles(tips, zv, bx, by, lam, o, r, u, f, z_far):
     """Vertices (tips, then the base vertices: far-plane point (bx, by, z_far) pulled toward the tip
     to the fraction ``lam`` of the ruling), triangles (tip, B_k, B_k+1) and their corner Z_v."""
@@ -420,7 +417,7 @@ def build_sheets(
     return Primitives(verts, tri, za, n_objects, int((~keep).sum()), n_sub, n_two)
 
 
-@njit(**_JIT)
+@kernel
 def _sheet_quads(V, faces, edges, edge_faces, o, r, u, f, near, z_far, lr):
     """Per silhouette edge the sheet's quad (v0, v1, F1, F0) on the side away from the adjacent
     triangles' projection (both sides where they project to both or edge-on), with F0, F1 on the
@@ -529,7 +526,7 @@ def _sheet_quads(V, faces, edges, edge_faces, o, r, u, f, near, z_far, lr):
     return V0, V1, F0, F1, zz0, zz1, n_two
 
 
-@njit(**_JIT)
+@kernel
 def _to_view(p, o, r, u, f):
     dx = p[0] - o[0]
     dy = p[1] - o[1]
@@ -537,7 +534,7 @@ def _to_view(p, o, r, u, f):
     return (dx * r[0] + dy * r[1] + dz * r[2], dx * u[0] + dy * u[1] + dz * u[2], dx * f[0] + dy * f[1] + dz * f[2])
 
 
-@njit(**_JIT)
+@kernel
 def _sheet_strips(V0, V1, F0, F1, z0, z1, tolerance, max_subdiv):
     """Split every sheet into k strips, ``k = ceil(q / tolerance)`` (at most ``max_subdiv``; 1 where
     q is not finite; ``max_subdiv`` when tolerance is 0), ``q = |(F1 - V1) - (F0 - V0)| / length``:
@@ -602,7 +599,7 @@ def _sheet_strips(V0, V1, F0, F1, z0, z1, tolerance, max_subdiv):
 
 
 # ---- early rejection: a max-depth pyramid of Z_P ----------------------------------------------
-@njit(inline="always", **_JIT)
+@kernel(inline=True)
 def _max_down_row(src, s0, sw, sh, dst, d0, dw, i):
     """Row i of a 2x2-max reduction: src (sh, sw) stored flat from s0 into dst (.., dw) from d0.
     Non-finite and negative values count as 0 (empty texels: nothing behind them)."""
@@ -620,14 +617,14 @@ def _max_down_row(src, s0, sw, sh, dst, d0, dw, i):
         dst[d0 + i * dw + j] = m
 
 
-@njit(parallel=True, **_JIT)
+@kernel(parallel=True)
 def _pyramid_level1(zp_flat, H, W, data, w2):
     """Level 1 (2x2 max of ``Z_P``) straight from the map, rows in parallel."""
     for i in prange((H + 1) // 2):
         _max_down_row(zp_flat, 0, W, H, data, 0, w2, i)
 
 
-@njit(**_JIT)
+@kernel
 def _pyramid_coarser(data, offs, ws, hs):
     """Levels 2.. (small: one serial pass)."""
     for L in range(2, len(offs)):
@@ -661,7 +658,7 @@ def pyramid_max(pyr) -> float:
     return float(data[offs[-1]]) if len(offs) > 1 else 0.0
 
 
-@njit(**_JIT)
+@kernel
 def _zmax_rect(data, offs, ws, hs, x0, y0, x1, y1):
     """Max of level-0 texels [x0..x1] x [y0..y1] (inclusive, clamped) through the pyramid (an upper
     bound: read at a level >= 1 whose cells cover the rectangle in at most ~9 x 9)."""
@@ -688,7 +685,7 @@ def _zmax_rect(data, offs, ws, hs, x0, y0, x1, y1):
     return m
 
 
-@njit(**_JIT)
+@kernel
 def _zmax_bbox(data, offs, ws, hs, xa, ya, xb, yb):
     """Max Z_P under the pixel-coordinate box [xa, xb] x [ya, yb], grown by a texel on every side,
     with a relative margin (a safe upper bound for the early rejection)."""
@@ -704,7 +701,7 @@ def _zmax_bbox(data, offs, ws, hs, xa, ya, xb, yb):
     ) * (1.0 + 1e-6)
 
 
-@njit(**_JIT)
+@kernel
 def _wedge_zmax(wl, wt, sxs, sys_, tx, ty, ux0, uy0, ux1, uy1, fa, fb, data, offs, ws, hs):
     """Max Z_P under the part of a cone wedge between ruling fractions fa < fb (window-space
     fractions from the tip (tx, ty) to the base vertices (ux0, uy0), (ux1, uy1))."""
@@ -723,7 +720,7 @@ def _wedge_zmax(wl, wt, sxs, sys_, tx, ty, ux0, uy0, ux1, uy1, fa, fb, data, off
     return _zmax_bbox(data, offs, ws, hs, xa, ya, xb, yb)
 
 
-@njit(parallel=True, **_JIT)
+@kernel(parallel=True)
 def _cone_reject_kernel(
     wl, wt, sx_scale, sy_scale, qx, qy, zv, bx, by, z_far, iters, pieces, data, offs, ws, hs, eps, lam, keep
 ):
@@ -814,7 +811,7 @@ def _reject_cones(view, q, zv, bx, by, z_far, pyr):
     return lam, keep
 
 
-@njit(parallel=True, **_JIT)
+@kernel(parallel=True)
 def _sheet_reject_kernel(sx, sy, zc, z_far, iters, pieces, eps, data, offs, ws, hs, ucut):
     """Per sheet: the fraction ``ucut`` of every ruling (from the edge, u = 0, to the far line,
     u = 1) that can carry kept fragments; 0 drops the sheet. ``sx, sy`` (n, 4) pixel coordinates of
@@ -849,7 +846,7 @@ def _sheet_reject_kernel(sx, sy, zc, z_far, iters, pieces, eps, data, offs, ws, 
         ucut[i] = u if u > eps else 0.0
 
 
-@njit(**_JIT)
+@kernel
 def _sheet_zmax(sx, sy, zc, z_far, ua, ub, data, offs, ws, hs):
     """Max Z_P under the part ua <= u <= ub of a sheet: the hull of the four ruling points there
     (corners v0, v1, F1, F0 in pixels, ``zc`` the depths of v0, v1; F0, F1 at ``z_far``)."""
@@ -957,7 +954,7 @@ def penumbra_fragment_program(
     }
 
 
-@njit(parallel=True, **_JIT)
+@kernel(parallel=True)
 def _count_below(a, v):
     n = 0
     for i in prange(a.shape[0]):
@@ -1067,7 +1064,7 @@ def render_penumbra_map(
 # ==============================================================================================
 # 3. the eye pass
 # ==============================================================================================
-@njit(parallel=True, **_JIT)
+@kernel(parallel=True)
 def _eye_lookup_kernel(
     vp, d_occ, W, H, PW, PH, pad_l, pad_t, pts, nrm, bias, slope_bias, tex_out, umbra_out, needed, mark
 ):
@@ -1101,7 +1098,7 @@ def _eye_lookup_kernel(
                 needed[r2, c2] = 1
 
 
-@njit(parallel=True, **_JIT)
+@kernel(parallel=True)
 def _eye_gather_kernel(tex, umbra, pm_flat, v_out):
     for k in prange(tex.shape[0]):
         t = tex[k]
@@ -1275,7 +1272,7 @@ class PenumbraMapMethod(Method):
         )
         with ctx.timer.phase("eye_pass"):
             v, umbra = eye_pass(smp, pmap, pts, nrm, bias, slope_bias, lookups=look)
-            out = scatter(ctx, v, idx)
+            out = ctx.scatter(v, idx)
         st = dict(pmap.stats)
         st.update(
             {

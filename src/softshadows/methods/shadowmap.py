@@ -19,8 +19,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit, prange
+from numba import prange
 
+from .._jit import kernel
 from ..raster import View, rasterize_depth
 from ..raster.kernels import view_project
 from ..raster.view import light_view
@@ -67,7 +68,7 @@ def build_shadow_map(scene, view: View, faces_mask: np.ndarray | None = None, cu
     return ShadowMap(view, depth, tri)
 
 
-@njit(cache=True, inline="always")
+@kernel(inline=True)
 def texel_world_size(vp, depth):
     """World size of one texel (x) at a view depth."""
     s = (vp[13] - vp[12]) / vp[18]
@@ -76,7 +77,7 @@ def texel_world_size(vp, depth):
     return s
 
 
-@njit(cache=True, inline="always")
+@kernel(inline=True)
 def receiver_offset(vp, px, py, pz, nx, ny, nz, depth, bias, slope_bias):
     """Depth offset (world units) for the shadow test at a point with normal n."""
     lx, ly, lz = vp[0] - px, vp[1] - py, vp[2] - pz
@@ -87,7 +88,7 @@ def receiver_offset(vp, px, py, pz, nx, ny, nz, depth, bias, slope_bias):
     return texel_world_size(vp, depth) * (bias + slope_bias * tan)
 
 
-@njit(cache=True, inline="always")
+@kernel(inline=True)
 def biased_light_depth(vp, px, py, pz, nx, ny, nz, bias, slope_bias):
     """The shadow test's lookup for one point: (ok, sx, sy, zt) with (sx, sy) its continuous texel
     coordinates in the map of ``vp`` and ``zt`` its depth minus the bias; ``ok`` is False when the
@@ -100,7 +101,7 @@ def biased_light_depth(vp, px, py, pz, nx, ny, nz, bias, slope_bias):
     return True, sx, sy, z - off
 
 
-@njit(parallel=True, cache=True)
+@kernel(parallel=True)
 def shadow_lookup(vp, depth_map, pts, nrm, bias, slope_bias, pcf_radius):
     """V per point: 1 lit, 0 shadowed; with ``pcf_radius`` r > 0, the fraction of lit tests over
     the (2r+1)^2 texels around the point (percentage-closer filtering)."""
@@ -141,11 +142,3 @@ def lookup_points(
         float(slope_bias),
         int(pcf_radius),
     )
-
-
-def scatter(ctx, values: np.ndarray, idx: np.ndarray, fill: float = 1.0) -> np.ndarray:
-    """Per-point values -> (H,W) float32 image (pixels without a surface get ``fill``)."""
-    H, W = ctx.eye.mask.shape
-    out = np.full(H * W, fill, np.float32)
-    out[idx] = values
-    return out.reshape(H, W)

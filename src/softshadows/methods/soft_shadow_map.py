@@ -90,15 +90,15 @@ from dataclasses import dataclass, field
 
 import numba
 import numpy as np
-from numba import njit, prange
+from numba import prange
 
+from .._jit import kernel
 from ..errors import SoftShadowsError
 from ..raster import View, rasterize_depth, rasterize_fragments
 from ..raster.kernels import sample_bilinear, view_project
 from ..raster.view import light_view
 from .base import Method, MethodOutput, Param, register
 
-_JIT = dict(cache=True, error_model="numpy")
 BAND_ROWS = 2  # SSM rows per accumulation band (one thread sums one band)
 FP16_MAX = 65504.0
 
@@ -169,7 +169,7 @@ def compute_receiver_depth_map(scene, view: View) -> tuple[np.ndarray, np.ndarra
 
 
 # ---- 3. occluder depth map ---------------------------------------------------------------------
-@njit(**_JIT)
+@kernel
 def _max_depth_per_pixel(pixel, depth, tri, n_pix):
     out = np.full(n_pix, -np.inf, np.float32)
     who = np.full(n_pix, -1, np.int32)
@@ -208,7 +208,7 @@ def compute_occluder_depth_map(scene, view: View, side: str = "nearest") -> tupl
 
 
 # ---- 4. micro-patches --------------------------------------------------------------------------
-@njit(**_JIT)
+@kernel
 def discretize_occluders(depth, mesh, ovp):
     """Each non-empty occluder-map pixel -> a micro-patch parallel to the light at its depth,
     covering the pixel's footprint: rows ``[x0, x1, y0, y1, z_O]`` in the light frame (x along
@@ -240,7 +240,7 @@ def discretize_occluders(depth, mesh, ovp):
 
 
 # ---- 5. penumbra extents -----------------------------------------------------------------------
-@njit(inline="always", **_JIT)
+@kernel(inline=True)
 def _pyramid_section(c_p, h_p, z_p, h_l, z_plane):
     """One axis of Sec. 3.3: patch center ``c_p`` and half size ``h_p`` at depth ``z_p``, light half
     size ``h_l`` centered on C_L = 0. Returns the (lo, hi) interval where the pyramid of apex
@@ -254,7 +254,7 @@ def _pyramid_section(c_p, h_p, z_p, h_l, z_plane):
     return c_r - half, c_r + half
 
 
-@njit(**_JIT)
+@kernel
 def penumbra_extents(patches, hx, hy, z_plane, svp):
     """Per micro-patch, the SSM texels ``[i0, i1] x [j0, j1]`` (inclusive; empty when i0 > i1)
     whose centers lie in the patch's penumbra rectangle on the virtual plane at depth ``z_plane``."""
@@ -298,7 +298,7 @@ def penumbra_extents(patches, hx, hy, z_plane, svp):
 
 
 # ---- 6. the fragment program: percentage of occlusion ------------------------------------------
-@njit(inline="always", **_JIT)
+@kernel(inline=True)
 def _sat(x):
     """Clamp to [0, 1] (the SAT modifier); written as selects so that loops vectorize."""
     x = x if x > 0.0 else 0.0
@@ -310,13 +310,13 @@ _F1 = np.float32(1.0)
 _FH = np.float32(0.5)
 
 
-@njit(inline="always", **_JIT)
+@kernel(inline=True)
 def _sat32(x):
     x = x if x > _F0 else _F0
     return x if x < _F1 else _F1
 
 
-@njit(inline="always", **_JIT)
+@kernel(inline=True)
 def _occlusion_percentage32(k, a0, a1, c0, c1):
     """:func:`occlusion_percentage` in float32 arithmetic (the precision of a GPU fragment program;
     16 lanes per vector instead of 8)."""
@@ -327,7 +327,7 @@ def _occlusion_percentage32(k, a0, a1, c0, c1):
     return (b - a) * (d - c)
 
 
-@njit(inline="always", **_JIT)
+@kernel(inline=True)
 def occlusion_percentage(k, a0, a1, c0, c1):
     """Fraction of the light hidden by one micro-patch at one receiver point (Sec. 3.4, 4.2).
 
@@ -364,7 +364,7 @@ def occlusion_percentage_at(patch, ux, uy, z_r, hx, hy) -> float:
 
 
 # ---- 7. accumulation into the soft shadow map --------------------------------------------------
-@njit(inline="always", **_JIT)
+@kernel(inline=True)
 def round_half(x, toward_zero=False):
     """Round a float to an IEEE binary16 value, returned as float64. Default: nearest, ties to
     even, exactly ``float(np.float16(x))`` (overflow -> inf). ``toward_zero``: truncate the
@@ -385,7 +385,7 @@ def round_half(x, toward_zero=False):
     return y
 
 
-@njit(**_JIT)
+@kernel
 def bin_patches_by_band(ext, n_bands, band_rows):
     """CSR lists (ptr (n_bands+1,), idx) of the micro-patches whose extent meets each band of
     ``band_rows`` SSM rows, each list in micro-patch (draw) order."""
@@ -407,7 +407,7 @@ def bin_patches_by_band(ext, n_bands, band_rows):
     return cnt, idx
 
 
-@njit(parallel=True, **_JIT)
+@kernel(parallel=True)
 def accumulate_soft_shadow_map(
     patches,
     pmesh,
@@ -515,7 +515,7 @@ def accumulate_soft_shadow_map(
     return touched
 
 
-@njit(parallel=True, **_JIT)
+@kernel(parallel=True)
 def clamp_soft_shadow_map(ssm):
     """Clamp the summed percentages to [0, 1] in place (the paper clamps at display)."""
     H, W = ssm.shape
@@ -532,7 +532,7 @@ def merge_two_pass(front: np.ndarray, back: np.ndarray) -> np.ndarray:
 
 
 # ---- 9. projection onto the eye view -----------------------------------------------------------
-@njit(parallel=True, **_JIT)
+@kernel(parallel=True)
 def project_soft_shadow_map(pts, is_receiver, svp, ssm):
     """V per eye point: receivers read the SSM (bilinear) at their projection from the light;
     V = 1 - occlusion. Outside the SSM, behind the light, or on occluder-only geometry: V = 1."""
@@ -700,10 +700,7 @@ class SoftShadowMapMethod(Method):
             tri = ctx.eye.tri_id.ravel()[idx]
             is_recv = ctx.flat.receiver[np.maximum(tri, 0)] & (tri >= 0)
             v = project_soft_shadow_map(pts, is_recv, smap.view.params(), smap.occlusion)
-            H, W = ctx.eye.mask.shape
-            out = np.ones(H * W, np.float32)
-            out[idx] = v
-            out = out.reshape(H, W)
+            out = ctx.scatter(v, idx)
         stats = dict(smap.stats)
         stats["eye_receiver_pixels"] = int(is_recv.sum())
         return MethodOutput(out, stats)

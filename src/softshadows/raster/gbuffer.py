@@ -5,6 +5,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numba import prange
+
+from .._jit import kernel
 
 
 @dataclass
@@ -50,3 +53,48 @@ class Fragments:
 
     def __len__(self) -> int:
         return len(self.pixel)
+
+
+@kernel
+def _row_counts(mask):
+    H, W = mask.shape
+    c = np.zeros(H + 1, np.int64)
+    for i in range(H):
+        n = 0
+        for j in range(W):
+            if mask[i, j]:
+                n += 1
+        c[i + 1] = c[i] + n
+    return c
+
+
+@kernel(parallel=True)
+def _gather(position, normal, mask, eye, offs, pts, nrm, idx):
+    H, W = mask.shape
+    for i in prange(H):
+        k = offs[i]
+        for j in range(W):
+            if mask[i, j]:
+                px, py, pz = position[i, j, 0], position[i, j, 1], position[i, j, 2]
+                nx, ny, nz = normal[i, j, 0], normal[i, j, 1], normal[i, j, 2]
+                if nx * (eye[0] - px) + ny * (eye[1] - py) + nz * (eye[2] - pz) < 0.0:
+                    nx, ny, nz = -nx, -ny, -nz
+                pts[k, 0] = px
+                pts[k, 1] = py
+                pts[k, 2] = pz
+                nrm[k, 0] = nx
+                nrm[k, 1] = ny
+                nrm[k, 2] = nz
+                idx[k] = i * W + j
+                k += 1
+
+
+def gather_points(position, normal, mask, eye):
+    """Compact the surface pixels of a G-buffer: positions, eye-facing normals, flat indices."""
+    offs = _row_counts(mask)
+    K = int(offs[-1])
+    pts = np.empty((K, 3), np.float64)
+    nrm = np.empty((K, 3), np.float64)
+    idx = np.empty(K, np.int64)
+    _gather(position, normal, mask, eye, offs, pts, nrm, idx)
+    return pts, nrm, idx

@@ -18,12 +18,11 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
-_JIT = dict(cache=True, fastmath=False, error_model="numpy")
+from .._jit import kernel
 
 
-@njit(**_JIT)
+@kernel
 def view_coords(vp, px, py, pz):
     """World point -> view coordinates (x, y, z) (x along right, y along up, z = depth)."""
     dx = px - vp[0]
@@ -35,7 +34,7 @@ def view_coords(vp, px, py, pz):
     return x, y, z
 
 
-@njit(**_JIT)
+@kernel
 def view_coords_to_screen(vp, x, y, z):
     """View coordinates -> continuous pixel coordinates (sx, sy) (perspective divides by z)."""
     if vp[20] == 0.0:
@@ -46,7 +45,7 @@ def view_coords_to_screen(vp, x, y, z):
     return sx, sy
 
 
-@njit(**_JIT)
+@kernel
 def view_project(vp, px, py, pz):
     """World point -> (sx, sy, depth), same as ``View.project``."""
     x, y, z = view_coords(vp, px, py, pz)
@@ -54,7 +53,7 @@ def view_project(vp, px, py, pz):
     return sx, sy, z
 
 
-@njit(**_JIT)
+@kernel
 def view_ray(vp, sx, sy):
     """Continuous pixel coordinates -> (x', y') window coordinates: view-space ``x/z, y/z``
     (perspective) or ``x, y`` (orthographic)."""
@@ -63,7 +62,7 @@ def view_ray(vp, sx, sy):
     return xw, yw
 
 
-@njit(**_JIT)
+@kernel
 def view_unproject(vp, sx, sy, depth):
     """Continuous pixel coordinates and view depth -> world point (x, y, z), same as ``View.unproject``."""
     x, y = view_ray(vp, sx, sy)
@@ -76,7 +75,7 @@ def view_unproject(vp, sx, sy, depth):
     return wx, wy, wz
 
 
-@njit(**_JIT)
+@kernel
 def sample_nearest(img2d, sx, sy, default):
     """Nearest-pixel lookup at continuous pixel coordinates (centers at half-integers), clamp-to-edge.
 
@@ -101,7 +100,7 @@ def sample_nearest(img2d, sx, sy, default):
     return float(img2d[int(fy), int(fx)])
 
 
-@njit(**_JIT)
+@kernel
 def sample_bilinear(img2d, sx, sy):
     """Bilinear lookup at continuous pixel coordinates (centers at half-integers), clamp-to-edge.
 

@@ -17,9 +17,8 @@ kernels that take functions as arguments). Add a program here, give it a code, a
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
-_JIT = dict(cache=True, fastmath=False, error_model="numpy")
+from .._jit import kernel
 
 #: value = a (MIN-blend of an interpolated attribute); params unused
 PROGRAM_ATTRIBUTE = 0
@@ -29,13 +28,13 @@ PROGRAM_PENUMBRA = 1
 PROGRAMS = (PROGRAM_ATTRIBUTE, PROGRAM_PENUMBRA)
 
 
-@njit(**_JIT)
+@kernel
 def smoothstep_bernstein(i):
     """Parker et al.'s Bernstein interpolant 3 I^2 - 2 I^3."""
     return i * i * (3.0 - 2.0 * i)
 
 
-@njit(**_JIT)
+@kernel
 def penumbra_intensity(zf, zv, zp, eps, bernstein):
     """The penumbra map's fragment program (Wyman & Hansen 2003, Sec. 3) for one fragment:
     I = (Z_F - Z_V) / (Z_P - Z_V) with ``zf`` the fragment depth, ``zv`` the interpolated silhouette
@@ -55,7 +54,7 @@ def penumbra_intensity(zf, zv, zp, eps, bernstein):
     return i if kept else np.nan
 
 
-@njit(**_JIT)
+@kernel
 def discard_depth(program, params, s):
     """The depth from which ``program`` discards every fragment at a pixel whose input image value is
     ``s``: a fragment with ``z >= discard_depth(...)`` is discarded there (-inf or NaN: every fragment
@@ -66,7 +65,7 @@ def discard_depth(program, params, s):
     return np.inf
 
 
-@njit(**_JIT)
+@kernel
 def value_lower_bound(program, params, a, z_min, s_max):
     """A lower bound of the value ``program`` returns for a fragment with attribute ``a``, depth
     ``z >= z_min`` and input image value ``s <= s_max`` (finite), or -inf where none is known: the
@@ -86,7 +85,7 @@ def value_lower_bound(program, params, a, z_min, s_max):
     return -np.inf
 
 
-@njit(**_JIT)
+@kernel
 def run_program(program, params, a, s, z):
     if program == PROGRAM_PENUMBRA:
         eps = params[0] * params[1] * s

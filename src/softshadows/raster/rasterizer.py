@@ -65,8 +65,9 @@ import math
 
 import numba
 import numpy as np
-from numba import njit, prange
+from numba import prange
 
+from .._jit import kernel
 from .gbuffer import Fragments, GBuffer
 from .kernels import view_coords, view_coords_to_screen
 from .programs import PROGRAMS, discard_depth, run_program, value_lower_bound
@@ -75,7 +76,6 @@ TILE = 16  #: tile size in pixels (square)
 SUBPIXEL = 4096.0  #: screen coordinates are snapped to 1/SUBPIXEL px before coverage
 _PERSPECTIVE_MIN_NEAR = 1e-9
 
-_JIT = dict(cache=True, fastmath=False, error_model="numpy")
 
 _CULL = {"none": 0, "back": 1, "front": 2}
 
@@ -90,12 +90,12 @@ _M_DEPTH, _M_GBUF, _M_FCOUNT, _M_FFILL, _M_MINBLEND = 0, 1, 2, 3, 4
 # ----------------------------------------------------------------------------------------------
 # setup
 # ----------------------------------------------------------------------------------------------
-@njit(**_JIT)
+@kernel
 def _snap(v):
     return math.floor(v * SUBPIXEL + 0.5) / SUBPIXEL
 
 
-@njit(**_JIT)
+@kernel
 def _clip_point(xi, yi, zi, xo, yo, zo, near):
     """Point of segment inside->outside on z = near. Always called with (inside, outside) in this order,
     so that the two triangles sharing an edge compute bit-identical points."""
@@ -112,7 +112,7 @@ _U = 2.0**-53  # unit roundoff of float64
 _ROBUST = 1e150  # coordinates below this never overflow the edge functions (no inf - inf = NaN)
 
 
-@njit(**_JIT)
+@kernel
 def _store_edge(CE, slot, k, ax, ay, bx, by, ext_x, ext_y):
     """Directed edge a->b of a positively oriented piece; inside is E >= 0 with
     E(p) = cross(b - a, p - a), evaluated from the canonically ordered endpoints.
@@ -160,7 +160,7 @@ def _store_edge(CE, slot, k, ax, ay, bx, by, ext_x, ext_y):
     CE[slot, k, 7] = cax - 0.5
 
 
-@njit(**_JIT)
+@kernel
 def _setup_piece(vp, slot, x0, y0, z0, x1, y1, z1, x2, y2, z2, far, CB, CE, CZ):
     """Project, snap, orient one (clipped) triangle; returns 1 if it may cover a pixel center."""
     W = vp[18]
@@ -225,7 +225,7 @@ def _setup_piece(vp, slot, x0, y0, z0, x1, y1, z1, x2, y2, z2, far, CB, CE, CZ):
     return 1
 
 
-@njit(**_JIT)
+@kernel
 def _setup_one(t, verts, faces, vp, near, cull, NC, CB, CE, CZ, PL, NW):
     """Triangle t: NC[t] pieces in slots 2t, 2t+1 of CB/CE/CZ; PL[t] plane data; NW[t] unit normal."""
     ortho = vp[20] != 0.0
@@ -345,7 +345,7 @@ def _setup_one(t, verts, faces, vp, near, cull, NC, CB, CE, CZ, PL, NW):
 # ----------------------------------------------------------------------------------------------
 # binning
 # ----------------------------------------------------------------------------------------------
-@njit(parallel=True, **_JIT)
+@kernel(parallel=True)
 def _tile_row_bits(mask, T, ntx, nty, bits, tile_any):
     """bits[tile, li]: bit k set where texel (li, k) of the tile is set in ``mask`` (H,W) uint8;
     tile_any[tile]: any of them."""
@@ -365,7 +365,7 @@ def _tile_row_bits(mask, T, ntx, nty, bits, tile_any):
         tile_any[tile] = a != 0
 
 
-@njit(**_JIT)
+@kernel
 def _rect_has_bits(RN, i0, i1, j0, j1):
     """Whether rows i0..i1, columns j0..j1 of a tile (tile coordinates) hold a bit set in the row
     masks ``RN`` (see :func:`_tile_row_bits`)."""
@@ -375,7 +375,7 @@ def _rect_has_bits(RN, i0, i1, j0, j1):
     return ((acc >> j0) & ((np.int64(1) << (j1 - j0 + 1)) - 1)) != 0
 
 
-@njit(parallel=True, **_JIT)
+@kernel(parallel=True)
 def _setup_count(verts, faces, vp, near, cull, NC, CB, CE, CZ, PL, NW, T, ntx, chunk, cnt, nslot, tile_any, use_bits):
     """Setup of every triangle (parallel over chunks of triangles, dealt round-robin to ``nslot``
     slots: see ``_run_tiles``) and per (chunk, tile) bin counts. With ``use_bits``, only the tiles
@@ -400,7 +400,7 @@ def _setup_count(verts, faces, vp, near, cull, NC, CB, CE, CZ, PL, NW, T, ntx, c
                             cnt[c, tile] += 1
 
 
-@njit(**_JIT)
+@kernel
 def _bin_offsets(cnt, bstart):
     """cnt (nchunk, ntiles) counts -> write offsets in place; bstart (ntiles+1) tile starts.
     Serial: nchunk * ntiles is small, and a parallel region costs more than it saves."""
@@ -416,7 +416,7 @@ def _bin_offsets(cnt, bstart):
     bstart[ntiles] = o
 
 
-@njit(parallel=True, **_JIT)
+@kernel(parallel=True)
 def _bin_fill(NC, CB, T, ntx, chunk, off, bins, nslot, tile_any, use_bits):
     nchunk = off.shape[0]
     F = NC.shape[0]
@@ -438,7 +438,7 @@ def _bin_fill(NC, CB, T, ntx, chunk, off, bins, nslot, tile_any, use_bits):
 # ----------------------------------------------------------------------------------------------
 # tiles
 # ----------------------------------------------------------------------------------------------
-@njit(**_JIT)
+@kernel
 def _rect_edge_test(CE, ct, i0, i1, j0, j1, W, H):
     """Conservative tests of piece ``ct`` against the pixel centers of rows i0..i1 and columns
     j0..j1: (reject, full). reject: some edge function is below -thr at the rectangle's four corner
@@ -470,7 +470,7 @@ def _rect_edge_test(CE, ct, i0, i1, j0, j1, W, H):
     return False, full
 
 
-@njit(**_JIT)
+@kernel
 def _bary_c(q4, q5, q6, q7, q8, q9, q10, q11, xw, yw, z, ortho):
     """Barycentrics (b1, b2) of the original triangle t (q4..q11 = PL[t, 4:12]) at the plane point
     seen through window coordinates (xw, yw) at depth z; clamped into the triangle (guards
@@ -492,7 +492,7 @@ def _bary_c(q4, q5, q6, q7, q8, q9, q10, q11, xw, yw, z, ortho):
     return b1, b2
 
 
-@njit(**_JIT)
+@kernel
 def _edge_in(r, ax, dy, sg, inc, j):
     """The coverage test of one edge at column j (r = dx * (i + 0.5 - ay) of the row): the pixel
     center is outside if e < 0, or e == 0 on an edge that does not own it (top-left rule)."""
@@ -500,7 +500,7 @@ def _edge_in(r, ax, dy, sg, inc, j):
     return not (e < 0.0 or (e == 0.0 and not inc))
 
 
-@njit(**_JIT)
+@kernel
 def _covered(j, r0, ax0, dy0, sg0, in0, r1, ax1, dy1, sg1, in1, r2, ax2, dy2, sg2, in2):
     return (
         _edge_in(r0, ax0, dy0, sg0, in0, j)
@@ -509,7 +509,7 @@ def _covered(j, r0, ax0, dy0, sg0, in0, r1, ax1, dy1, sg1, in1, r2, ax2, dy2, sg
     )
 
 
-@njit(**_JIT)
+@kernel
 def _edge_span(lo, hi, j0, j1, r, ax, dy, sg, inc, inv, c0, M, kind):
     """Intersect the column span [lo, hi] of a row with the columns of [j0, j1] that pass the test of
     one edge, exactly as :func:`_edge_in` decides them (which is monotonic in j: px - ax, the product
@@ -565,7 +565,7 @@ def _edge_span(lo, hi, j0, j1, r, ax, dy, sg, inc, inv, c0, M, kind):
     return lo, hi
 
 
-@njit(**_JIT)
+@kernel
 def _fast_bound(lo, hi, slow, py, j0, j1, ax, ay, dx, dy, sg, inc, inv, c0, M, kind):
     """One edge's bound of the covered columns [lo, hi] of the row at py by the fast path of
     :func:`_edge_span` (branch-free, so that the loop over a tile's rows vectorizes); slow is set
@@ -590,7 +590,7 @@ def _fast_bound(lo, hi, slow, py, j0, j1, ax, ay, dx, dy, sg, inc, inv, c0, M, k
     return lo, hi, slow
 
 
-@njit(**_JIT)
+@kernel
 def _scan_run(js, j1, r0, ax0, dy0, sg0, in0, r1, ax1, dy1, sg1, in1, r2, ax2, dy2, sg2, in2):
     """Next run [lo, hi] of covered columns at or after js, testing pixel by pixel (lo > hi: none);
     for the pieces whose edge functions might overflow."""
@@ -603,7 +603,7 @@ def _scan_run(js, j1, r0, ax0, dy0, sg0, in0, r1, ax1, dy1, sg1, in1, r2, ax2, d
     return lo, j - 1
 
 
-@njit(**_JIT)
+@kernel
 def _plane_depth(ortho, pnx, pny, pnz, pd, xw, yw):
     """The view depth of a triangle's plane seen through window point (xw, yw), written exactly as
     the tile kernel's per-fragment depth (same operations in the same order, so the same rounding);
@@ -615,7 +615,7 @@ def _plane_depth(ortho, pnx, pny, pnz, pd, xw, yw):
     return pd / (pnx * xw + zrow)
 
 
-@njit(**_JIT)
+@kernel
 def _rect_min_depth(ortho, pnx, pny, pnz, pd, wl, wt, wsx, wsy, i0, i1, j0, j1):
     """A lower bound of the plane depth (as :func:`_plane_depth`) over the pixel centers of rows
     i0..i1 and columns j0..j1, or -inf where there is none (the denominator may vanish). The
@@ -652,7 +652,7 @@ def _make_tiles_kernel(mode, prog=0):
     each kernel compiles only its own mode's and program's code, which keeps the hot loops free of
     branches, so that they vectorize, and their register allocation clean)."""
 
-    @njit(parallel=True, **_JIT)
+    @kernel(parallel=True)
     def tiles(
         vp,
         near,
