@@ -9,31 +9,46 @@ from softshadows.scene.builtin import BUILTIN
 # the ground truth is tested in test_ground_truth.py; here it runs with few samples to stay fast
 FAST = {"ground-truth": {"samples": 4}}
 
+#: non-default settings each method must also keep finite and in [0,1] (its other code paths)
+VARIANTS = {
+    "penumbra-map": [{"map_size": 192}],
+    "soft-shadow-map": [{"ssm_size": 64}, {"two_pass": True, "accumulate": "float16", "map_size": 64, "ssm_size": 64}],
+    "occlusion-textures": [
+        {"filter": "mipmap", "combine": "sum", "leak_fix": True, "texture_size": 64, "slices": 4},
+        {"filter": "sat", "combine": "max", "self_shadow": "include"},
+    ],
+}
 
-def _methods():
-    return list(ss.methods())
+
+def _cases():
+    """(method, scene, light, params) for every registered method (new methods join automatically)."""
+    out = []
+    for name in ss.methods():
+        for params in [FAST.get(name, {})] + VARIANTS.get(name, []):
+            for scene_name in BUILTIN:
+                for light in ("rect", "sphere"):
+                    tag = ",".join(f"{k}={v}" for k, v in params.items()) or "defaults"
+                    out.append(pytest.param(name, scene_name, light, params, id=f"{name}-{scene_name}-{light}-{tag}"))
+    return out
 
 
-@pytest.mark.parametrize("light", ["rect", "sphere"])
-@pytest.mark.parametrize("scene_name", list(BUILTIN))
-def test_every_method_v_finite_in_unit_interval(scene_name, light):
+@pytest.mark.parametrize(("name", "scene_name", "light", "params"), _cases())
+def test_v_finite_in_unit_interval_nan_on_background_and_deterministic(name, scene_name, light, params):
     scene = ss.load_scene(scene_name, light=light)
-    for name, m in ss.methods().items():
-        if light not in m.light_shapes:
-            with pytest.raises(ss.SoftShadowsError, match=name):
-                ss.render(scene, name, 8, 8)
-            continue
-        params = dict(FAST.get(name, {}))
-        a = ss.render(scene, name, 40, 30, seed=5, **params)
-        v = a.visibility
-        mask = a.mask
-        assert mask.sum() > 100, name
-        assert np.all(np.isfinite(v[mask])), name
-        assert np.all(np.isnan(v[~mask])), name
-        assert v[mask].min() >= 0.0 and v[mask].max() <= 1.0, name
-        assert np.all(np.isfinite(a.image)), name
-        b = ss.render(scene, name, 40, 30, seed=5, **params)
-        assert np.array_equal(a.visibility, b.visibility, equal_nan=True), name
+    m = ss.methods()[name]
+    if light not in m.light_shapes:
+        with pytest.raises(ss.SoftShadowsError, match=name):
+            ss.render(scene, name, 8, 8, **params)
+        return
+    a = ss.render(scene, name, 40, 30, seed=5, **params)
+    v, mask = a.visibility, a.mask
+    assert mask.sum() > 100
+    assert np.all(np.isfinite(v[mask]))
+    assert np.all(np.isnan(v[~mask]))
+    assert v[mask].min() >= 0.0 and v[mask].max() <= 1.0
+    assert np.all(np.isfinite(a.image))
+    b = ss.render(scene, name, 40, 30, seed=5, **params)
+    assert np.array_equal(a.visibility, b.visibility, equal_nan=True)
 
 
 def test_unknown_method_and_parameter_name_the_valid_ones():

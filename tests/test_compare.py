@@ -57,14 +57,21 @@ def test_metrics_json_and_report_name_every_method(compared):
     assert "sortTable" in html and "numba" in html  # sortable tables, machine description
 
 
-def test_skipped_light_shape_is_noted(tmp_path):
-    from softshadows.methods import methods
+def test_skipped_light_shape_is_noted(monkeypatch):
+    from softshadows.methods import base, methods
 
-    rect_only = [n for n, m in methods().items() if m.light_shapes == ("rect",)]
-    if not rect_only:
-        pytest.skip("no rect-only method registered")
+    methods()  # load the built-in methods first
+
+    class RectOnly(base.Method):
+        name = "rect-only-test"
+        light_shapes = ("rect",)
+
+    monkeypatch.setitem(base._REGISTRY, RectOnly.name, RectOnly())
     run, skipped = resolve_methods("all", "sphere")
-    assert rect_only[0] in skipped and rect_only[0] not in run
+    assert RectOnly.name in skipped and RectOnly.name not in run
+    assert "rect" in skipped[RectOnly.name]
+    run, skipped = resolve_methods("all", "rect")
+    assert RectOnly.name in run and RectOnly.name not in skipped
 
 
 def test_bad_input_is_one_line_error(tmp_path, capsys):

@@ -280,7 +280,8 @@ def test_containing_slice_is_not_used(ramp_scene):
 
 # ---- robustness ---------------------------------------------------------------------------------
 @pytest.mark.parametrize("name", sorted(BUILTIN))
-def test_visibility_finite_in_unit_interval_on_builtins(name):
+def test_phases_and_stats_on_builtins(name):
+    # (V finite and in [0,1] on every scene and variant: tests/test_api.py, for every method)
     sc = ss.load_scene(name)
     for kw in (
         {},
@@ -288,9 +289,6 @@ def test_visibility_finite_in_unit_interval_on_builtins(name):
         {"filter": "sat", "combine": "max", "self_shadow": "include"},
     ):
         r = ss.render(sc, "occlusion-textures", 40, 40, **kw)
-        m = np.isfinite(r.position[..., 0])
-        v = r.visibility[m]
-        assert np.all(np.isfinite(v)) and v.min() >= 0.0 and v.max() <= 1.0, (name, kw)
         assert {"slicing", "prefilter", "eye_pass"} <= set(r.timings)
         assert r.stats["slices_used"] >= 1 and f"prefilter_s_{r.params['filter']}" in r.stats
 

@@ -292,12 +292,12 @@ def test_contact_penumbra_width_vanishes_at_contact():
 
 
 @pytest.mark.parametrize("light", ["sphere", "rect"])
-def test_finite_and_in_range_on_all_builtin_scenes(light):
+def test_umbra_lit_pixels_and_stats_on_all_builtin_scenes(light):
+    # (V finite and in [0,1] on every scene: tests/test_api.py, for every method)
     for name in ss.scene.builtin.builtin_scenes():
         scene = ss.load_scene(name, light=light)
         res = ss.render(scene, "penumbra-map", 40, 40, map_size=192)
         v = res.visibility[res.mask]
-        assert np.all(np.isfinite(v)) and v.min() >= 0.0 and v.max() <= 1.0, name
         assert v.min() == 0.0 and v.max() == 1.0, name  # an umbra and lit pixels in every scene
         st = res.stats
         assert st["silhouette_edges"] > 0 and st["cone_fragments"] + st["sheet_fragments"] > 0

@@ -203,14 +203,12 @@ def test_two_pass_is_not_worse_on_thick_occluders():
 
 
 @pytest.mark.parametrize("name", ["square", "spheres", "fence", "contact", "plant", "bunny"])
-def test_visibility_finite_in_unit_interval_on_builtins(name):
+def test_roles_phases_and_stats_on_builtins(name):
+    # (V finite and in [0,1] on every scene and variant: tests/test_api.py, for every method)
     sc = ss.load_scene(name)
     assert sc.has_roles
     for kw in ({}, {"two_pass": True, "accumulate": "float16", "map_size": 64}):
         r = ss.render(sc, "soft-shadow-map", 40, 32, ssm_size=64, **kw)
-        v = r.visibility[r.mask]
-        assert np.all(np.isfinite(v)) and v.min() >= 0.0 and v.max() <= 1.0
-        assert np.all(np.isnan(r.visibility[~r.mask]))
         assert r.stats["texels_touched"] > 0 and r.stats["micro_patches"] > 0
         for phase in ("occluder_map", "receiver_map", "soft_shadow_map", "eye_projection"):
             assert phase in r.timings

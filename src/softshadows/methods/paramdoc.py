@@ -28,7 +28,8 @@ def params_table(method) -> str:
         else:
             lo, hi = _fmt(p.min), _fmt(p.max)
             allowed = f"{p.type.__name__}" + (f" >= {lo}" if lo else "") + (f", <= {hi}" if hi else "")
-        rows.append(f"| `{p.name}` | `{p.default!r}` | {allowed} | {p.help} |")
+        meaning = p.help.replace("|", "\\|")  # a literal | would split the table cell
+        rows.append(f"| `{p.name}` | `{p.default!r}` | {allowed} | {meaning} |")
     if not method.params:
         rows.append("| (none) | | | |")
     return "\n".join(rows)
