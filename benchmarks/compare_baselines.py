@@ -1,4 +1,4 @@
-"""Reproduce the README numbers of the comparison issue (PCSS baseline).
+"""Reproduce the PCSS baseline numbers of docs/results/pcss.md.
 
 1. Speed target: PCSS full frame <= 2x ``hard`` at 512x512 on ``bunny`` (rect light), both timed
    in this process after warm-up, medians of ``--repeats`` round-robin frames (``softshadows.bench``).

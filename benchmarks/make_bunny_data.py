@@ -3,7 +3,7 @@
 Development-only tool (needs ``fast-simplification``, which the package does not depend on)::
 
     pip install fast-simplification
-    python benchmarks/make_bunny_data.py [--source ../shared/models/stanford-bunny.obj] [--faces 10000]
+    python benchmarks/make_bunny_data.py [--source path/to/stanford-bunny.obj] [--faces 10000]
 
 Steps: load the OBJ with trimesh (no processing), merge duplicate vertices, quadric-decimate to
 about ``--faces`` triangles with fast-simplification, drop degenerate and unreferenced geometry,

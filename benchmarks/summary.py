@@ -1,4 +1,4 @@
-"""The README's summary tables, from one command:
+"""The summary tables of the README and docs/results/summary.md, from one command:
 
     python benchmarks/summary.py [--out DIR] [--size 256x192] [--samples 256] [--repeats 7]
 

@@ -1,4 +1,4 @@
-"""Ground truth against the closed forms (DESIGN.md: analytic cases first)."""
+"""Ground truth against the closed forms (docs/design.md: analytic cases first)."""
 
 import numpy as np
 import pytest

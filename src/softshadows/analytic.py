@@ -1,4 +1,4 @@
-"""Closed-form visibility for the analytic test cases (DESIGN.md, "Correctness habits").
+"""Closed-form visibility for the analytic test cases (docs/design.md, "Habits").
 
 * :func:`rect_occluder_visibility` — a rectangle light and an axis-aligned rectangular occluder in
   parallel planes: V = 1 - area(projection of the occluder through p onto the light plane,

@@ -1,4 +1,4 @@
-"""Shading, kept apart from visibility (DESIGN.md): image = unshadowed direct light x V + ambient.
+"""Shading, kept apart from visibility (docs/design.md): image = unshadowed direct light x V + ambient.
 
 Unshadowed direct light at p with normal n, from the light's center c:
     albedo * intensity * max(0, n.l) * max(0, -l.n_L) / r^2        (rect: the light's cosine too)

@@ -1,33 +1,14 @@
 """Silhouette edges and vertices of triangle meshes as seen from a point (e.g. a light's center).
 
-Definition. A triangle ``(a, b, c)`` *faces* a point ``p`` when ``((b - a) x (c - a)) . (p - a) > 0``
-(edge-on counts as not facing). An edge, after welding vertices that share a position, is a
-*silhouette edge* seen from ``p`` when
+After welding vertices that share a position, an edge is a silhouette edge seen from ``p`` when it
+is a boundary edge or its adjacent triangles include both facing and non-facing ones (a triangle
+``(a, b, c)`` faces ``p`` when ``((b - a) x (c - a)) . (p - a) > 0``); vertex degrees other than 2
+are normal. :func:`silhouette_brute` (no state, a hash table of edges per call) and
+:func:`silhouette_adjacency` (an :class:`EdgeAdjacency` built once by :func:`build_adjacency`) give
+identical results; :func:`find_silhouette` dispatches and caches the adjacency per mesh. Inputs are
+plain arrays: ``vertices`` (V,3) float64, ``faces`` (F,3) int64, ``point`` (3,).
 
-* it is a boundary edge (exactly one adjacent triangle: open meshes such as a single quad), or
-* its adjacent triangles include both facing and non-facing ones (the contour fold of a closed
-  mesh; for a non-manifold edge with three or more triangles, any mix).
-
-Because boundary edges count whatever their facing, the result does not depend on winding or on
-one-sided geometry. Silhouette *vertices* are the endpoints of silhouette edges; their *degree* is
-the number of silhouette edges meeting there. Degrees other than 2 are normal (Wyman & Hansen 2003
-found vertices with 3-4 silhouette edges common and up to 8 in pathological cases), so consumers
-must not assume closed loops.
-
-Two paths return identical results (same facing arithmetic, same canonical edge order):
-
-* :func:`silhouette_brute` — no precomputation: every call welds the vertices, lists the three
-  edges of every triangle, matches them (a hash table of edges, Numba) and tests every edge (what
-  a per-frame "brute force" extraction does; O(F), plus sorting the silhouette edges).
-* :func:`silhouette_adjacency` — from an :class:`EdgeAdjacency` built once per mesh
-  (:func:`build_adjacency`: welded edges, their adjacent faces in CSR form, face planes); a call
-  is one plane test per face and one segmented sum per edge (O(F), no sorting).
-
-:func:`find_silhouette` dispatches on ``method`` and caches the adjacency of a mesh (by array
-identity) so that repeated frames of the same geometry pay the build once.
-
-The functions are vectorized numpy or Numba and take plain arrays: ``vertices`` (V,3) float64,
-``faces`` (F,3) int64, ``point`` (3,).
+Definition and the two paths in detail: ``docs/methods/penumbra-map.md`` (section "Silhouettes").
 """
 
 from __future__ import annotations

@@ -1,24 +1,12 @@
 """``ground-truth``: distribution ray tracing on the exact geometry with Embree (``embreex``).
 
-For every eye pixel with a surface point p (eye G-buffer), shoot occlusion rays from
-``p + eps * n`` (n: the geometric normal turned toward the eye; eps = ``offset`` x scene diagonal,
-which avoids self-intersection) to ``samples = N x N`` stratified, jittered points of the light:
+Occlusion rays from every visible point, offset along its normal, to ``samples`` = N x N stratified,
+jittered points of the light (the rectangle, or the sphere's disk facing the point through the
+concentric map) give V = unoccluded rays / N^2 (docs/design.md). Jitter is a counter-based hash of
+(seed, pixel, sample), so the image does not depend on threading; ray generation and reduction are
+Numba ``nogil`` kernels overlapped with Embree's single-threaded tracing (:func:`trace_in_pipeline`).
 
-* rect light: one jittered point per cell of an N x N grid over the rectangle (uniform in area);
-* sphere light: the disk of the sphere's radius through its center facing p, sampled by the
-  concentric (Shirley-Chiu) map of the same jittered N x N grid, so strata stay equal-area.
-
-V(p) = unoccluded rays / N^2 (DESIGN.md). Occluders are the faces of role both|occluder.
-With ``physical=true`` the image is the full area-light integral per sample instead of
-"unshadowed point light x V": E(p) = sum_s vis_s * L cos(theta_p) cos(theta_l) / r^2 * A / N^2,
-with radiance L = intensity / area (cos(theta_l) on the facing disk for sphere lights); V is the same.
-
-Random numbers: a counter-based hash of (seed, pixel, sample) (splitmix64), so results do not
-depend on chunking or threads; the same seed gives the same image.
-
-Speed: Embree's ``run`` (embreex) is single-threaded and holds the GIL; ray generation and
-reduction are Numba ``nogil`` kernels run in a worker thread, overlapped with tracing
-(:func:`trace_in_pipeline`), so the method runs at close to raw Embree throughput.
+Steps, parameters, deviations and known limits: ``docs/methods/ground-truth.md``.
 """
 
 from __future__ import annotations

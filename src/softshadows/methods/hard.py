@@ -1,10 +1,11 @@
 """``hard``: Williams (1978) shadow map from the light's center, the baseline.
 
-Steps: (1) :func:`fit_light_view` + :func:`build_shadow_map` — occluder depths from the light
-center through the shared rasterizer; (2) :func:`shadow_lookup` — per eye pixel, project into the
-map and compare depths with constant + slope-scaled bias (in texels, see ``shadowmap.py``), with
-optional percentage-closer filtering over (2*pcf+1)^2 texels. V is 0 or 1 (fractional with PCF):
-a point light at the area light's center, for either light shape.
+:func:`fit_light_view` + :func:`build_shadow_map` render the occluders' depths from the light
+center through the shared rasterizer; :func:`lookup_points` compares each eye point's depth with
+constant + slope-scaled bias in texels (``shadowmap.py``), with optional PCF. V is 0 or 1
+(fractional with PCF): a point light at the area light's center, for either light shape.
+
+Steps, parameters and known limits: ``docs/methods/hard.md``.
 """
 
 from __future__ import annotations

@@ -1,94 +1,14 @@
-"""Occlusion textures (Eisemann & Décoret 2006, "Plausible image based soft shadows using occlusion
-textures", SIBGRAPI 2006; ``papers/eisemann2006-occlusion-textures.txt``).
+"""``occlusion-textures``: Eisemann & Décoret, "Plausible image based soft shadows using occlusion textures", 2006.
 
-The scene is cut into slices parallel to the (rectangular) light; everything inside a slice is
-projected onto the slice's plane farthest from the light as a binary *occlusion texture*. The
-textures are prefiltered so that a box filter of any size can be looked up quickly. For an eye point
-P, each slice between P and the light blocks the fraction of the light given by the mean of its
-texture over the pyramid (P, light) cut by the slice plane -- a rectangle of size Eq. 4 -- and the
-slices' blocked fractions are combined with the probabilistic formula of Eq. 5.
+The occluders are cut into slices parallel to the (rectangular) light and projected from a centre
+of projection behind it into binary occlusion textures (:func:`fit_slicing_view`,
+:func:`slice_scene`), prefiltered so that a box filter of any size is one lookup (mipmaps, N-Buffers
+or summed-area tables); for each eye point every slice between it and the light blocks the mean of
+its texture over the light's pyramid cut by the slice (:func:`kernel_rect`, Eq. 4), and the slices
+combine as independent occluders (:func:`combine_occlusion`, Eq. 5), with the slice containing the
+point faded out (:func:`slice_weight`). :func:`occlusion_visibility` runs it on arbitrary points.
 
-Steps, in the paper's order (its Fig. 9), one function each:
-
-1. Slicing (Sec. 3.4): :func:`fit_slicing_view` places the centre of projection (COP) behind the light
-   at distance d, with the frustum fitted to the light and d the largest distance for which the
-   frustum contains the scene (Fig. 4, 5); :func:`slice_scene` rasterizes the scene once from the COP
-   (shared rasterizer, every fragment: the equivalent of the paper's single pass into 4-16 colour
-   channels) and sets texel (i, j) of slice k when a fragment of depth inside slice k covers it. The
-   optional light-leak fix for thin occluders (Fig. 6) also sets the same texel in slice k+1.
-2. Prefiltering (Sec. 3.2), selectable with ``filter``: :func:`prefilter_mipmap` (the GPU mipmap
-   pyramid; rectangular kernels through the GPU's anisotropic filtering, :func:`lookup_mipmap`),
-   :func:`prefilter_nbuffers` (level l = mean over the 2^l x 2^l box starting at each texel, full
-   resolution; :func:`lookup_nbuffers` interpolates linearly between the two levels bracketing the
-   kernel size) and :func:`prefilter_sat` (summed-area table, exact box filter, :func:`lookup_sat`).
-3. Kernel size (Eq. 4): :func:`kernel_rect` -- the light seen from P cut by the slice plane, a
-   rectangle of size d(P, slice)/d(P, light) x size(light), mapped into the slice's texels.
-4. Combination (Sec. 3.3): :func:`combine_occlusion` -- ``product`` (Eq. 5: V = prod(1 - I_k),
-   default), ``max`` (V = 1 - max I_k) or ``sum`` (V = max(0, 1 - sum I_k), clamped).
-5. Self-shadowing (Sec. 3.4): :func:`slice_weight` -- the slice containing P is not used, and the
-   contribution of the slice just above P (the closest one between P and the light) fades in
-   linearly with the distance of P to that slice's lower plane (0 when P is on the plane, 1 one
-   slice thickness below it), so V is continuous where geometry crosses slice planes.
-   ``self_shadow="skip"`` (hard skip, the discontinuity the paper warns about) and ``"include"`` (use
-   the containing slice too: Fig. 7's self-shadowing) are the failure modes, switchable.
-6. The eye pass: :func:`eye_pass` visits, for every eye point, the slices between it and the light.
-
-Parameters (paper defaults): ``slices=16`` (4-16 useful), ``texture_size=512`` (Fig. 10: 16
-textures of 512^2), ``filter="nbuffers"`` (the paper's choice: "best tradeoff"), ``combine="product"``,
-``cop_distance=0`` (0: automatic, the largest d whose frustum fitted to the light contains the scene;
-> 0: that distance in world units, the frustum then widened to still contain the occluders),
-``leak_fix=False`` (the paper enables it "uniquely for thin objects"), ``anisotropy=16`` (maximum
-anisotropy of the mipmap lookup, as a GeForce 7800), ``self_shadow="fade"``.
-
-Stats: ``slices``, ``slices_used`` (non-empty slices; empty ones are neither filtered nor looked
-up), ``fragments``, ``cop_distance``, ``fov_deg``, ``texel_size`` (world size of a texel at the
-first and last slice planes), ``nbuffer_levels`` / ``mip_levels``, ``slicing_s``, ``prefilter_s``,
-``prefilter_s_<filter>``, ``eye_pass_s`` (the same as the timer phases ``slicing``, ``prefilter``,
-``eye_pass``).
-
-Deviations from the paper (honest differences; also in the README):
-
-* Slicing range: the slices cover the depth range (along the light normal) of the geometry that
-  casts shadows -- every mesh with role ``both`` or ``occluder`` -- split uniformly. With roles all
-  ``both`` this is the paper's "the scene". Receiver-only meshes are not sliced (they cannot cast
-  shadows), and the frustum is fitted to the occluders and to the eye points being shaded (every
-  kernel is then inside the textures, the property the paper's COP choice is for, Sec. 3.4, note 2).
-  A scene whose occluders are all at one depth gets a slab of 1e-3 x depth around it.
-* Automatic d is 98% of the largest containing distance (a margin for rounding), capped at
-  max(scene depth, light size) (a scene entirely inside the light's prism admits any d; we keep a
-  perspective from at most one scene depth behind the light, Fig. 4's argument against ortho) and
-  floored at 2% of the light size (geometry that reaches the light plane outside the light would
-  otherwise force an almost 180-degree frustum; such geometry is clipped).
-* Summed-area tables are 32-bit integer tables (the textures are binary, so sums are exact: the
-  "32 bit textures" the paper requires, without the precision artifacts), and they are interpolated
-  bilinearly, which makes the box filter exact for any real-valued rectangle. The paper's GPU of 2006
-  could not interpolate 32-bit textures and showed texels (its Fig. 2 close-up).
-* N-Buffers are square; a rectangular light's kernel is covered by ceil(long/short) square lookups
-  along its long side (like anisotropic probes). Lookups use clamp-to-edge; levels are built only up
-  to the largest kernel any eye point needs (the paper builds all log2(size) levels).
-* Mipmap lookups follow the EXT_texture_filter_anisotropic model (N = min(ceil(Pmax/Pmin),
-  anisotropy) trilinear probes along the major axis at LOD log2(Pmax/N)), with a zero border.
-* Slices that received no fragment are skipped, and so is a slice whose occupied texels lie outside
-  the filter's support around the kernel (their occlusion is 0: the result is identical).
-* Sec. 3.6's loop over N-Buffer levels with a running slice index is a workaround for shaders that
-  cannot index texture arrays; here the eye pass loops over the slices and picks the levels directly.
-* Self-shadowing fade, as we read Sec. 3.4/3.5: "the contribution of the slice closest to P is
-  weighted according to the distance of P to the slice" -- the closest slice between P and the light
-  gets weight d(P, its lower plane) / thickness (clamped to 1); the containing slice gets 0. This is
-  the reading that is continuous across every slice plane (tested); the hard skip is ``"skip"``.
-* A sphere light is accepted through the square of equal area at its centre facing the scene
-  (``softshadows.scene.sphere_to_rect``); the method itself is defined for rectangles only.
-* The paper's 8-bit RGBA packing and swizzling are GPU encoding details: textures here are uint8
-  (binary) and prefiltered values float32.
-
-Known limits (from the paper): occluders inside the slice containing P are ignored and those of the
-slice above are faded, so close self-occlusion and contact shadows are missed or too light; the slice
-approximation moves occluders to the slice's lower plane (penumbra sizes err by up to one slice
-thickness); thin occluders and surfaces steep to the slices leak light between slices (rings in
-the spheres' umbrae; ``leak_fix``); a closed object spanning
-several slices is counted once per slice and the product (which assumes independent occluders) makes
-its shadow too dark, more so with the leak fix; very fine occluders are
-over- or under-estimated at texel level; the combination assumes uncorrelated occluders.
+Steps, parameters, deviations and known limits: ``docs/methods/occlusion-textures.md``.
 """
 
 from __future__ import annotations
@@ -206,7 +126,7 @@ def fit_cop_distance(dmax: float, zmax: float, light_size: float) -> float:
     """The COP distance from the frustum constraint ``dmax`` (the largest d such that the frustum
     from (0, 0, -d) through the light rectangle contains the points: |x| / (z + d) <= hu / d, i.e.
     d <= hu z / (|x| - hu) for |x| > hu, likewise in y), kept 2% inside, capped at
-    max(scene depth, light size) and floored at 2% of the light size (see the module docstring)."""
+    max(scene depth, light size) and floored at 2% of the light size (see docs/methods/occlusion-textures.md)."""
     d = min(max(zmax, light_size), dmax)
     return max(d * 0.98, 0.02 * light_size)
 

@@ -1,85 +1,12 @@
-"""``pcss``: percentage-closer soft shadows (R. Fernando, "Percentage-Closer Soft Shadows",
-SIGGRAPH 2005 sketch), the soft-shadow baseline real-time engines ship.
+"""``pcss``: percentage-closer soft shadows (R. Fernando, SIGGRAPH 2005 sketch), the baseline engines ship.
 
-One shadow map is rendered from the light's *center* (shared with ``hard``: ``shadowmap.py``).
-For each eye pixel with surface point p, projected into the map at (sx, sy) with light-view
-depth z_r (the receiver depth), the paper's three steps:
+One shadow map from the light's center (shared with ``hard``: ``shadowmap.py``), then per eye
+point the paper's three steps: :func:`blocker_search` (average depth of the blockers in a region
+sized by the light and the receiver depth; no blocker: V = 1), :func:`penumbra_estimation`
+(parallel planes: ``w = (z_r - z_b) * w_light / z_b``) and :func:`filtering` (PCF with that kernel
+size); the search region and kernel take the light's shape (rectangle or disk).
 
-1. :func:`blocker_search` — search a region of the shadow map around (sx, sy) whose size
-   follows from the light size and the receiver's distance from the light (similar triangles:
-   the cross-section of the pyramid/cone from p to the light at the nearest possible blocker
-   depth z_near), and average the depths of the texels closer to the light than the receiver
-   (*blockers*). Early out (the paper's optimization): no blocker found -> V = 1 and no filtering.
-2. :func:`penumbra_estimation` — parallel-plane estimate of the penumbra width on the receiver,
-   ``w_penumbra = (z_r - z_blocker) * w_light / z_blocker`` (world units), turned into a PCF
-   kernel radius in texels: ``(w_penumbra / 2) / texel_size(z_r)``.
-3. :func:`filtering` — percentage-closer filtering with that variable kernel size: the fraction
-   of filter taps whose shadow-map depth is not closer than the receiver.
-
-Steps 2 and 3 run in one pass over the points (``filtering_kernel`` calls
-:func:`penumbra_estimation` per point, as the reference shader does), so the timed phases are
-``shadow_map``, ``blocker_search`` and ``filter`` (= penumbra estimation + filtering).
-
-Light shapes (the paper assumes a square light of width ``w_light``):
-
-* rect light: per-axis sizes ``|u|`` and ``|v|`` (the map is axis-aligned with u, see
-  ``raster.view.light_frame``), so search region and kernel are rectangles of the light's
-  aspect ratio; the sample pattern covers the unit *square*;
-* sphere light: ``w_light`` = the diameter (the disk through the center facing p), search
-  region and kernel are disks; the sample pattern covers the unit *disk*.
-  For a planar occluder parallel to a planar receiver the exact soft shadow is the hard shadow
-  convolved with the light's shape scaled by (z_r - z_b)/z_b, which is what the kernel of that
-  shape computes.
-
-Parameters (defaults of NVIDIA's reference PCSS shader that accompanies the technique:
-16 blocker-search taps and 16 PCF taps on a Poisson disk):
-
-* ``search_samples`` / ``filter_samples`` — taps of the blocker search and of the PCF filter;
-* ``pattern`` — ``poisson`` (deterministic best-candidate Poisson-disk set, the same for every
-  pixel) or ``grid`` (regular N x N, N = round(sqrt(samples)); on the disk, the concentric map
-  of the grid keeps cells equal-area); ``rotate`` — per-pixel random rotation of the pattern
-  (toroidal shift for the square pattern): trades banding for noise (common practice, not in the
-  sketch; off by default);
-* ``map_size``, ``bias``, ``slope_bias`` — the shared shadow map and its bias, in texels, as in
-  ``hard``;
-* ``bilinear`` — each PCF tap is a 2x2 bilinearly weighted depth comparison, the GPU's hardware
-  PCF (``SampleCmp`` with a linear comparison filter) that the reference shader relies on; off:
-  one nearest-texel comparison per tap. The blocker search uses point sampling, as in the shader.
-* ``receiver_plane`` (default on) — every tap, in the search and in the filter, compares the map
-  depth with the depth of the receiver's *tangent plane* along that tap's light ray (the exact
-  form, from the surface normal, of the receiver-plane depth bias of Isidoro 2006 that NVIDIA's
-  PCSS samples use) instead of the one receiver depth of the sketch. Without it a curved or
-  tilted receiver that is also in the map (every occluder-role surface: the bunny, the spheres)
-  finds *itself* as a blocker over the large search and filter regions and darkens itself
-  (bunny MAE 0.041 vs 0.016 with it, spheres 0.051 vs 0.023, 160x120). ``receiver_plane=false``
-  gives the sketch's plain comparison.
-
-Deviations from the sketch, and why:
-
-* ``z_near`` of the search region is the nearest depth in the shadow map (the nearest possible
-  blocker) instead of the light frustum's near plane: our light frustum is fitted to the
-  occluders, so the two differ only by the fit margin, and the map minimum is never farther
-  than a real blocker.
-* ``receiver_plane`` (above) is on by default; the sketch compares against one depth.
-* The kernel takes the light's shape and aspect (square/rectangle or disk, see above); the sketch
-  assumes a square light and a square kernel.
-* The shadow map holds the occluder-role faces only (as ``hard``); a receiver-only ground
-  never shadows itself.
-
-Known limits (the technique's, reproduced on purpose): one depth layer, so the average blocker
-depth mixes occluders at different depths (wrong penumbra where occluders overlap); the blocker
-depth is that of the surface *nearest to the light*, not of the silhouette that casts the edge,
-so under tall or rounded occluders (the bunny's body, spheres) the penumbra is overestimated and
-the umbra near the contact with the ground comes out too bright (bunny: mean error 0.13 in the
-ground-truth umbra); the umbra is never shrunk by a large light (the shadow map sees the
-occluder from the center only); the part of the light below a receiver's horizon is ignored (a
-shadow-map method sees occluders, not the receiver's own tangent plane); sparse taps over large
-regions give banding (``pattern=grid`` and the fixed Poisson set) or noise (``rotate``);
-blockers outside the search region are missed.
-
-Statistics: the search/filter tap counts actually used, the fraction of points that took the
-early out (no blocker), that were fully blocked in the search, the mean blocker count, the mean
-and max search radius and filter radius (texels) and the mean penumbra width (world units).
+Steps, parameters, deviations from the sketch and known limits: ``docs/methods/pcss.md``.
 """
 
 from __future__ import annotations

@@ -1,122 +1,15 @@
 """``penumbra-map``: Wyman & Hansen, "Penumbra Maps: Approximate Soft Shadows in Real-Time" (EGSR 2003).
 
-A shadow map from the light's center gives the hard shadow, taken as the umbra. A second map of
-the same view, the *penumbra map*, stores on the foremost surfaces seen from the light a shadow
-intensity produced by drawing, outside the object silhouettes, a cone at every silhouette vertex
-and a sheet along every silhouette edge (Haines' plateaus, generalized to arbitrary receivers).
-The eye pass makes two lookups: the shadow-map test (umbra: V = 0), else the penumbra map.
+A shadow map from the light's center gives the hard shadow, taken as the umbra
+(:func:`shadow_map_pass`); a second map of the same texel grid, the penumbra map
+(:func:`render_penumbra_map`), gets a cone at every silhouette vertex and a sheet along every
+silhouette edge (:func:`find_silhouettes`, :func:`build_cones`, :func:`build_sheets`), shaded by the
+fragment program ``I = (Z_F - Z_v)/(Z_P - Z_v)``, smoothstepped, darkest wins
+(:func:`penumbra_fragment_program`); the eye pass reads the umbra test, else the penumbra map
+(:func:`eye_lookups`, :func:`eye_pass`).
 
-The paper's three passes, one function each, in the paper's order:
-
-1. :func:`shadow_map_pass` — the shadow map from the light's center (occluder depths; exactly
-   ``hard``'s view, texels and bias), and for the penumbra map's view (the same texel grid grown by
-   a border that can hold the outer penumbra, :func:`penumbra_map_view`) the depth ``Z_P`` of the
-   foremost surface of every texel (occluders and receivers) that the fragment program reads.
-2. :func:`render_penumbra_map` — the penumbra map, cleared to white (1):
-
-   a. :func:`find_silhouettes` — silhouette edges E and vertices V seen from the light center
-      (``softshadows.geometry.silhouette``: the per-frame ``brute`` force of the paper, or the
-      ``adjacency`` fast path). Vertices with three or more silhouette edges are handled: every
-      vertex gets exactly one cone and every edge one sheet, whatever the degree.
-   b. :func:`build_cones` — at each v_i a cone with its tip at v_i and its base on the far plane,
-      radius ``C_ri = (Z_far - Z_vi) L_r / Z_vi`` around the point where the ray from the light
-      center through v_i meets the far plane, split into ``cone_segments`` triangles with one vertex
-      at v_i and two on the far plane. Per-vertex attribute: ``Z_vi`` (constant on a cone).
-   c. :func:`build_sheets` — per edge a quad joining the edge to the outer common tangent of the two
-      cones' base circles (on the side away from the occluder), i.e. a sheet tangent to both cones;
-      split into strips where far from planar (a parallelogram). Per-vertex attribute: the ``Z_v``
-      of the silhouette point each ruling starts from, interpolated by the rasterizer as in the paper.
-   d. :func:`penumbra_fragment_program` — cones and sheets go through the shared rasterizer
-      (``rasterize_min_blend``: every fragment, no depth test, fused with the fragment program); per fragment F at texel P:
-      discard if ``Z_F`` is behind the shadow-map surface ``Z_P``; ``I = (Z_F - Z_v)/(Z_P - Z_v)``
-      with world-space (view-depth) values; ``I' = 3I^2 - 2I^3`` (Bernstein, Parker et al.) or I;
-      the darkest value per texel is kept (the paper writes I' as depth with ``GL_LESS``: a MIN blend).
-3. :func:`eye_pass` — per eye pixel: the shadow-map test with ``hard``'s bias (V = 0: umbra), else
-   V = the penumbra-map texel. Its lookups (:func:`eye_lookups`: the umbra test and the texel each
-   pixel reads) are made right after pass 1, so that pass 2 can shade only the texels read
-   (``texels=read``, below); pass 3 then only gathers.
-
-Parameters (defaults): ``map_size`` 1024 (the paper: maps of the image size, 1024), ``bias`` 1.0 and
-``slope_bias`` 1.0 (texels, as ``hard``; the paper only says it used "a larger bias"),
-``smoothstep`` ``bernstein`` (the paper) | ``linear``, ``silhouettes`` ``brute`` (the paper) |
-``adjacency``, ``cone_segments`` 16 (the paper: "a number of triangles"; 8 is ~15% faster on
-``bunny`` with visible faceting at sharp corners), ``sheet_tolerance``
-0.005 and ``sheet_max_subdiv`` 16 (the paper: "we subdivide extremely non-planar quads", no
-numbers), ``early_reject`` true, ``texels`` ``read`` (``all``: the paper's whole map; same V).
-
-Statistics: silhouette edges / vertices / max degree / vertices of degree >= 3, cone and sheet
-triangles and fragments (rasterized and kept), subdivided sheets, penumbra-map size and border,
-texels in penumbra, texels shaded, (piece, tile) pairs culled by depth and by value; phases
-``shadow_map``, ``silhouettes``, ``penumbra_map``, ``eye_pass`` (lookups and gather).
-
-Light shapes. The paper's light is a sphere of radius L_r. A rectangle light is accepted through
-its equivalent radius (the disk of equal area, ``light.equivalent_radius``): an approximation —
-the penumbra of a rectangle is not rotationally symmetric and the paper's cones would need
-rectangular bases (the paper mentions triangular bases for triangular lights).
-
-Deviations and implementation choices (none changes the paper's result except where said):
-
-* Roles: the shadow map (umbra test) holds occluder-role faces, as in ``hard``; ``Z_P`` is the
-  nearest of those and the receiver-only faces (a receiver-only ground must still carry the
-  penumbra). The paper has no roles (everything casts and receives).
-* Map extent: ``hard``'s light view covers the occluders only, but the outer penumbra lies outside
-  them. The shadow map is ``hard``'s own (same view, texels and bias: the umbra is bit for bit
-  ``hard``'s shadow); the penumbra map uses the same texel grid grown by a border that holds the
-  outer penumbra: a side reaches as far as the farthest disk of radius ``L_r (1/z_v - 1/z_max)``
-  (window units) around the projection of any occluder vertex v (the reach of its cone at the
-  farthest surface; sheets lie between cones), clipped to where there is geometry and to
-  ``map_size // 2`` texels per side (stat ``border_clipped``). Every occluder lies inside
-  ``hard``'s window, so only receiver-only faces are rasterized into the border.
-* Far plane: the paper's ``Z_far`` is the light frustum's far plane; we use the farthest ``Z_P``
-  of the map (a tight far plane: cones and sheets beyond every surface only produce discarded
-  fragments). The cones' and sheets' shapes do not depend on it (a cone's cross-section at depth
-  z has radius ``L_r (1/Z_v - 1/z)`` in window units whatever ``Z_far`` is; the tangent
-  direction of a sheet neither), only their extent.
-* ``early_reject`` (on by default): before rasterizing, with a max-depth pyramid of ``Z_P``, each
-  cone triangle is shortened along its rulings to the largest ``Z_P`` under its footprint (two
-  whole-triangle bounds, then 8 slices along the rulings), and each sheet is shortened to the
-  part ``u <= u_cut`` of all its rulings (the same ruled surface, triangulated over the shorter
-  extent); cones and sheets with nothing behind them are dropped. Every fragment removed would
-  have been discarded by the fragment program, so the penumbra map is the same up to rounding
-  (cones: same planes; sheets: the strips' triangulation of the ruled surface moves within the
-  subdivision tolerance). The rasterizer then skips, per 16x16 tile, the pieces of cones and
-  sheets whose nearest fragment there lies behind every ``Z_P`` of the tile (hierarchical culling,
-  ``rasterize_min_blend(cull_discarded=True)``: an exact bound, the same map). Together they cut
-  the fragments on ``bunny`` from 26.6M + 1.75M to 5.4M + 0.56M; the kept ones (4.39M + 0.48M) do
-  not change. A GPU's fill rate made this unnecessary for the paper; our CPU rasterizer pays per
-  fragment. ``early_reject=false`` draws every fragment (the paper's cost). With it the rasterizer
-  also skips, per tile, the cone pieces whose intensity cannot go below the tile's largest texel
-  (a lower bound from their nearest depth and the tile's farthest ``Z_P``: the MIN blend could not
-  change a texel; ``value_culled_tile_pieces``): on ``bunny`` 5.4M cone fragments become 4.2M,
-  the map is the same.
-* ``texels=read`` (the default): the penumbra map is shaded only at the texels the eye pass reads
-  (the eye pixels outside the umbra, projected into the map: ~80k of the 1.5M texels on ``bunny``
-  at 512x512), a texel mask handed to the rasterizer, which skips the tiles, pieces, rows and spans
-  without such a texel. The other texels stay white. V is bit for bit that of the whole map
-  (``texels=all``, the paper's pass, which a GPU draws at no extra cost): a fragment program only
-  ever writes its own texel, and the eye pass reads nothing else. What changes is the penumbra map
-  as an image (only the texels read are computed) and the fragment counts (of the texels shaded).
-  On ``bunny`` the cone fragments fall from 4.2M to 0.15M; the frame is dominated by the per-piece
-  and per-row work of the rasterizer that remains.
-* Discard with a tolerance: a fragment is discarded when ``Z_F >= Z_P - bias * texel`` (the
-  constant bias in world units at ``Z_P``), so that ``Z_P - Z_v`` never nears 0/0 on surfaces that
-  contain the silhouette vertex (e.g. the top of a box).
-* Sheet side: the side away from the adjacent triangles' projection; an edge whose adjacent
-  triangles project to both sides (non-manifold) gets a sheet on each side. An edge that projects
-  to (almost) a point gets no sheet (its cones cover it).
-* Lookups are nearest-texel (the paper's texture lookup filter is not stated).
-
-Known limits (the paper's own, shown not hidden; see the README):
-
-* Outer penumbra only: the hard shadow is taken as the umbra, so the umbra is overestimated (too
-  large and too dark), increasingly with light size and occluder-receiver distance; there is no
-  light bleeding under small occluders.
-* One silhouette, from the light's center: silhouettes that change over the light are missed.
-* Overlapping penumbrae: the darkest wins (no summing or multiplying; artifacts at silhouette
-  concavities, worse for large penumbrae).
-* Cost: every silhouette vertex draws a whole cone, so the fragments grow with (silhouette
-  vertices) x (penumbra area in texels): ~6M on ``bunny`` at the default light, hundreds of
-  millions on ``plant`` (21k silhouette vertices on open leaves) — seconds per frame on a CPU.
+Steps, parameters, deviations (map border, far plane, early rejection, texels read) and known
+limits: ``docs/methods/penumbra-map.md``.
 """
 
 from __future__ import annotations

@@ -1,86 +1,13 @@
-"""``soft-shadow-map``: Soft Shadow Maps (Atty, Holzschuch, Lapierre, Hasenfratz, Hansen, Sillion,
-Computer Graphics Forum 2006), rectangle lights.
+"""``soft-shadow-map``: Soft Shadow Maps (Atty, Holzschuch, Lapierre, Hasenfratz, Hansen, Sillion, CGF 2006).
 
-The occluders, seen from the light's center, are replaced by one *micro-patch* per occluder-map
-pixel: a rectangle parallel to the light at that pixel's depth covering the pixel's footprint.
-For every micro-patch, the fraction of the light it hides is computed at every texel of a second
-projective texture, the *soft shadow map* (SSM), inside the patch's penumbra extent, and summed.
-The SSM is then projected onto the scene from the light. Both inner and outer penumbrae come out.
+The occluders seen from the center of the rectangle light become one micro-patch per occluder-map pixel
+(:func:`discretize_occluders`); the fraction of the light each patch hides is computed at every
+texel of the soft shadow map inside its penumbra extent (:func:`penumbra_extents`,
+:func:`occlusion_percentage`), summed in draw order like GPU blending
+(:func:`accumulate_soft_shadow_map`, optionally in FP16), clamped, and projected onto the eye view
+(:func:`project_soft_shadow_map`). :func:`compute_soft_shadow_map` runs every step up to the map.
 
-Steps (paper Fig. 4), one function each, in this order:
-
-1. :func:`compute_map_views` — the occluder map and the SSM/receiver map are perspective views
-   from the light's center C_L along its normal, axis-aligned with the rectangle (``right`` along
-   ``u``) and with the light's aspect ratio (Sec. 3.2), so every micro-patch is axis-aligned with
-   the light and similar to it. The occluder map covers the occluders; the SSM covers their
-   largest possible shadow (occluder window grown by the widest penumbra), clipped to the receivers.
-2. :func:`compute_receiver_depth_map` — receiver depths at the SSM texels ("Compute depth map of
-   receivers"); faces with ``Mesh.role`` in ``receiver|both``.
-3. :func:`compute_occluder_depth_map` — occluder depths ("Compute depth map of occluders"); faces
-   with role ``occluder|both``. One pass: the nearest surface. Two-pass variant (Sec. 3.5): the
-   closest front faces, and separately the furthest back faces.
-4. :func:`discretize_occluders` — "Retrieve depth of occluder / compute micro-patch" (Sec. 3.2):
-   each non-empty pixel -> the rectangle ``[x0, x1] x [y0, y1]`` at depth ``z_O`` in the light frame.
-5. :func:`penumbra_extents` — "Compute extent of penumbra" (Sec. 3.3): ratio r = LL'/PP', apex
-   ``O = C_L + r/(1+r) (C_P - C_L)``, and the axis-aligned rectangle where the pyramid meets the
-   SSM's virtual plane: ``C_L C_R = z_R/z_O' C_L O``, ``RR' = LL' (z_R - z_O')/z_O'`` (z_O' the
-   apex depth); converted into a range of SSM texels.
-6. :func:`occlusion_percentage` — the fragment program (Sec. 3.4/4.2): the micro-patch projected
-   back from the receiver point of a texel (receiver depth map) onto the light, as the interval
-   ``[a, b] x [c, d]`` in the light's ``[0, 1]^2`` coordinates; the occluded fraction is the product
-   of the two interval overlaps with ``[0, 1]`` (the ``MOV_SAT / SUB / MUL`` of the paper).
-7. :func:`accumulate_soft_shadow_map` — "Add to current percentage in soft shadow map": the GPU's
-   additive blending, done race-free in parallel: the SSM is split into bands of rows, the
-   micro-patches are binned by band (:func:`bin_patches_by_band`) in occluder-map order (the draw
-   order), and each band is summed by one thread in that order. ``accumulate="float16"`` rounds
-   the running sum to half precision after every addition (:func:`round_half`, IEEE binary16,
-   round-to-nearest-even, np.float16 semantics), which reproduces the FP16 blending failure of
-   Fig. 14 / Appendix A; ``float32`` (default) adds in single precision like FP32 blending, and
-   evaluates the fragment program in float32 too, as a GPU fragment program does (16 vector lanes;
-   within 5e-6 of float64 arithmetic on the built-in scenes). The bands are dealt round-robin to
-   the threads so that a shadow in a few bands does not leave a thread idle.
-   The sum is clamped to [0, 1] at the end (:func:`clamp_soft_shadow_map`).
-8. :func:`merge_two_pass` — two-pass variant: one SSM per occluder map, merged by max (Sec. 3.5).
-9. :func:`project_soft_shadow_map` — "Project soft shadow map on the scene": each eye pixel on a
-   receiver is projected into the SSM and read with bilinear filtering; V = 1 - occlusion.
-
-Parameters (``Param`` defaults):
-
-* ``map_size`` = 256: occluder map N x N pixels (paper: 128 typical, 256 for small penumbrae,
-  "above 200 pixels does not bring an improvement", Sec. 5.2.3/6.2.2).
-* ``ssm_size`` = 256: soft shadow map N x N texels (the paper does not give it; keeping it fixed
-  while the occluder map changes is what makes the cost linear in occluder-map pixels, Sec. 6.2.2).
-* ``two_pass`` = false: front-face and back-face occluder maps merged by max (Sec. 3.5).
-* ``accumulate`` = float32 | float16 | float16-rtz: float16 rounds the running sum to the nearest
-  half (np.float16), float16-rtz truncates it, the rule Appendix A states (``X + e = X if
-  e < 2^-10 X``); both reproduce the paper's FP16 blending failure.
-* ``margin`` = 0.02: fraction added around the occluders in the occluder map's window.
-
-Statistics: ``micro_patches`` (all passes), ``micro_patches_front``/``_back``, ``texels_touched``
-(fragment-program invocations: texels inside penumbra extents), ``texels_per_patch``,
-``occluded_texels`` (SSM texels with occlusion > 0), map sizes, ``fp16_safe`` (Appendix A's
-Eq. 4 holds for every micro-patch over the farthest receiver), and per-phase times
-``occluder_map``, ``receiver_map``, ``penumbra_extents``, ``soft_shadow_map``, ``eye_projection``.
-
-Deviations from the paper (see the README):
-
-* CPU/Numba instead of GPU fragment programs; blending is the banded, ordered sum above.
-* The paper intersects the pyramid with *one* virtual plane. Receivers have different depths, so
-  we place that plane at the farthest receiver depth of the receiver map: the extent (a rectangle
-  in projective SSM coordinates whose size grows with depth) then contains the true penumbra of
-  every receiver. The occluded fraction at each texel uses that texel's own receiver depth, so
-  this costs evaluations of zero-valued texels, not accuracy.
-* Two-pass back map: the furthest back-facing fragment per pixel (all fragments with front faces
-  culled, max depth), the software equivalent of a GREATER depth test.
-* A mesh of role ``both`` never shadows itself (the paper computes no self-shadowing); scenes
-  without roles are refused with a one-line error (the split is the algorithm's premise, Sec. 3.1).
-
-Known limits (the paper's, kept): no self-shadowing; eye pixels on occluder-only geometry get
-V = 1 (the paper shades only receivers); the shadow of the *discretized* occluder seen from C_L
-(silhouette parts visible only from other light points are missing, Sec. 5.1.1); overlaps/gaps
-between neighbouring micro-patch back-projections (Sec. 5.1.2); receivers are not shadowed by
-other receivers, and a receiver point farther from the light than the receiver map's surface at
-its texel reads that surface's value.
+Steps, parameters, deviations and known limits: ``docs/methods/soft-shadow-map.md``.
 """
 
 from __future__ import annotations

@@ -3,7 +3,7 @@
 A :class:`View` is an orthonormal frame (origin, right, up, forward) plus a window:
 
 * view coordinates: ``x = (p-origin).right``, ``y = (p-origin).up``, ``z = (p-origin).forward``;
-  ``z`` is the *depth*: distance along the view axis in world units (DESIGN.md), for both
+  ``z`` is the *depth*: distance along the view axis in world units (docs/design.md), for both
   perspective and orthographic views.
 * perspective: the window ``(l, r, b, t)`` bounds ``x/z`` and ``y/z`` (the image plane at z = 1),
   so asymmetric (off-axis) frusta are allowed; orthographic: it bounds ``x`` and ``y`` in world units.
