@@ -20,7 +20,6 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-DEFAULT_SOURCE = ROOT.parent / "shared" / "models" / "stanford-bunny.obj"
 DEFAULT_OUT = ROOT / "src" / "softshadows" / "data" / "bunny.npz"
 
 
@@ -49,7 +48,7 @@ def make(source: Path, out: Path, faces: int = 10_000, height: float = 1.2) -> t
 
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--source", type=Path, default=DEFAULT_SOURCE)
+    ap.add_argument("--source", type=Path, required=True, help="path of stanford-bunny.obj (Stanford 3D Scanning Repository)")
     ap.add_argument("--out", type=Path, default=DEFAULT_OUT)
     ap.add_argument("--faces", type=int, default=10_000)
     ap.add_argument("--height", type=float, default=1.2)
