@@ -48,7 +48,9 @@ def make(source: Path, out: Path, faces: int = 10_000, height: float = 1.2) -> t
 
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--source", type=Path, required=True, help="path of stanford-bunny.obj (Stanford 3D Scanning Repository)")
+    ap.add_argument(
+        "--source", type=Path, required=True, help="path of stanford-bunny.obj (Stanford 3D Scanning Repository)"
+    )
     ap.add_argument("--out", type=Path, default=DEFAULT_OUT)
     ap.add_argument("--faces", type=int, default=10_000)
     ap.add_argument("--height", type=float, default=1.2)
