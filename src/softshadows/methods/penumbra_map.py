@@ -126,6 +126,7 @@ import time
 import weakref
 from contextlib import nullcontext
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 import numpy as np
 from numba import prange
@@ -1234,6 +1235,9 @@ class PenumbraMapMethod(Method):
             choices=("read", "all"),
         ),
     )
+
+    #: what `softshadows pareto` sweeps (Method.sweep)
+    sweep: ClassVar = {"map_size": [256, 512, 1024, 2048], "cone_segments": [8, 16]}
 
     def run(
         self,
