@@ -171,6 +171,12 @@ def test_real_sweep_writes_files_and_a_consistent_front(swept):
     assert js["budget"]["fits"] and js["budget"]["mae"] == min(p["mae"] for p in js["points"])
     html = (out / "pareto.html").read_text()
     assert "data:image/png;base64," in html and "ground-truth" in html
+    # the page's viewer holds the reference and each front setting, linked from the table
+    data = json.loads(html.split('<script type="application/json" id="viewer-data">', 1)[1].split("</script>", 1)[0])
+    front = sorted((p for p in js["points"] if p["on_front"]), key=lambda p: p["ms"])
+    labels = [f"{p['method']} " + ", ".join(f"{k}={v}" for k, v in p["params"].items()) for p in front]
+    assert [it["name"] for it in data["items"]] == ["ground-truth", *labels]
+    assert html.count('href="#viewer?m=') == len(front)
 
 
 def test_render_auto_end_to_end(swept, tmp_path, monkeypatch, capsys):

@@ -182,9 +182,16 @@ def table_md(doc: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def pareto_html(doc: dict, plot: bytes | None) -> str:
-    """A self-contained page: the plot (data URI), the budget choice, the sortable table."""
+def point_label(p: dict) -> str:
+    """How a setting is named in the page's viewer and table links."""
+    return f"{p['method']} {_fmt_params(p['params'])}"
+
+
+def pareto_html(doc: dict, plot: bytes | None, viewer: dict | None = None) -> str:
+    """A self-contained page: the plot (data URI), the budget choice, the viewer of the front's
+    settings against the reference (``viewer``: report.viewer.viewer_payload), the sortable table."""
     import html as _h
+    from urllib.parse import quote
 
     from .report.html import _CSS, _JS, _kv, _ms, _table, data_uri
 
@@ -209,6 +216,10 @@ def pareto_html(doc: dict, plot: bytes | None) -> str:
         parts.append(f"<div class='note'>budget {b['budget_ms']:g} ms: <b>{e(b['text'])}</b></div>")
     if plot:
         parts.append(f"<h2>Error against frame time</h2><img alt='pareto plot' src='{data_uri(plot)}'>")
+    if viewer:
+        from .report.viewer import viewer_html
+
+        parts.append(viewer_html(viewer).replace(">Viewer</h2>", ">The front's settings against the reference</h2>", 1))
     header = [
         ("method", ""),
         ("params", "the swept parameters (others at their defaults)"),
@@ -219,9 +230,12 @@ def pareto_html(doc: dict, plot: bytes | None) -> str:
     rows = []
     for p in doc["points"]:
         fr = bool(p.get("on_front"))
+        name = e(p["method"])
+        if fr and viewer:
+            name = f'<a href="#viewer?m={e(quote(point_label(p)))}" title="show in the viewer">{name}</a>'
         rows.append(
             [
-                (e(p["method"]), e(p["method"])),
+                (name, e(p["method"])),
                 (e(_fmt_params(p["params"])), e(_fmt_params(p["params"]))),
                 _ms(p["ms"] if _finite(p.get("ms")) else None),
                 p.get("mae"),
@@ -236,7 +250,7 @@ def pareto_html(doc: dict, plot: bytes | None) -> str:
     return "\n".join(parts)
 
 
-def write_outputs(doc: dict, out_dir, final: bool = True) -> dict:
+def write_outputs(doc: dict, out_dir, final: bool = True, viewer: dict | None = None) -> dict:
     """pareto.json always; with ``final`` also the plot, the markdown table and pareto.html."""
     os.makedirs(out_dir, exist_ok=True)
     files = {"json": os.path.join(out_dir, "pareto.json")}
@@ -250,7 +264,7 @@ def write_outputs(doc: dict, out_dir, final: bool = True) -> dict:
         )
         atomic_write(files["png"], png)
         atomic_write(files["md"], table_md(doc))
-        atomic_write(files["html"], pareto_html(doc, png))
+        atomic_write(files["html"], pareto_html(doc, png, viewer))
     return files
 
 
@@ -438,14 +452,42 @@ def pareto(
                 "text": (describe(p) if fits else f"nothing fits; the fastest is {describe(p)}"),
             }
         if out_dir is not None:
-            return write_outputs(doc, out_dir, final=final)
+            return write_outputs(doc, out_dir, final=final, viewer=_viewer() if final else None)
         return {}
+
+    frames: dict = {}  # setting index -> (V, sRGB image) of its warm-up frame, for the page's viewer
+
+    def _viewer():
+        from .compare import _png_bytes
+        from .metrics import signed_error_map
+        from .report import error_limit
+        from .report.viewer import viewer_payload
+        from .shading import to_srgb8
+
+        front = sorted((i for i in doc["front"] if i in frames), key=lambda i: points[i]["ms"])
+        items = [
+            {"name": REFERENCE, "v": ref.visibility, "image": _png_bytes(to_srgb8(ref.image)), "caption": "reference"}
+        ]
+        for i in front:
+            p = points[i]
+            items.append(
+                {
+                    "name": point_label(p),
+                    "v": frames[i][0],
+                    "image": _png_bytes(frames[i][1]),
+                    "caption": f"{p['ms']:.1f} ms, MAE {p['mae']:.4f}",
+                }
+            )
+        limit = error_limit([signed_error_map(frames[i][0], ref.visibility) for i in front])
+        return viewer_payload(items, limit)
 
     say(f"{sc.name} ({sc.light.shape} light) {width}x{height}: {len(settings)} settings of {len(names)} method(s)")
     say(f"  ground truth reference, {ref_params['samples']} samples ...")
     ref = render(sc, REFERENCE, width, height, seed=seed + REF_SEED_OFFSET, progress=progress, **ref_params)
     doc["reference"]["ms"] = ref.timings["total"] * 1e3
     from tqdm import tqdm
+
+    from .shading import to_srgb8
 
     bar = tqdm(total=len(settings) * (1 + repeats), desc="pareto", unit="frame", disable=not progress, leave=False)
     files: dict = {}
@@ -454,6 +496,7 @@ def pareto(
             bar.set_postfix_str(f"{m} {_fmt_params(s)}", refresh=False)
             r = render(sc, m, width, height, seed=seed, **s)
             points[i]["mae"] = _mae(r.visibility, ref.visibility)
+            frames[i] = (r.visibility, to_srgb8(r.image))
             bar.update()
             save()
         n = len(settings)
