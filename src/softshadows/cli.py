@@ -80,7 +80,7 @@ def _cmd_render(args) -> int:
         vmask = ~np.isnan(res.visibility)
         ms = "  ".join(f"{k}={v * 1e3:.1f}ms" for k, v in res.timings.items())
         print(
-            f"{scene.name} ({scene.light.shape} light) {args.method} {w}x{h}: mean V={np.nanmean(res.visibility[vmask]) if vmask.any() else float('nan'):.3f}"
+            f"{scene.name} ({scene.light.shape} light) {method} {w}x{h}: mean V={np.nanmean(res.visibility[vmask]) if vmask.any() else float('nan'):.3f}"
         )
         print(f"  {ms}")
         shown = {k: v for k, v in res.stats.items() if not k.startswith("_")}
