@@ -232,3 +232,20 @@ def test_ctrl_c_leaves_partial_results(tmp_path, monkeypatch):
     assert not [f for f in tmp_path.iterdir() if ".tmp" in f.name]  # no temporary file left behind
     assert math.isfinite(timed[0]["ms"])
     assert np.isfinite([p["mae"] for p in js["points"]]).all()
+
+
+def test_a_failing_setting_is_reported_and_the_sweep_goes_on(tmp_path, monkeypatch):
+    real = softshadows.render
+
+    def flaky(scene, method, *a, **k):
+        if method == "hard" and k.get("map_size") == 128:
+            raise MemoryError("simulated")
+        return real(scene, method, *a, **k)
+
+    monkeypatch.setattr(softshadows, "render", flaky)
+    doc = pareto("square", "hard", W, H, str(tmp_path), 4, repeats=1, sweeps={"hard": {"map_size": [64, 128, 256]}})
+    bad = [p for p in doc["points"] if "failed" in p]
+    assert len(bad) == 1 and bad[0]["params"] == {"map_size": 128} and "MemoryError" in bad[0]["failed"]
+    assert bad[0]["ms"] is None and not bad[0]["on_front"]
+    good = [p for p in doc["points"] if "failed" not in p]
+    assert len(good) == 2 and all(p["ms"] > 0 and p["mae"] is not None for p in good) and doc["complete"]

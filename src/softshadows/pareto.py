@@ -494,7 +494,15 @@ def pareto(
     try:
         for i, (m, s) in enumerate(settings):  # warm-up frame (untimed) and the error
             bar.set_postfix_str(f"{m} {_fmt_params(s)}", refresh=False)
-            r = render(sc, m, width, height, seed=seed, **s)
+            try:
+                r = render(sc, m, width, height, seed=seed, **s)
+            except SoftShadowsError:
+                raise
+            except Exception as exc:  # one failing setting (e.g. out of memory) does not end the sweep
+                points[i]["failed"] = f"{type(exc).__name__}: {exc}"
+                print(f"softshadows: warning: {m} {_fmt_params(s)} failed: {points[i]['failed']}", file=sys.stderr)
+                bar.update(1 + repeats)
+                continue
             points[i]["mae"] = _mae(r.visibility, ref.visibility)
             frames[i] = (r.visibility, to_srgb8(r.image))
             bar.update()
@@ -504,6 +512,8 @@ def pareto(
             for k in range(n):
                 i = (k + rep * max(1, n // repeats)) % n
                 m, s = settings[i]
+                if "failed" in points[i]:
+                    continue
                 bar.set_postfix_str(f"{m} {_fmt_params(s)}", refresh=False)
                 r = render(sc, m, width, height, seed=seed, **s)
                 points[i]["times_ms"].append(r.timings["total"] * 1e3)
@@ -566,7 +576,10 @@ def _cmd_pareto(args) -> int:
     )
     if not args.quiet:
         print(f"{'method':<20}{'params':<40}{'ms':>9}{'MAE':>10}  front")
-        for p in sorted(doc["points"], key=lambda p: p["ms"]):
+        for p in sorted(doc["points"], key=lambda p: p["ms"] if _finite(p["ms"]) else math.inf):
+            if "failed" in p:
+                print(f"{p['method']:<20}{_fmt_params(p['params']):<40} failed: {p['failed']}")
+                continue
             print(
                 f"{p['method']:<20}{_fmt_params(p['params']):<40}{p['ms']:9.2f}{p['mae']:10.5f}"
                 f"  {'*' if p['on_front'] else ''}"
