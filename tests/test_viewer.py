@@ -74,11 +74,12 @@ def report(tmp_path_factory):
 
 
 @pytest.fixture(scope="module")
-def page(report):
+def page(request):
     exe, why = _chromium()
     if exe is None:
         print(f"SKIP viewer browser test: {why}")
         pytest.skip(why)
+    report = request.getfixturevalue("report")  # only rendered when a browser can show it
     from playwright.sync_api import sync_playwright
 
     with sync_playwright() as p:
