@@ -4,6 +4,7 @@
     softshadows list
     softshadows compare ...   (softshadows.compare)
     softshadows bench ...     (softshadows.bench)
+    softshadows pareto ...    (softshadows.pareto; render --method auto --budget-ms X uses its front)
 
 Bad input prints one line ``softshadows: error: ...`` and exits with code 2.
 """
@@ -58,7 +59,12 @@ def _cmd_render(args) -> int:
     w, h = parse_size(args.size)
     params = parse_sets(args.set)
     scene = load_scene(args.scene, light=args.light)
-    res = render(scene, args.method, w, h, seed=args.seed, progress=not args.quiet, **params)
+    method = args.method
+    if method == "auto":  # the least-error setting within --budget-ms on this machine (softshadows.pareto)
+        method, params = _auto_method(scene, w, h, args.budget_ms, params, quiet=args.quiet)
+    elif args.budget_ms is not None:
+        raise SoftShadowsError("--budget-ms applies to --method auto only")
+    res = render(scene, method, w, h, seed=args.seed, progress=not args.quiet, **params)
     out = args.output or f"{scene.name}-{args.method}.png"
     os.makedirs(os.path.dirname(os.path.abspath(out)), exist_ok=True)
     save_png(out, res.image)
@@ -74,7 +80,7 @@ def _cmd_render(args) -> int:
         vmask = ~np.isnan(res.visibility)
         ms = "  ".join(f"{k}={v * 1e3:.1f}ms" for k, v in res.timings.items())
         print(
-            f"{scene.name} ({scene.light.shape} light) {args.method} {w}x{h}: mean V={np.nanmean(res.visibility[vmask]) if vmask.any() else float('nan'):.3f}"
+            f"{scene.name} ({scene.light.shape} light) {method} {w}x{h}: mean V={np.nanmean(res.visibility[vmask]) if vmask.any() else float('nan'):.3f}"
         )
         print(f"  {ms}")
         shown = {k: v for k, v in res.stats.items() if not k.startswith("_")}
@@ -82,6 +88,21 @@ def _cmd_render(args) -> int:
             print("  stats: " + ", ".join(f"{k}={v}" for k, v in shown.items()))
         print(f"wrote {out}" + (f" and {args.exr}" if args.exr else ""))
     return 0
+
+
+def _auto_method(scene, w, h, budget_ms, sets, quiet=False):
+    from .pareto import auto_choice, describe
+
+    if sets:
+        raise SoftShadowsError("--set cannot be combined with --method auto (it picks the parameters)")
+    method, params, point, fits, path = auto_choice(scene, w, h, budget_ms, progress=not quiet, verbose=not quiet)
+    if not quiet:
+        print(
+            f"auto ({budget_ms:g} ms budget): {describe(point)}"
+            + ("" if fits else " -- nothing fits the budget, the fastest setting")
+            + f"; front: {path}"
+        )
+    return method, params
 
 
 def _cmd_list(args) -> int:
@@ -108,7 +129,14 @@ def build_parser() -> argparse.ArgumentParser:
 
     r = sub.add_parser("render", help="render one method on one scene")
     r.add_argument("scene", nargs="?", default=DEFAULT_SCENE, help="built-in name, TOML scene or mesh file")
-    r.add_argument("--method", "-m", default="ground-truth")
+    r.add_argument("--method", "-m", default="ground-truth", help="a method, or 'auto' (with --budget-ms)")
+    r.add_argument(
+        "--budget-ms",
+        dest="budget_ms",
+        type=float,
+        default=None,
+        help="with --method auto: the least-error method and settings within this frame time (softshadows pareto)",
+    )
     r.add_argument("--size", default="512x512", help="WxH")
     r.add_argument("--light", choices=("rect", "sphere"), default=None, help="swap in this light shape")
     r.add_argument("--set", action="append", metavar="KEY=VALUE", help="method parameter (repeatable)")
@@ -122,7 +150,7 @@ def build_parser() -> argparse.ArgumentParser:
     ls = sub.add_parser("list", help="list built-in scenes, methods and their parameters")
     ls.set_defaults(func=_cmd_list)
 
-    for modname in ("compare", "bench"):
+    for modname in ("compare", "bench", "pareto"):
         try:
             mod = importlib.import_module(f"softshadows.{modname}")
         except ModuleNotFoundError as exc:

@@ -347,6 +347,7 @@ def compare(
         "machine": machine,
         "command": command,
         "colorbar": colorbar_png(limit),
+        "viewer": _viewer_payload(gt, results, ref_entry, entries, limit),
         "created": time.strftime("%Y-%m-%d %H:%M:%S"),
     }
     report = write_html(out("report.html"), ctx)
@@ -363,6 +364,20 @@ def compare(
         "error_limit": limit,
         "wall_s": time.perf_counter() - t_start,
     }
+
+
+def _viewer_payload(gt, results, ref_entry, entries, limit) -> dict:
+    """The report viewer's data (report/viewer.py): reference first, then each method."""
+    from .report.viewer import viewer_payload
+
+    items = [{"name": REFERENCE, "v": gt.visibility, "image": ref_entry["images"]["image"], "caption": "reference"}]
+    for e in entries:
+        mt, ms = e["metrics"], e["timings"].get("total", float("nan")) * 1e3
+        cap = f"MAE {mt['mae']:.4f}, {ms:.1f} ms"
+        items.append(
+            {"name": e["name"], "v": results[e["name"]].visibility, "image": e["images"]["image"], "caption": cap}
+        )
+    return viewer_payload(items, limit)
 
 
 # ---- command line -----------------------------------------------------------------------------

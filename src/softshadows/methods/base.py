@@ -8,6 +8,7 @@ calls the method, shades, and times every phase.
 
 from __future__ import annotations
 
+import itertools
 import time
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -159,6 +160,10 @@ class Method:
     params: tuple = ()
     summary: str = ""
     paper: str = ""
+    #: quality settings ``softshadows pareto`` measures: ``{param: [values, ...]}`` (every
+    #: combination) or a list of ``{param: value}`` settings; parameters not named keep their
+    #: defaults. ``None``: the defaults only. Declared beside ``params`` in each method's class.
+    sweep: dict | list | None = None
 
     def run(self, ctx: FrameContext, **params) -> MethodOutput:  # pragma: no cover - abstract
         raise NotImplementedError
@@ -171,6 +176,30 @@ class Method:
                 valid = ", ".join(sorted(known)) or "(none)"
                 raise SoftShadowsError(f"method '{self.name}': unknown parameter '{k}'; valid: {valid}")
             out[k] = known[k].coerce(v, self.name)
+        return out
+
+    def sweep_settings(self, sweep: dict | list | None = None) -> list[dict]:
+        """The settings of ``sweep`` (default: the class's ``sweep``) as a list of ``{param: value}``
+        dicts, each value coerced and validated by its Param; duplicates dropped, order kept."""
+        sw = self.sweep if sweep is None else sweep
+        if sw is None:
+            raw = [{}]
+        elif isinstance(sw, dict):
+            keys = list(sw)
+            for k in keys:
+                if isinstance(sw[k], (str, bytes)) or not hasattr(sw[k], "__iter__"):
+                    raise SoftShadowsError(f"method '{self.name}': sweep of '{k}' must be a list of values")
+            raw = [dict(zip(keys, combo)) for combo in itertools.product(*(list(sw[k]) for k in keys))]
+        else:
+            raw = [dict(d) for d in sw]
+        out, seen = [], set()
+        for d in raw:
+            full = self.resolve_params(d)  # validates names and values
+            setting = {k: full[k] for k in d}
+            key = tuple(sorted((k, repr(v)) for k, v in setting.items()))
+            if key not in seen:
+                seen.add(key)
+                out.append(setting)
         return out
 
     def check_light(self, light) -> None:

@@ -11,6 +11,8 @@ Steps, parameters, deviations and known limits: ``docs/methods/ground-truth.md``
 
 from __future__ import annotations
 
+from typing import ClassVar
+
 import numpy as np
 from numba import prange
 
@@ -249,6 +251,9 @@ class GroundTruth(Method):
         Param("physical", False, "image = full area-light integral (cosines, 1/r^2) per sample"),
         Param("offset", 1e-4, "ray origin offset along the normal, x scene diagonal", min=0.0),
     )
+
+    #: what `softshadows pareto` sweeps (Method.sweep)
+    sweep: ClassVar = {"samples": [1, 4, 16, 64]}
 
     def run(self, ctx, samples, physical, offset):
         n_side = int(round(np.sqrt(samples)))

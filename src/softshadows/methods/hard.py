@@ -10,6 +10,8 @@ Steps, parameters and known limits: ``docs/methods/hard.md``.
 
 from __future__ import annotations
 
+from typing import ClassVar
+
 from .base import Method, MethodOutput, Param, register
 from .shadowmap import build_shadow_map, fit_light_view, lookup_points
 
@@ -26,6 +28,9 @@ class Hard(Method):
         Param("slope_bias", 1.0, "slope-scaled bias: texels x tan(angle to light)", min=0.0),
         Param("pcf", 0, "percentage-closer filtering radius in texels (0 = off)", min=0, max=16),
     )
+
+    #: what `softshadows pareto` sweeps (Method.sweep)
+    sweep: ClassVar = {"map_size": [256, 512, 1024, 2048], "pcf": [0, 2]}
 
     def run(self, ctx, map_size, bias, slope_bias, pcf):
         pts, nrm, idx = ctx.points()

@@ -16,6 +16,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numba
 import numpy as np
@@ -861,6 +862,9 @@ class OcclusionTextures(Method):
             choices=SELF_SHADOW,
         ),
     )
+
+    #: what `softshadows pareto` sweeps (Method.sweep)
+    sweep: ClassVar = {"slices": [4, 8, 16], "texture_size": [128, 256, 512]}
 
     def run(
         self,

@@ -11,6 +11,8 @@ Steps, parameters, deviations from the sketch and known limits: ``docs/methods/p
 
 from __future__ import annotations
 
+from typing import ClassVar
+
 import numba
 import numpy as np
 from numba import prange
@@ -430,6 +432,9 @@ class PCSS(Method):
             "compare each tap against the receiver's tangent plane (off: the sketch's one depth)",
         ),
     )
+
+    #: what `softshadows pareto` sweeps (Method.sweep)
+    sweep: ClassVar = {"map_size": [512, 1024, 2048], "filter_samples": [16, 36, 64]}
 
     def run(
         self, ctx, map_size, search_samples, filter_samples, pattern, rotate, bilinear, bias, slope_bias, receiver_plane

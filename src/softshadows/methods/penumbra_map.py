@@ -19,6 +19,7 @@ import time
 import weakref
 from contextlib import nullcontext
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 import numpy as np
 from numba import prange
@@ -1127,6 +1128,9 @@ class PenumbraMapMethod(Method):
             choices=("read", "all"),
         ),
     )
+
+    #: what `softshadows pareto` sweeps (Method.sweep)
+    sweep: ClassVar = {"map_size": [256, 512, 1024, 2048], "cone_segments": [8, 16]}
 
     def run(
         self,

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 import numba
 import numpy as np
@@ -619,6 +620,16 @@ class SoftShadowMapMethod(Method):
         ),
         Param("margin", 0.02, "border added around the occluders in the occluder map (fraction)", min=0.0, max=1.0),
     )
+
+    #: what `softshadows pareto` sweeps (Method.sweep)
+    sweep: ClassVar = [
+        {"map_size": 64, "ssm_size": 128},
+        {"map_size": 128, "ssm_size": 128},
+        {"map_size": 128, "ssm_size": 256},
+        {"map_size": 256, "ssm_size": 256},
+        {"map_size": 256, "ssm_size": 512},
+        {"map_size": 512, "ssm_size": 512},
+    ]
 
     def run(self, ctx, map_size, ssm_size, two_pass, accumulate, margin):
         smap = compute_soft_shadow_map(ctx.scene, map_size, ssm_size, two_pass, accumulate, margin, ctx.timer)

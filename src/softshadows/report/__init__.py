@@ -4,7 +4,8 @@
   ``V - V_ref`` with symmetric limits (red: darker than truth, blue: brighter);
 * :func:`grid_image` — one labelled image of every method (shaded, V, error);
 * :func:`sweep_plot` — frame time and error against a swept parameter (``softshadows bench --sweep``);
-* :func:`write_html` — the self-contained ``report.html``; :func:`machine_info`.
+* :func:`write_html` — the self-contained ``report.html``; :func:`machine_info`;
+* ``report.viewer`` — its interactive viewer section (``viewer_payload``, ``viewer_html``, ``viewer.js``).
 """
 
 from .figures import colorbar_png, error_heatmap, error_limit, error_rgb, grid_image, sweep_plot

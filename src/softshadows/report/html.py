@@ -182,6 +182,11 @@ def render_html(ctx: dict) -> str:
     for m, why in ctx.get("failed", {}).items():
         parts.append(f"<div class='note fail'><b>{_e(m)} failed:</b> {_e(why)}</div>")
 
+    if ctx.get("viewer"):  # the interactive viewer (report/viewer.py)
+        from .viewer import viewer_html
+
+        parts.append(viewer_html(ctx["viewer"]))
+
     # metrics table
     parts.append("<h2>Error against ground truth</h2>")
     parts.append(
@@ -199,8 +204,10 @@ def render_html(ctx: dict) -> str:
     rows = []
     for m in methods:
         mt = m["metrics"]
+        name = _e(m["name"])
+        link = f'<a href="#viewer?m={name}" title="show in the viewer">{name}</a>' if ctx.get("viewer") else name
         rows.append(
-            [(_e(m["name"]), _e(m["name"]))]
+            [(link, name)]
             + [mt.get(k) for k in METRIC_COLS]
             + [mt.get("n_shadow"), _ms(m["timings"].get("total", float("nan")) * 1e3)]
         )
