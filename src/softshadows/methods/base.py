@@ -159,6 +159,11 @@ class Method:
     params: tuple = ()
     summary: str = ""
     paper: str = ""
+    #: renders the occluders into map(s) from the light's centre (or the light plane): cannot cover
+    #: occluders around or touching the light (render() warns; softshadows.limits)
+    light_view: bool = False
+    #: shadows receiver faces only (V = 1 without receivers; render() warns)
+    receivers_only: bool = False
 
     def run(self, ctx: FrameContext, **params) -> MethodOutput:  # pragma: no cover - abstract
         raise NotImplementedError
