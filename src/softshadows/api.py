@@ -25,8 +25,8 @@ _WARM: set = set()
 #: seeds are 64-bit counters in the kernels
 SEED_MAX = 2**63 - 1
 #: rough peak memory of one frame per eye pixel (G-buffer, points, V, image, method buffers), bytes;
-#: measured peak RSS growth is below 200 B/pixel for every method at 1024x1024 (docs/reliability.md)
-BYTES_PER_PIXEL = 400
+#: measured peak RSS growth is 96-172 B/pixel at 1024x1024 (docs/reliability.md): 1.5x margin
+BYTES_PER_PIXEL = 256
 #: serialises renders when the active Numba threading layer is not thread-safe (workqueue)
 _RENDER_LOCK = threading.RLock()
 
