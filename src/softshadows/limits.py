@@ -25,7 +25,17 @@ MAX_VIEW_DEGREES = 170.0
 
 
 def light_view_problem(scene) -> str | None:
-    """Why a map from the light's centre cannot cover the occluders, or None when it can."""
+    """Why a map from the light's centre cannot cover the occluders, or None when it can (cached
+    per scene geometry and light)."""
+    light = scene.light
+    key = ("light_view_problem", light.shape, *light.center, *getattr(light, "normal", ()))
+    cache = scene.flat._cache
+    if key not in cache:
+        cache[key] = _light_view_problem(scene)
+    return cache[key]
+
+
+def _light_view_problem(scene) -> str | None:
     flat = scene.flat
     if not flat.occluder.any():
         return None
@@ -52,6 +62,18 @@ def light_view_problem(scene) -> str | None:
     return None
 
 
+def _any_lit(scene, res) -> bool:
+    """True when the light's unshadowed direct term is > 0 at some visible pixel (a sparse sample
+    first: the common case costs a few hundred points, not the whole frame)."""
+    idx = np.flatnonzero(res.mask.ravel())
+    for sel in (idx[:: max(1, len(idx) // 256)], idx):
+        pos = res.position.reshape(-1, 3)[sel].astype(np.float64)
+        nrm = facing_normals(res.normal.reshape(-1, 3)[sel].astype(np.float64), pos, scene.camera.eye)
+        if np.any(unshadowed(scene.light, pos, nrm) > 0):
+            return True
+    return False
+
+
 def frame_warnings(scene, method, res) -> list[str]:
     """The warnings for one frame of ``method`` on ``scene`` (the scene the kernels saw)."""
     out = []
@@ -68,13 +90,9 @@ def frame_warnings(scene, method, res) -> list[str]:
             f"{method.name}: the scene has no receiver faces (role receiver or both) and this method "
             "shadows receivers only, so V = 1 everywhere"
         )
-    if res.mask is not None and res.mask.any():
-        pos = res.position[res.mask].astype(np.float64)
-        nrm = facing_normals(res.normal[res.mask].astype(np.float64), pos, scene.camera.eye)
-        lit = unshadowed(scene.light, pos, nrm)
-        if not np.any(lit > 0):
-            out.append(
-                "the light reaches no surface the camera sees (it faces away from them, or is behind or "
-                "below them): the image is ambient light only"
-            )
+    if res.mask is not None and res.mask.any() and not _any_lit(scene, res):
+        out.append(
+            "the light reaches no surface the camera sees (it faces away from them, or is behind or "
+            "below them): the image is ambient light only"
+        )
     return out
