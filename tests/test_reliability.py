@@ -216,6 +216,7 @@ def test_bench_and_compare_outputs_checked_first(tmp_path, capsys):
         (lambda sc: ss.render(sc, "hard", 16, 12, seed=True), "seed"),
         (lambda sc: ss.render(sc, "hard", True, 12), "width"),
         (lambda sc: ss.render(sc, None, 16, 12), "method"),
+        (lambda sc: ss.render(sc, "hard", 16, 12, map_size=True), "map_size"),
         (lambda sc: Scene("x", sc.light, sc.camera), "meshes"),
         (lambda sc: Scene(sc.meshes, sc.light, "cam"), "camera"),
         (lambda sc: Camera((0, 0, 5), (0, 0, 0), fov_y="45"), "camera.fov_y"),
@@ -339,6 +340,7 @@ TEMPLATE = {
     "mesh1.size": "6",
     "mesh1.role": '"receiver"',
 }
+EXTRA_KEYS = ["mesh0.radius", "light.radius", "light.type", "mesh1.cells", "mesh0.translate", "mesh1.scale", "wat"]
 JUNK = st.sampled_from(
     [
         "0",
@@ -362,6 +364,9 @@ JUNK = st.sampled_from(
         "1e-9",
         "[1e-9, 1e-9, 1e-9]",
         "[1e8, 1e8, 1e8]",
+        "[3e6, 0, -2e6]",
+        "[0, 0.6, 0]",
+        "[0, 0.1, 0]",
     ]
 )
 
@@ -391,9 +396,7 @@ def broken_scene_file(draw):
             else:
                 fields.pop(k, None)
         if draw(st.booleans()):
-            fields[draw(st.sampled_from(["mesh0.radius", "light.radius", "light.type", "mesh1.cells", "wat"]))] = draw(
-                JUNK
-            )
+            fields[draw(st.sampled_from(EXTRA_KEYS))] = draw(JUNK)
         text = _toml(fields).encode()
         return "scene.toml", _mangle(draw, text)
     # an OBJ mesh: random (possibly non-finite, huge or tiny) vertices, faces possibly out of range

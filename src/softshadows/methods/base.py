@@ -38,6 +38,8 @@ class Param:
         """Convert a value (possibly a string from the CLI) and validate it."""
         t = self.type
         try:
+            if isinstance(value, (bool, np.bool_)) and t is not bool:  # True is not a size or a count
+                raise ValueError(value)
             if isinstance(value, str) and t is bool:
                 low = value.strip().lower()
                 if low in ("1", "true", "yes", "on"):
