@@ -208,6 +208,23 @@ def test_atomic_write_keeps_old_file_on_failure_and_file_size_limit(tmp_path):
     assert target.read_bytes() == b"old" and [x.name for x in tmp_path.iterdir()] == ["v.exr"]
 
 
+def test_cli_file_size_limit_one_line_nothing_left(tmp_path):
+    # the whole command under a real file-size limit: one line naming the user's path, exit 2
+    code = textwrap.dedent(f"""
+        import resource, sys
+        resource.setrlimit(resource.RLIMIT_FSIZE, (1500, 1500))
+        sys.path.insert(0, {SRC!r})
+        from softshadows.cli import main
+        sys.exit(main(["render", "square", "-m", "hard", "--set", "map_size=256", "--size", "64x48", "-q",
+                       "-o", {str(tmp_path / "a.png")!r}, "--exr", {str(tmp_path / "a.exr")!r}]))
+    """)
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert p.returncode == 2, p.stderr[-2000:]
+    line = _one_error_line(p.stderr)
+    assert line.startswith(f"softshadows: error: cannot write {tmp_path}/a.") and "File too large" in line, line
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_bench_and_compare_outputs_checked_first(tmp_path, capsys):
     (tmp_path / "f").write_text("x")
     assert main(["bench", "square", "--methods", "hard", "--sizes", "16", "--json", str(tmp_path), "-q"]) == 2

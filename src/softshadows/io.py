@@ -29,7 +29,16 @@ JSON_EXTS = (".json",)
 
 
 class OutputError(SoftShadowsError):
-    """An output path is unusable or could not be written."""
+    """An output path is unusable or could not be written (``path``, ``reason`` when writing failed)."""
+
+    def __init__(self, msg: str, path=None, reason: str | None = None):
+        super().__init__(msg)
+        self.path, self.reason = path, reason
+
+
+def _write_error(shown, exc: BaseException, path=None) -> OutputError:
+    reason = _reason(exc)
+    return OutputError(f"cannot write {shown}: {reason}", path=str(path if path is not None else shown), reason=reason)
 
 
 def _reason(exc: BaseException) -> str:
@@ -109,13 +118,13 @@ def atomic_path(path):
     try:
         tmp = _temp_beside(target)
     except OSError as exc:
-        raise OutputError(f"cannot write {path}: {_reason(exc)}") from None
+        raise _write_error(path, exc, target) from None
     try:
         yield tmp
         os.replace(tmp, target)
     except OSError as exc:
         _remove(tmp)
-        raise OutputError(f"cannot write {path}: {_reason(exc)}") from None
+        raise _write_error(path, exc, target) from None
     except BaseException:
         _remove(tmp)
         raise
@@ -138,7 +147,7 @@ class OutputGroup:
         try:
             tmp = _temp_beside(t)
         except OSError as exc:
-            raise OutputError(f"cannot write {target}: {_reason(exc)}") from None
+            raise _write_error(target, exc, t) from None
         self._pending.append((tmp, t, str(target)))
         return tmp
 
@@ -149,10 +158,15 @@ class OutputGroup:
         if et is not None:
             for tmp, _t, _n in self._pending:
                 _remove(tmp)
-            if isinstance(ev, OSError):
+            # a writer's error names the temporary file: name the user's path instead
+            if isinstance(ev, OutputError) and ev.reason is not None:
+                shown = next((n for tmp, _t, n in self._pending if str(tmp) == ev.path), None)
+                if shown is not None:
+                    raise OutputError(f"cannot write {shown}: {ev.reason}", path=shown, reason=ev.reason) from None
+            elif isinstance(ev, OSError):
                 name = getattr(ev, "filename", None)
                 shown = next((n for tmp, _t, n in self._pending if str(tmp) == str(name)), name)
-                raise OutputError(f"cannot write {shown}: {_reason(ev)}") from None
+                raise _write_error(shown, ev) from None
             return False
         for i, (tmp, t, name) in enumerate(self._pending):
             try:
@@ -160,7 +174,7 @@ class OutputGroup:
             except OSError as exc:
                 for tmp2, _t, _n in self._pending[i:]:
                     _remove(tmp2)
-                raise OutputError(f"cannot write {name}: {_reason(exc)}") from None
+                raise _write_error(name, exc, t) from None
         return False
 
 
