@@ -52,7 +52,8 @@ def eye_view(scene, width: int, height: int) -> View:
     return View.from_camera(scene.camera, width, height, near=max(1e-4, diag * 1e-5), far=diag * 4 + 1.0)
 
 
-def _check_size(width, height):
+def check_size(width, height) -> None:
+    """Image sizes: positive ints (not bool), <= 16384, and the frame's memory estimate available."""
     for nm, v in (("width", width), ("height", height)):
         if not isinstance(v, (int, np.integer)) or isinstance(v, (bool, np.bool_)) or v <= 0:
             raise SoftShadowsError(f"image {nm} must be a positive integer, got {v!r}")
@@ -127,7 +128,7 @@ def render(
     _check_scene(scene)
     if not isinstance(method, str):
         raise SoftShadowsError(f"method must be a method name (str), got {type(method).__name__}")
-    _check_size(width, height)
+    check_size(width, height)
     seed = check_seed(seed)
     m = get_method(method)
     resolved = m.resolve_params(params)

@@ -39,7 +39,7 @@ import sys
 
 import numpy as np
 
-from .api import check_seed
+from .api import check_seed, check_size
 from .compare import REFERENCE, jsonable, load, parse_method_sets, parse_size, resolve_methods
 from .errors import SoftShadowsError
 from .io import IMAGE_EXTS, JSON_EXTS, check_outputs, write_json
@@ -79,6 +79,7 @@ def _sizes(sizes) -> list[tuple[int, int]]:
             w, h = int(s[0]), int(s[1])
         else:
             w, h = parse_size(str(s).strip())
+        check_size(w, h)  # every size (and its memory estimate) checked before the first frame
         out.append((w, h))
     if not out:
         raise SoftShadowsError("--sizes is empty; give e.g. 256,512,1024 or 640x480")

@@ -333,7 +333,8 @@ class Scene:
         origin, shift = that centre (else 0); when E is outside ``RESCALE_OUTSIDE``,
         scale = 2**-round(log2 E) (exact in binary; else 1). Scenes near the origin with an extent
         of 1e-2..1e4 units (all built-in scenes) are returned as they are (same object)."""
-        if self._norm is None:
+        key = (id(self.light), id(self.camera))  # a light or camera assigned later is seen
+        if self._norm is None or self._norm[3] != key:
             v = self.flat.vertices
             lo, hi = v.min(axis=0), v.max(axis=0)
             ext = float(np.max(hi - lo))
@@ -343,10 +344,10 @@ class Scene:
             if ext > 0 and not (RESCALE_OUTSIDE[0] <= ext <= RESCALE_OUTSIDE[1]):
                 scale = float(2.0 ** -round(np.log2(ext)))
             if not shift.any() and scale == 1.0:
-                self._norm = (self, np.zeros(3), 1.0)
+                self._norm = (self, np.zeros(3), 1.0, key)
             else:
-                self._norm = (_similar_scene(self, shift, scale), shift, scale)
-        return self._norm
+                self._norm = (_similar_scene(self, shift, scale), shift, scale, key)
+        return self._norm[:3]
 
     def with_light(self, light) -> Scene:
         return Scene(self.meshes, light, self.camera, self.name)
@@ -389,7 +390,7 @@ def _similar_scene(scene: Scene, shift: np.ndarray, scale: float) -> Scene:
         scene.camera.fov_y,
     )
     out = Scene(meshes, lt, cam, scene.name)
-    out._norm = (out, np.zeros(3), 1.0)
+    out._norm = (out, np.zeros(3), 1.0, (id(lt), id(cam)))
     return out
 
 
