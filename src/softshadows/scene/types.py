@@ -333,8 +333,9 @@ class Scene:
         origin, shift = that centre (else 0); when E is outside ``RESCALE_OUTSIDE``,
         scale = 2**-round(log2 E) (exact in binary; else 1). Scenes near the origin with an extent
         of 1e-2..1e4 units (all built-in scenes) are returned as they are (same object)."""
-        key = (id(self.light), id(self.camera))  # a light or camera assigned later is seen
-        if self._norm is None or self._norm[3] != key:
+        # a light or camera assigned after the first call is seen (compared by identity)
+        if self._norm is None or self._norm[3][0] is not self.light or self._norm[3][1] is not self.camera:
+            key = (self.light, self.camera)
             v = self.flat.vertices
             lo, hi = v.min(axis=0), v.max(axis=0)
             ext = float(np.max(hi - lo))
@@ -390,7 +391,7 @@ def _similar_scene(scene: Scene, shift: np.ndarray, scale: float) -> Scene:
         scene.camera.fov_y,
     )
     out = Scene(meshes, lt, cam, scene.name)
-    out._norm = (out, np.zeros(3), 1.0, (id(lt), id(cam)))
+    out._norm = (out, np.zeros(3), 1.0, (lt, cam))
     return out
 
 
