@@ -185,6 +185,15 @@ def test_failing_later_output_leaves_nothing_behind(tmp_path, capsys, monkeypatc
     assert list(tmp_path.iterdir()) == []  # no orphaned PNG, no truncated EXR, no temp file
 
 
+def test_atomic_outputs_have_the_usual_mode(tmp_path):
+    from softshadows.io import write_text
+
+    write_text(tmp_path / "a.json", "{}")
+    umask = os.umask(0)
+    os.umask(umask)
+    assert (tmp_path / "a.json").stat().st_mode & 0o777 == 0o666 & ~umask  # as open() would give
+
+
 def test_atomic_write_keeps_old_file_on_failure_and_file_size_limit(tmp_path):
     # a real file-size limit (RLIMIT_FSIZE) in a child process: the write fails with EFBIG
     target = tmp_path / "v.exr"
@@ -452,6 +461,7 @@ def _mangle(draw, text: bytes) -> bytes:
     max_examples=40,
     deadline=None,
     derandomize=True,
+    database=None,
     suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow],
 )
 @given(
