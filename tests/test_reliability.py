@@ -255,6 +255,8 @@ def test_bench_and_compare_outputs_checked_first(tmp_path, capsys):
         (lambda sc: ss.render(sc, "hard", True, 12), "width"),
         (lambda sc: ss.render(sc, None, 16, 12), "method"),
         (lambda sc: ss.render(sc, "hard", 16, 12, map_size=True), "map_size"),
+        (lambda sc: ss.load_scene(None), "scene must be a name or a file path"),
+        (lambda sc: ss.load_scene("square", light="disk"), "light"),
         (lambda sc: Scene("x", sc.light, sc.camera), "meshes"),
         (lambda sc: Scene(sc.meshes, sc.light, "cam"), "camera"),
         (lambda sc: Camera((0, 0, 5), (0, 0, 0), fov_y="45"), "camera.fov_y"),

@@ -73,6 +73,7 @@ from __future__ import annotations
 
 import io
 import math
+import os
 import tomllib
 from pathlib import Path
 
@@ -125,6 +126,10 @@ def load_scene(name_or_path, light: str | None = None) -> Scene:
         raise SceneError(f"light must be 'rect' or 'sphere', got {light!r}")
     if isinstance(name_or_path, str) and name_or_path in BUILTIN:
         return build(name_or_path, light)
+    if not isinstance(name_or_path, (str, os.PathLike)):
+        raise SceneError(f"scene must be a name or a file path, got {type(name_or_path).__name__}; {_choices()}")
+    if not str(name_or_path).strip():
+        raise SceneError(f"scene is empty; {_choices()}")
     path = Path(name_or_path)
     suffix = path.suffix.lower()
     if suffix == ".toml":

@@ -224,7 +224,7 @@ class Camera:
             raise SceneError("camera: eye and target coincide")
         fwd = (self.target - self.eye) / np.linalg.norm(self.target - self.eye)
         if np.linalg.norm(np.cross(fwd, self.up)) < 1e-9:
-            raise SceneError("camera: up is parallel to the view direction")
+            raise SceneError(f"camera: up {self.up.tolist()} is zero or parallel to the view direction")
         if (why := fov_y_problem(fov_y)) is not None:
             raise SceneError(f"camera.fov_y must be {why}, got {fov_y!r}")
         self.fov_y = float(fov_y)
