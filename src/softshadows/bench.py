@@ -35,13 +35,14 @@ Atty et al. 2006) against the parameter:
 
 from __future__ import annotations
 
-import json
 import sys
 
 import numpy as np
 
+from .api import check_seed, check_size
 from .compare import REFERENCE, jsonable, load, parse_method_sets, parse_size, resolve_methods
 from .errors import SoftShadowsError
+from .io import IMAGE_EXTS, JSON_EXTS, check_outputs, write_json
 
 SHARED_PHASES = ("eye_gbuffer", "shading")
 SWEEP_KINDS = ("light-size", "occluder-height", "resolution", "map-size", "triangles")
@@ -78,6 +79,7 @@ def _sizes(sizes) -> list[tuple[int, int]]:
             w, h = int(s[0]), int(s[1])
         else:
             w, h = parse_size(str(s).strip())
+        check_size(w, h)  # every size (and its memory estimate) checked before the first frame
         out.append((w, h))
     if not out:
         raise SoftShadowsError("--sizes is empty; give e.g. 256,512,1024 or 640x480")
@@ -384,11 +386,16 @@ def _float_list(text, what) -> list[float]:
 
 def _cmd_bench(args) -> int:
     sets = parse_method_sets(args.set)
+    check_seed(args.seed)
     if args.sweep:
         values = _float_list(args.values, "--values") if args.values else None
         if values is not None and args.sweep in ("resolution", "map-size"):
             values = [int(v) for v in values]
         out_png = args.out or f"sweep-{args.sweep}.png"
+        check_outputs([("--out", out_png, IMAGE_EXTS), ("--json", args.json, JSON_EXTS)])
+    else:
+        check_outputs([("--json", args.json, JSON_EXTS)])
+    if args.sweep:
         methods = args.methods if args.methods != "all" else "all"
         data = sweep(
             args.scene,
@@ -412,8 +419,7 @@ def _cmd_bench(args) -> int:
         for n in data["notes"]:
             print(n)
         if args.json:
-            with open(args.json, "w") as fh:
-                json.dump(jsonable(data), fh, indent=2)
+            write_json(args.json, jsonable(data))
             print(f"wrote {args.json}")
         print(f"plot: {out_png}")
         return 0
@@ -430,8 +436,7 @@ def _cmd_bench(args) -> int:
     )
     print(format_table(res))
     if args.json:
-        with open(args.json, "w") as fh:
-            json.dump(jsonable(res), fh, indent=2)
+        write_json(args.json, jsonable(res))
         print(f"wrote {args.json}")
     return 0
 

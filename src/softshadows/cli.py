@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import argparse
 import importlib
-import os
 import sys
 import warnings
 
@@ -54,28 +53,32 @@ def _cmd_render(args) -> int:
     import numpy as np
 
     from . import load_scene, render
-    from .shading import save_exr, save_png
+    from .api import check_seed
+    from .io import EXR_EXTS, IMAGE_EXTS, OutputGroup, check_outputs
+    from .shading import save_exr, save_png, visibility_to_rgb
 
     w, h = parse_size(args.size)
     params = parse_sets(args.set)
+    seed = check_seed(args.seed)
     scene = load_scene(args.scene, light=args.light)
+    out = args.output or f"{scene.name}-{args.method}.png"
+    # every output checked before rendering; all written together (temp files renamed at the end)
+    check_outputs(
+        [("-o/--output", out, IMAGE_EXTS), ("--exr", args.exr, EXR_EXTS), ("--v-png", args.v_png, IMAGE_EXTS)]
+    )
     method = args.method
     if method == "auto":  # the least-error setting within --budget-ms on this machine (softshadows.pareto)
         method, params = _auto_method(scene, w, h, args.budget_ms, params, quiet=args.quiet)
     elif args.budget_ms is not None:
         raise SoftShadowsError("--budget-ms applies to --method auto only")
-    res = render(scene, method, w, h, seed=args.seed, progress=not args.quiet, **params)
-    out = args.output or f"{scene.name}-{args.method}.png"
-    os.makedirs(os.path.dirname(os.path.abspath(out)), exist_ok=True)
-    save_png(out, res.image)
-    if args.exr:
-        save_exr(
-            args.exr, {"V": res.visibility, "R": res.image[..., 0], "G": res.image[..., 1], "B": res.image[..., 2]}
-        )
-    if args.v_png:
-        from .shading import visibility_to_rgb
-
-        save_png(args.v_png, visibility_to_rgb(res.visibility))
+    res = render(scene, method, w, h, seed=seed, progress=not args.quiet, **params)
+    with OutputGroup() as g:
+        save_png(g.path(out), res.image)
+        if args.exr:
+            chans = {"V": res.visibility, "R": res.image[..., 0], "G": res.image[..., 1], "B": res.image[..., 2]}
+            save_exr(g.path(args.exr), chans)
+        if args.v_png:
+            save_png(g.path(args.v_png), visibility_to_rgb(res.visibility))
     if not args.quiet:
         vmask = ~np.isnan(res.visibility)
         ms = "  ".join(f"{k}={v * 1e3:.1f}ms" for k, v in res.timings.items())
@@ -140,7 +143,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--size", default="512x512", help="WxH")
     r.add_argument("--light", choices=("rect", "sphere"), default=None, help="swap in this light shape")
     r.add_argument("--set", action="append", metavar="KEY=VALUE", help="method parameter (repeatable)")
-    r.add_argument("--seed", type=int, default=0)
+    r.add_argument("--seed", type=int, default=0, help="random seed, an integer in [0, 2**63-1]")
     r.add_argument("-o", "--output", help="PNG path (default SCENE-METHOD.png)")
     r.add_argument("--exr", help="also write V and the linear image to this OpenEXR file")
     r.add_argument("--v-png", dest="v_png", help="also write V as a grey PNG")
@@ -180,7 +183,7 @@ def main(argv=None) -> int:
         ap.print_help()
         return 2
     with warnings.catch_warnings():
-        warnings.simplefilter("always")
+        warnings.simplefilter("default")  # each distinct warning once
         warnings.showwarning = lambda msg, cat, fn, ln, file=None, line=None: print(
             f"softshadows: warning: {msg}", file=sys.stderr
         )
@@ -191,6 +194,13 @@ def main(argv=None) -> int:
             return 2
         except FileNotFoundError as exc:
             print(f"softshadows: error: {exc.filename or exc}: file not found", file=sys.stderr)
+            return 2
+        except OSError as exc:
+            where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
+            print(f"softshadows: error: {where}{exc.strerror or ' '.join(str(exc).split())}", file=sys.stderr)
+            return 2
+        except MemoryError:
+            print("softshadows: error: out of memory; use a smaller --size", file=sys.stderr)
             return 2
         except KeyboardInterrupt:
             print("softshadows: interrupted", file=sys.stderr)

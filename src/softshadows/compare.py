@@ -21,7 +21,6 @@ a method that fails at run time is reported (note + stderr) and the others still
 
 from __future__ import annotations
 
-import json
 import math
 import os
 import sys
@@ -31,6 +30,7 @@ import traceback
 import numpy as np
 
 from .errors import SoftShadowsError
+from .io import check_folder, write_bytes, write_json
 
 DEFAULT_SCENE = "bunny"
 DEFAULT_SIZE = (320, 240)
@@ -173,8 +173,7 @@ def _png_bytes(rgb8: np.ndarray) -> bytes:
 
 
 def _write(path, data: bytes) -> None:
-    with open(path, "wb") as fh:
-        fh.write(data)
+    write_bytes(path, data)
 
 
 # ---- the comparison ---------------------------------------------------------------------------
@@ -223,7 +222,7 @@ def compare(
         if m == REFERENCE:
             given.setdefault("samples", gt_samples)
         resolved[m] = get_method(m).resolve_params(given)
-    os.makedirs(out_dir, exist_ok=True)
+    check_folder(out_dir, "output folder (compare -o)")  # before the long renders; created when written
 
     def say(msg):
         if verbose:
@@ -333,8 +332,7 @@ def compare(
         "seed": seed,
     }
     mpath = out("metrics.json")
-    with open(mpath, "w") as fh:
-        json.dump(jsonable(doc), fh, indent=2)
+    write_json(mpath, jsonable(doc))
     ctx = {
         "title": f"softshadows: {sc.name} ({sc.light.shape} light), {len(entries)} method(s) vs ground truth",
         "scene": info,

@@ -126,7 +126,12 @@ def to_srgb8(img: np.ndarray) -> np.ndarray:
 
 
 def save_png(path, img: np.ndarray) -> None:
-    Image.fromarray(to_srgb8(img)).save(str(path))
+    """Write a linear image as an sRGB PNG, atomically (:func:`softshadows.io.atomic_path`)."""
+    from .io import atomic_path
+
+    data = Image.fromarray(to_srgb8(img))
+    with atomic_path(path) as tmp:
+        data.save(str(tmp), format="PNG")
 
 
 def visibility_to_rgb(v: np.ndarray) -> np.ndarray:
@@ -139,12 +144,18 @@ def visibility_to_rgb(v: np.ndarray) -> np.ndarray:
 
 
 def save_exr(path, channels: dict[str, np.ndarray]) -> None:
-    """Write float32 channels (each (H,W)) to an OpenEXR file."""
+    """Write float32 channels (each (H,W)) to an OpenEXR file, atomically."""
     import OpenEXR
 
+    from .io import atomic_path
+
     chans = {k: np.ascontiguousarray(v.astype(np.float32)) for k, v in channels.items()}
-    with OpenEXR.File({"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}, chans) as f:
-        f.write(str(path))
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    with atomic_path(path) as tmp, OpenEXR.File(header, chans) as f:
+        try:
+            f.write(str(tmp))
+        except RuntimeError as exc:  # the OpenEXR binding reports I/O failures as RuntimeError
+            raise OSError(" ".join(str(exc).split())) from None
 
 
 def load_exr(path) -> dict[str, np.ndarray]:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib
+import threading
 
 from .base import FrameContext, Method, MethodOutput, Param, get_method, methods, register
 
@@ -16,19 +17,25 @@ _MODULES = [
     "occlusion_textures",
 ]
 _loaded = False
+_load_lock = threading.RLock()
 
 
 def _load_all() -> None:
+    """Import every method module once; thread-safe (a second thread waits for the first one
+    instead of seeing a half-filled registry)."""
     global _loaded
     if _loaded:
         return
-    _loaded = True
-    for m in _MODULES:
-        try:
-            importlib.import_module(f"{__name__}.{m}")
-        except ModuleNotFoundError as exc:
-            if exc.name != f"{__name__}.{m}":
-                raise
+    with _load_lock:
+        if _loaded:
+            return
+        for m in _MODULES:
+            try:
+                importlib.import_module(f"{__name__}.{m}")
+            except ModuleNotFoundError as exc:
+                if exc.name != f"{__name__}.{m}":
+                    raise
+        _loaded = True
 
 
 __all__ = ["FrameContext", "Method", "MethodOutput", "Param", "get_method", "methods", "register"]

@@ -39,6 +39,8 @@ class Param:
         """Convert a value (possibly a string from the CLI) and validate it."""
         t = self.type
         try:
+            if isinstance(value, (bool, np.bool_)) and t is not bool:  # True is not a size or a count
+                raise ValueError(value)
             if isinstance(value, str) and t is bool:
                 low = value.strip().lower()
                 if low in ("1", "true", "yes", "on"):
@@ -164,6 +166,11 @@ class Method:
     #: combination) or a list of ``{param: value}`` settings; parameters not named keep their
     #: defaults. ``None``: the defaults only. Declared beside ``params`` in each method's class.
     sweep: dict | list | None = None
+    #: renders the occluders into map(s) from the light's centre (or the light plane): cannot cover
+    #: occluders around or touching the light (render() warns; softshadows.limits)
+    light_view: bool = False
+    #: shadows receiver faces only (V = 1 without receivers; render() warns)
+    receivers_only: bool = False
 
     def run(self, ctx: FrameContext, **params) -> MethodOutput:  # pragma: no cover - abstract
         raise NotImplementedError

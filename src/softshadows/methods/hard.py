@@ -22,6 +22,7 @@ class Hard(Method):
     light_shapes = ("rect", "sphere")
     summary = "shadow map from the light center (+ optional PCF): hard shadows, the baseline"
     paper = "Williams 1978"
+    light_view = True  # maps from the light's centre (limits: softshadows.limits)
     params = (
         Param("map_size", 1024, "shadow map resolution (square)", min=16, max=16384),
         Param("bias", 1.0, "constant depth bias, in texels at the receiver", min=0.0),

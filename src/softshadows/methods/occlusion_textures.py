@@ -833,6 +833,7 @@ class OcclusionTextures(Method):
         "(mipmap / N-Buffers / SAT), box-filtered per slice (Eq. 4) and combined as a product (Eq. 5)"
     )
     paper = "eisemann2006-occlusion-textures"
+    light_view = True  # maps from the light's centre (limits: softshadows.limits)
     params = (
         Param("slices", 16, "number of slices parallel to the light (paper: 4-16)", min=1, max=64),
         Param("texture_size", 512, "occlusion texture resolution (square, power of two)", choices=TEXTURE_SIZES),

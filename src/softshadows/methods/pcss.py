@@ -417,6 +417,7 @@ class PCSS(Method):
     light_shapes = ("rect", "sphere")
     summary = "percentage-closer soft shadows: blocker search, penumbra estimate, variable-size PCF"
     paper = "Fernando 2005, Percentage-Closer Soft Shadows (SIGGRAPH sketch)"
+    light_view = True  # maps from the light's centre (limits: softshadows.limits)
     params = (
         Param("map_size", 1024, "shadow map resolution (square)", min=16, max=16384),
         Param("search_samples", 16, "blocker-search taps", min=1, max=1024),

@@ -1077,6 +1077,7 @@ class PenumbraMapMethod(Method):
         "shadow map + penumbra map of cones and sheets at the silhouettes from the light center: outer penumbra only"
     )
     paper = "Wyman & Hansen 2003, Penumbra Maps: Approximate Soft Shadows in Real-Time"
+    light_view = True  # maps from the light's centre (limits: softshadows.limits)
     params = (
         Param(
             "map_size",

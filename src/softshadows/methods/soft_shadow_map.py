@@ -607,6 +607,8 @@ class SoftShadowMapMethod(Method):
     light_shapes = ("rect",)
     summary = "soft shadow maps: occluder-map pixels as micro-patches, occlusion summed in a projective map"
     paper = "Atty et al. 2006, Soft Shadow Maps: Efficient Sampling of Light Source Visibility"
+    light_view = True  # maps from the light's centre (limits: softshadows.limits)
+    receivers_only = True  # only receiver faces are shadowed
     params = (
         Param("map_size", 256, "occluder map resolution N (N x N, light's aspect ratio)", min=8, max=4096),
         Param("ssm_size", 256, "soft shadow map resolution (N x N texels)", min=8, max=4096),

@@ -171,7 +171,13 @@ def light_frame(light, toward=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]
         r = _unit(light.u - np.dot(light.u, f) * f)
         u = np.cross(f, r)
         return r, u, f
-    f = _unit(np.asarray(toward, float) - light.center) if toward is not None else np.array([0.0, -1.0, 0.0])
+    d = np.asarray(toward, float) - light.center if toward is not None else np.zeros(3)
+    # toward the light's own centre (e.g. a light at the occluders' centre) has no direction: look down
+    f = (
+        _unit(d)
+        if np.linalg.norm(d) > 1e-12 * max(1.0, float(np.abs(light.center).max()))
+        else np.array([0.0, -1.0, 0.0])
+    )
     a = np.array([0.0, 0.0, 1.0]) if abs(f[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
     r = _unit(np.cross(a, f))
     u = np.cross(f, r)

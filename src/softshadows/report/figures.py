@@ -11,6 +11,8 @@ import io
 
 import numpy as np
 
+from ..io import write_bytes
+
 CMAP = "RdBu"
 BACKGROUND = (0.82, 0.82, 0.82)
 
@@ -76,8 +78,7 @@ def error_heatmap(err: np.ndarray, limit: float, path=None, title: str | None = 
     cb.set_label("V - V_ref\nred: darker than truth\nblue: brighter", fontsize=7)
     data = _fig_png(fig, dpi)
     if path is not None:
-        with open(path, "wb") as fh_:
-            fh_.write(data)
+        write_bytes(path, data)
     return data
 
 
@@ -146,8 +147,7 @@ def grid_image(rows: list[dict], limit: float, path=None, title: str | None = No
         cb.ax.tick_params(labelsize=7)
     data = _fig_png(fig, 100)
     if path is not None:
-        with open(path, "wb") as fh:
-            fh.write(data)
+        write_bytes(path, data)
     return data
 
 
@@ -182,6 +182,5 @@ def sweep_plot(data: dict, path=None, error_key: str = "ssm_error") -> bytes:
     fig.tight_layout()
     out = _fig_png(fig, 110)
     if path is not None:
-        with open(path, "wb") as fh:
-            fh.write(out)
+        write_bytes(path, out)
     return out

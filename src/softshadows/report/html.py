@@ -326,7 +326,6 @@ def render_html(ctx: dict) -> str:
 
 
 def write_html(path, ctx: dict) -> str:
-    text = render_html(ctx)
-    with open(path, "w", encoding="utf-8") as fh:
-        fh.write(text)
-    return str(path)
+    from ..io import write_text
+
+    return write_text(path, render_html(ctx))

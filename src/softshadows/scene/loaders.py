@@ -71,7 +71,9 @@ Unknown keys are errors (a typo should not be silently ignored).
 
 from __future__ import annotations
 
+import io
 import math
+import os
 import tomllib
 from pathlib import Path
 
@@ -80,7 +82,7 @@ import numpy as np
 from ..errors import SceneError
 from . import primitives as prim
 from .builtin import BUILTIN, build, frame_camera, shadow_footprint, with_light_shape
-from .types import ROLES, Camera, Mesh, RectLight, Scene, SphereLight
+from .types import ROLES, Camera, Mesh, RectLight, Scene, SphereLight, fov_y_problem
 
 __all__ = ["MESH_EXTENSIONS", "load_scene", "load_toml", "read_mesh_file", "scene_from_mesh"]
 
@@ -124,6 +126,10 @@ def load_scene(name_or_path, light: str | None = None) -> Scene:
         raise SceneError(f"light must be 'rect' or 'sphere', got {light!r}")
     if isinstance(name_or_path, str) and name_or_path in BUILTIN:
         return build(name_or_path, light)
+    if not isinstance(name_or_path, (str, os.PathLike)):
+        raise SceneError(f"scene must be a name or a file path, got {type(name_or_path).__name__}; {_choices()}")
+    if not str(name_or_path).strip():
+        raise SceneError(f"scene is empty; {_choices()}")
     path = Path(name_or_path)
     suffix = path.suffix.lower()
     if suffix == ".toml":
@@ -149,7 +155,19 @@ def read_mesh_file(path, label: str | None = None) -> tuple[np.ndarray, np.ndarr
     if not path.is_file():
         raise SceneError(f"{label}: file not found")
     try:
-        obj = trimesh.load(str(path), process=False)
+        if path.suffix.lower() == ".gltf":
+            _check_gltf_buffers(path, label)
+        if path.suffix.lower() == ".obj":  # text: decoded here (UTF-8, else Latin-1), MTL files too
+            obj = trimesh.load(
+                io.BytesIO(_utf8(path.read_bytes())),
+                file_type="obj",
+                resolver=_text_resolver(path.parent),
+                process=False,
+            )
+        else:
+            obj = trimesh.load(str(path), process=False)
+    except SceneError:
+        raise
     except Exception as exc:
         raise SceneError(f"{label}: cannot read mesh: {_one_line(exc) or type(exc).__name__}") from None
     parts = []
@@ -173,6 +191,46 @@ def read_mesh_file(path, label: str | None = None) -> tuple[np.ndarray, np.ndarr
         bad = int(np.argmin(finite))
         raise SceneError(f"{label}: vertex {bad} is not finite ({v[bad].tolist()})")
     return v, f
+
+
+def _utf8(data: bytes) -> bytes:
+    """Text bytes as UTF-8: kept when they are UTF-8 (a BOM dropped), else read as Latin-1 (every
+    byte is a character: comments and names in legacy encodings load instead of failing)."""
+    if data.startswith(b"\xef\xbb\xbf"):
+        data = data[3:]
+    try:
+        data.decode("utf-8")
+        return data
+    except UnicodeDecodeError:
+        return data.decode("latin-1").encode("utf-8")
+
+
+def _text_resolver(folder: Path):
+    """A trimesh resolver for an OBJ's side files that re-encodes text ones (.mtl) as UTF-8."""
+    from trimesh.resolvers import FilePathResolver
+
+    class _Resolver(FilePathResolver):
+        def get(self, name):
+            data = super().get(name)
+            return _utf8(data) if str(name).lower().endswith(".mtl") and isinstance(data, bytes) else data
+
+    return _Resolver(str(folder))
+
+
+def _check_gltf_buffers(path: Path, label: str) -> None:
+    """A .gltf's external buffers must exist: name the missing one (trimesh's message does not)."""
+    import json
+    from urllib.parse import unquote
+
+    try:
+        doc = json.loads(_utf8(path.read_bytes()).decode("utf-8"))
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise SceneError(f"{label}: not a glTF JSON file: {_one_line(exc)}") from None
+    buffers = doc.get("buffers", []) if isinstance(doc, dict) else []
+    for i, b in enumerate(buffers if isinstance(buffers, list) else []):
+        uri = b.get("uri") if isinstance(b, dict) else None
+        if isinstance(uri, str) and not uri.startswith("data:") and not (path.parent / unquote(uri)).is_file():
+            raise SceneError(f"{label}: buffer {i} file '{uri}' not found (next to the .gltf)")
 
 
 def _auto_light(lo: np.ndarray, hi: np.ndarray) -> RectLight:
@@ -368,7 +426,7 @@ def _primitive(fl: _Fields, kind: str) -> tuple[np.ndarray, np.ndarray]:
         return prim.icosphere(fl.num("radius", 1.0, gt=0), center, fl.num("subdivisions", 3, integer=True, ge=0, le=6))
     if kind == "quad":
         u, v = fl.vec("u"), fl.vec("v")
-        if np.linalg.norm(np.cross(u, v)) <= 1e-12:
+        if np.linalg.norm(np.cross(u, v)) <= 1e-9 * np.linalg.norm(u) * np.linalg.norm(v):
             fl.fail(f"{fl.field('u')} x {fl.field('v')} must have non-zero area, got u={u.tolist()}, v={v.tolist()}")
         return prim.quad(center, u, v)
     # cylinder
@@ -428,7 +486,7 @@ def _light(file: str, table) -> RectLight | SphereLight:
         if kind == "sphere":
             return SphereLight(center, fl.num("radius", gt=0), intensity)
         u, v = fl.vec("u"), fl.vec("v")
-        if np.linalg.norm(np.cross(u, v)) <= 1e-12:
+        if np.linalg.norm(np.cross(u, v)) <= 1e-9 * np.linalg.norm(u) * np.linalg.norm(v):
             fl.fail(f"[light].u x [light].v must have non-zero area, got u={u.tolist()}, v={v.tolist()}")
         return RectLight(center, u, v, intensity)
     except SceneError as exc:
@@ -441,7 +499,9 @@ def _camera(file: str, table) -> Camera:
     fl = _Fields(file, table, "[camera]", _CAMERA_KEYS)
     eye, target = fl.vec("eye"), fl.vec("target")
     up = fl.vec("up", default=[0.0, 1.0, 0.0])
-    fov = fl.num("fov_y", 45.0, gt=0, le=179)
+    fov = fl.num("fov_y", 45.0)
+    if (why := fov_y_problem(fov)) is not None:  # the one rule, shared with Camera
+        fl.fail(f"{fl.field('fov_y')} must be {why}, got {fov!r}")
     try:
         return Camera(eye, target, up, fov)
     except SceneError as exc:
@@ -455,12 +515,16 @@ def load_toml(path) -> Scene:
     if not path.is_file():
         raise SceneError(f"{file}: file not found")
     try:
-        with open(path, "rb") as fh:
-            doc = tomllib.load(fh)
+        raw = path.read_bytes()
+        if raw.startswith(b"\xef\xbb\xbf"):  # a UTF-8 byte-order mark (Windows editors): accepted
+            raw = raw[3:]
+        doc = tomllib.loads(raw.decode("utf-8"))
     except tomllib.TOMLDecodeError as exc:
         raise SceneError(f"{file}: malformed TOML: {_one_line(exc)}") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise SceneError(f"{file}: cannot read: {_one_line(exc)}") from None
+    except UnicodeDecodeError as exc:
+        raise SceneError(f"{file}: not UTF-8 text (TOML files are UTF-8): byte {exc.start}") from None
+    except OSError as exc:
+        raise SceneError(f"{file}: cannot read: {exc.strerror or _one_line(exc)}") from None
     top = _Fields(file, doc, "top level", _TOP_KEYS, sep=": ")
     name = top.string("name", path.stem)
     entries = doc.get("mesh")

@@ -15,11 +15,40 @@ from ..errors import SceneError
 ROLES = ("both", "occluder", "receiver")
 
 
+#: the one rule for a camera's vertical field of view (degrees), shared by Camera and the loader
+FOV_Y_RANGE = (0.0, 179.0)
+
+
+def fov_y_problem(fov) -> str | None:
+    """None when ``fov`` is a valid ``fov_y``, else what is expected (one rule, open interval)."""
+    lo, hi = FOV_Y_RANGE
+    if not _is_number(fov) or not (lo < float(fov) < hi):
+        return f"a number of degrees in ({lo:g}, {hi:g})"
+    return None
+
+
+def _is_number(x) -> bool:
+    return isinstance(x, (int, float, np.integer, np.floating)) and not isinstance(x, (bool, np.bool_))
+
+
+def _number(x, what: str, *, gt=None, ge=None) -> float:
+    """A finite real number (not a bool or a string), else SceneError naming ``what``."""
+    if not _is_number(x) or not np.isfinite(x):
+        raise SceneError(f"{what} must be a finite number, got {x!r}")
+    if gt is not None and not x > gt:
+        raise SceneError(f"{what} must be > {gt}, got {x!r}")
+    if ge is not None and not x >= ge:
+        raise SceneError(f"{what} must be >= {ge}, got {x!r}")
+    return float(x)
+
+
 def _vec3(x, what: str) -> np.ndarray:
+    if isinstance(x, (str, bytes, bool, np.bool_)):
+        raise SceneError(f"{what}: expected 3 numbers, got {x!r}")
     try:
         a = np.asarray(x, dtype=np.float64).reshape(3)
-    except Exception as exc:
-        raise SceneError(f"{what}: expected 3 numbers, got {x!r}") from exc
+    except Exception:
+        raise SceneError(f"{what}: expected 3 numbers, got {x!r}") from None
     if not np.all(np.isfinite(a)):
         raise SceneError(f"{what}: non-finite value {a.tolist()}")
     return a
@@ -33,8 +62,18 @@ class Mesh:
     """
 
     def __init__(self, vertices, faces, albedo=(0.8, 0.8, 0.8), role: str = "both", name: str = "mesh"):
-        v = np.asarray(vertices, dtype=np.float64)
-        f = np.asarray(faces)
+        if not isinstance(name, str):
+            raise SceneError(f"mesh name must be a string, got {name!r}")
+        try:
+            v = np.asarray(vertices, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise SceneError(f"mesh '{name}': vertices must be numbers of shape (N,3)") from None
+        try:
+            f = np.asarray(faces)
+        except (TypeError, ValueError):
+            raise SceneError(f"mesh '{name}': faces must be integers of shape (M,3)") from None
+        if f.dtype.kind not in "iuf" and f.size:
+            raise SceneError(f"mesh '{name}': faces must be integers of shape (M,3), got dtype {f.dtype}")
         if v.ndim != 2 or v.shape[1] != 3:
             raise SceneError(f"mesh '{name}': vertices must have shape (N,3), got {v.shape}")
         if f.ndim != 2 or f.shape[1] != 3:
@@ -47,9 +86,14 @@ class Mesh:
         f = f.astype(np.int64)
         if f.size and (f.min() < 0 or f.max() >= len(v)):
             raise SceneError(f"mesh '{name}': face index out of range [0, {len(v)})")
-        if role not in ROLES:
+        if not isinstance(role, str) or role not in ROLES:
             raise SceneError(f"mesh '{name}': role must be one of {', '.join(ROLES)}, got '{role}'")
-        alb = np.asarray(albedo, dtype=np.float64).reshape(-1)
+        try:
+            if isinstance(albedo, (str, bytes)):
+                raise TypeError
+            alb = np.asarray(albedo, dtype=np.float64).reshape(-1)
+        except (TypeError, ValueError):
+            raise SceneError(f"mesh '{name}': albedo must be 3 non-negative numbers, got {albedo!r}") from None
         if alb.size == 1:
             alb = np.repeat(alb, 3)
         if alb.size != 3 or not np.all(np.isfinite(alb)) or alb.min() < 0:
@@ -91,11 +135,11 @@ class RectLight:
         self.u = _vec3(u, "light.u")
         self.v = _vec3(v, "light.v")
         n = np.cross(self.u, self.v)
-        if np.linalg.norm(n) < 1e-12 or np.linalg.norm(self.u) < 1e-9 or np.linalg.norm(self.v) < 1e-9:
+        lu, lv = np.linalg.norm(self.u), np.linalg.norm(self.v)
+        # relative test (u, v parallel or zero), so that lights of any scale are accepted
+        if not (lu > 0 and lv > 0) or np.linalg.norm(n) <= 1e-9 * lu * lv:
             raise SceneError(f"light: rectangle has zero area (u={self.u.tolist()}, v={self.v.tolist()})")
-        if not np.isfinite(intensity) or intensity < 0:
-            raise SceneError(f"light.intensity must be finite and >= 0, got {intensity}")
-        self.intensity = float(intensity)
+        self.intensity = _number(intensity, "light.intensity", ge=0)
 
     @property
     def normal(self) -> np.ndarray:
@@ -130,12 +174,8 @@ class SphereLight:
 
     def __init__(self, center, radius: float, intensity: float = 1.0):
         self.center = _vec3(center, "light.center")
-        if not np.isfinite(radius) or radius <= 0:
-            raise SceneError(f"light.radius must be > 0, got {radius}")
-        if not np.isfinite(intensity) or intensity < 0:
-            raise SceneError(f"light.intensity must be finite and >= 0, got {intensity}")
-        self.radius = float(radius)
-        self.intensity = float(intensity)
+        self.radius = _number(radius, "light.radius", gt=0)
+        self.intensity = _number(intensity, "light.intensity", ge=0)
 
     @property
     def area(self) -> float:
@@ -184,9 +224,9 @@ class Camera:
             raise SceneError("camera: eye and target coincide")
         fwd = (self.target - self.eye) / np.linalg.norm(self.target - self.eye)
         if np.linalg.norm(np.cross(fwd, self.up)) < 1e-9:
-            raise SceneError("camera: up is parallel to the view direction")
-        if not (0.0 < fov_y < 179.0):
-            raise SceneError(f"camera.fov_y must be in (0, 179) degrees, got {fov_y}")
+            raise SceneError(f"camera: up {self.up.tolist()} is zero or parallel to the view direction")
+        if (why := fov_y_problem(fov_y)) is not None:
+            raise SceneError(f"camera.fov_y must be {why}, got {fov_y!r}")
         self.fov_y = float(fov_y)
 
     def __repr__(self) -> str:
@@ -228,12 +268,27 @@ class Scene:
     camera: Camera
     name: str = "scene"
     _flat: FlatGeometry | None = field(default=None, repr=False, compare=False)
+    _norm: tuple | None = field(default=None, repr=False, compare=False)
 
     def __post_init__(self):
+        if not isinstance(self.name, str):
+            raise SceneError(f"scene name must be a string, got {self.name!r}")
+        if isinstance(self.meshes, Mesh):
+            self.meshes = [self.meshes]
+        if not isinstance(self.meshes, (list, tuple)):
+            raise SceneError(f"scene '{self.name}': meshes must be a list of Mesh, got {type(self.meshes).__name__}")
+        self.meshes = list(self.meshes)
         if not self.meshes:
             raise SceneError(f"scene '{self.name}': no meshes")
+        for i, m in enumerate(self.meshes):
+            if not isinstance(m, Mesh):
+                raise SceneError(f"scene '{self.name}': meshes[{i}] must be a Mesh, got {type(m).__name__}")
         if not isinstance(self.light, (RectLight, SphereLight)):
-            raise SceneError(f"scene '{self.name}': light must be a RectLight or SphereLight")
+            raise SceneError(
+                f"scene '{self.name}': light must be a RectLight or SphereLight, got {type(self.light).__name__}"
+            )
+        if not isinstance(self.camera, Camera):
+            raise SceneError(f"scene '{self.name}': camera must be a Camera, got {type(self.camera).__name__}")
 
     @property
     def flat(self) -> FlatGeometry:
@@ -267,11 +322,77 @@ class Scene:
         v = self.flat.vertices
         return v.min(axis=0), v.max(axis=0)
 
+    def normalized(self) -> tuple[Scene, np.ndarray, float]:
+        """``(scene', shift, scale)`` with ``scene' = (scene - shift) * scale`` (a similarity, so V is
+        the same): what every kernel and Embree receive (:func:`softshadows.render`).
+
+        Kernels and Embree work partly in float32. A scene far from the origin (georeferenced,
+        e.g. 1e6..1e8 units away with metre-sized objects) loses its detail in float32, and one of
+        tiny or huge extent meets absolute epsilons (near planes, degeneracy tests). So, in float64:
+        when the meshes' bounding-box centre is more than ``RECENTRE_AT`` x their extent E from the
+        origin, shift = that centre (else 0); when E is outside ``RESCALE_OUTSIDE``,
+        scale = 2**-round(log2 E) (exact in binary; else 1). Scenes near the origin with an extent
+        of 1e-2..1e4 units (all built-in scenes) are returned as they are (same object)."""
+        # a light or camera assigned after the first call is seen (compared by identity)
+        if self._norm is None or self._norm[3][0] is not self.light or self._norm[3][1] is not self.camera:
+            key = (self.light, self.camera)
+            v = self.flat.vertices
+            lo, hi = v.min(axis=0), v.max(axis=0)
+            ext = float(np.max(hi - lo))
+            c = (lo + hi) / 2
+            shift = c if float(np.max(np.abs(c))) > RECENTRE_AT * max(ext, 1e-300) else np.zeros(3)
+            scale = 1.0
+            if ext > 0 and not (RESCALE_OUTSIDE[0] <= ext <= RESCALE_OUTSIDE[1]):
+                scale = float(2.0 ** -round(np.log2(ext)))
+            if not shift.any() and scale == 1.0:
+                self._norm = (self, np.zeros(3), 1.0, key)
+            else:
+                self._norm = (_similar_scene(self, shift, scale), shift, scale, key)
+        return self._norm[:3]
+
     def with_light(self, light) -> Scene:
         return Scene(self.meshes, light, self.camera, self.name)
 
     def with_camera(self, camera) -> Scene:
         return Scene(self.meshes, self.light, camera, self.name)
+
+
+#: recentre a scene whose bounding-box centre is further than this x its extent from the origin
+RECENTRE_AT = 16.0
+#: rescale a scene whose extent (largest bounding-box side) is outside this range
+RESCALE_OUTSIDE = (1e-2, 1e4)
+
+
+def _similar_scene(scene: Scene, shift: np.ndarray, scale: float) -> Scene:
+    """``(scene - shift) * scale`` in float64 (already validated input: no re-validation)."""
+
+    def pt(p):
+        return (np.asarray(p, np.float64) - shift) * scale
+
+    meshes = []
+    for m in scene.meshes:
+        mm = object.__new__(Mesh)
+        mm.vertices = np.ascontiguousarray(pt(m.vertices))
+        mm.faces, mm.albedo, mm.role, mm.name = m.faces, m.albedo, m.role, m.name
+        meshes.append(mm)
+    light = scene.light
+    if light.shape == "rect":
+        lt = object.__new__(RectLight)
+        lt.center, lt.u, lt.v = pt(light.center), light.u * scale, light.v * scale
+    else:
+        lt = object.__new__(SphereLight)
+        lt.center, lt.radius = pt(light.center), light.radius * scale
+    lt.intensity = light.intensity
+    cam = object.__new__(Camera)
+    cam.eye, cam.target, cam.up, cam.fov_y = (
+        pt(scene.camera.eye),
+        pt(scene.camera.target),
+        scene.camera.up,
+        scene.camera.fov_y,
+    )
+    out = Scene(meshes, lt, cam, scene.name)
+    out._norm = (out, np.zeros(3), 1.0, (lt, cam))
+    return out
 
 
 def warn(msg: str) -> None:
