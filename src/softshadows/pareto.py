@@ -100,13 +100,11 @@ def describe(p: dict) -> str:
 
 # ---- writing ----------------------------------------------------------------------------------
 def atomic_write(path, data) -> None:
-    """Write ``data`` (str or bytes) to ``path`` through a temporary file and a rename: a reader (or an
-    interrupted run) sees the old file or the new one, never half of one."""
-    path = os.fspath(path)
-    tmp = f"{path}.tmp{os.getpid()}"
-    with open(tmp, "wb") as fh:
-        fh.write(data.encode("utf-8") if isinstance(data, str) else data)
-    os.replace(tmp, path)
+    """Write ``data`` (str or bytes) atomically (softshadows.io: temp file beside it, renamed): a
+    reader or an interrupted run sees the old file or the new one, never half of one."""
+    from .io import write_bytes, write_text
+
+    (write_text if isinstance(data, str) else write_bytes)(path, data)
 
 
 def plot_png(doc: dict) -> bytes:
