@@ -158,12 +158,16 @@ def sample_view(view: View, point) -> View:
 
 
 # ---- line 3: render from the sample ----------------------------------------------------------
-def render_sample_depth(scene, view: View) -> tuple[np.ndarray, np.ndarray | None]:
+def render_sample_depth(scene, view: View, one_pass: bool) -> tuple[np.ndarray, np.ndarray | None]:
     """Line 3 (Render(SCENE)): depth images from a light sample with the shared rasterizer:
     the nearest occluder (role both|occluder) and, when the scene has receiver-only faces, the
     nearest of them where it lies in front of that occluder (a receiver-only face casts no shadow,
-    so both are seen from the sample). +inf where none."""
+    so both are seen from the sample). +inf where none. With ``one_pass`` (every receiver-only
+    face is at least as deep as every occluder: :func:`receivers_behind`) one depth image of all
+    faces is the same thing."""
     flat = scene.flat
+    if one_pass:
+        return rasterize_depth(view, flat.vertices, flat.faces)[0], None
     occ_faces, rec_faces = _role_faces(flat)
     d_occ = rasterize_depth(view, flat.vertices, occ_faces)[0] if len(occ_faces) else None
     d_rec = rasterize_depth(view, flat.vertices, rec_faces)[0] if len(rec_faces) else None
@@ -172,6 +176,20 @@ def render_sample_depth(scene, view: View) -> tuple[np.ndarray, np.ndarray | Non
     if d_rec is not None:
         d_rec = np.where(d_rec < d_occ, d_rec, np.float32(np.inf))
     return d_occ, d_rec
+
+
+def receivers_behind(scene, view: View) -> bool:
+    """True when no receiver-only face can be in front of an occluder from any light sample: its
+    vertices' depths (along the light's normal, the same in every sample's view) are all >= the
+    occluders'. Then a single depth image of all faces is exact (the built-in scenes with a rect
+    light: the ground plane below everything, parallel to the light)."""
+    flat = scene.flat
+    occ_faces, rec_faces = _role_faces(flat)
+    if len(occ_faces) == 0 or len(rec_faces) == 0:
+        return True
+    z_occ = (flat.vertices[np.unique(occ_faces)] - view.origin) @ view.forward
+    z_rec = (flat.vertices[np.unique(rec_faces)] - view.origin) @ view.forward
+    return bool(z_rec.min() >= z_occ.max())
 
 
 def _role_faces(flat) -> tuple[np.ndarray, np.ndarray]:
@@ -422,11 +440,12 @@ def build_ldi(scene, params: dict, seed: int = 0) -> LayeredAttenuationMap:
     band = 16
     complexity = np.zeros(len(pts))
     total_layers = nonempty = dropped = 0
+    one_pass = receivers_behind(scene, view)
     steps["samples"] += time.perf_counter() - t
     for s, p in enumerate(pts):  # line 1
         vs = sample_view(view, p)  # line 2
         t = time.perf_counter()
-        d_occ, d_rec = render_sample_depth(scene, vs)  # line 3
+        d_occ, d_rec = render_sample_depth(scene, vs, one_pass)  # line 3
         steps["render_depth"] += time.perf_counter() - t
         t = time.perf_counter()
         planes = 1 if d_rec is None else 2
