@@ -49,7 +49,9 @@ PARAMS = (
         "depth tolerance (the paper's epsilon) for merging layers and for the lookup, in LDI texels at that depth",
         min=0.0,
     ),
-    Param("max_layers", 8, "layers stored per LDI pixel at most (further ones are dropped and counted)", min=1, max=64),
+    Param(
+        "max_layers", 16, "layers stored per LDI pixel at most (further ones are dropped and counted)", min=1, max=64
+    ),
     Param("splat", True, "2x2 splat of each warped pixel against holes (the paper's)"),
     Param(
         "warp",
