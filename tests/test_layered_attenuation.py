@@ -82,9 +82,9 @@ def test_square_depth_complexity():
     assert bad.sum() == 0, f"{bad.sum()} of {stable.sum()} pixels have the wrong number of layers"
     # umbra: the one layer is the occluder (depth 2), no ground layer (depth 3) at all
     d = ldi.depth
-    assert np.allclose(d[umbra, 0], SQUARE_LIGHT_Y - SQUARE_OCCLUDER_Y, atol=1e-3)
-    assert np.allclose(d[pen, 0], SQUARE_LIGHT_Y - SQUARE_OCCLUDER_Y, atol=1e-3)
-    assert np.allclose(d[pen, 1], SQUARE_LIGHT_Y, atol=1e-3)
+    assert np.allclose(d[0, umbra], SQUARE_LIGHT_Y - SQUARE_OCCLUDER_Y, atol=1e-3)
+    assert np.allclose(d[0, pen], SQUARE_LIGHT_Y - SQUARE_OCCLUDER_Y, atol=1e-3)
+    assert np.allclose(d[1, pen], SQUARE_LIGHT_Y, atol=1e-3)
     st = ldi.stats()
     assert st["ldi_max_layers"] == 2 and st["ldi_total_layers"] == int(n.sum())
     # the Fig. 10 curve: grows as samples see more of the occluder's penumbra, ends at the LDI's value
@@ -106,11 +106,11 @@ def test_counts_once_per_viewpoint():
     ag = np.abs(g)
     # penumbra ends at 1.0; the ground at 4.0 (its edge is seen from part of the light)
     far = (((ag[..., 0] > 1.3) | (ag[..., 2] > 1.3)) & (ag[..., 0] < 3.8) & (ag[..., 2] < 3.8)).reshape(-1)
-    far &= (ldi.nlayers == 1) & np.isfinite(ldi.depth[:, 0])
+    far &= (ldi.nlayers == 1) & np.isfinite(ldi.depth[0])
     assert far.sum() > 1000
-    assert np.all(ldi.count[far, 0] == 16)
+    assert np.all(ldi.count[0, far] == 16)
     inner = (np.abs(g[..., 0]) < 0.3 * 1.5) & (np.abs(g[..., 2]) < 0.3 * 1.5)  # occluder interior
-    assert np.all(ldi.count[inner.reshape(-1), 0] == 16)
+    assert np.all(ldi.count[0, inner.reshape(-1)] == 16)
 
 
 def test_projective_warp_matches_disparity():
@@ -119,9 +119,9 @@ def test_projective_warp_matches_disparity():
     sc = ss.load_scene("spheres")
     a = la.precompute(sc, warp="disparity", **SMALL)
     b = la.precompute(sc, warp="projective", **SMALL)
-    same = (a.nlayers == b.nlayers) & np.all(a.count == b.count, axis=1)
+    same = (a.nlayers == b.nlayers) & np.all(a.count == b.count, axis=0)
     assert same.mean() > 0.995, same.mean()
-    both = np.isfinite(a.depth) & np.isfinite(b.depth) & same[:, None]
+    both = np.isfinite(a.depth) & np.isfinite(b.depth) & same[None, :]
     assert np.abs(a.depth[both] - b.depth[both]).max() < 1e-3
 
 

@@ -75,13 +75,14 @@ class LayeredAttenuationMap:
     """The precomputed layered attenuation maps of one light + geometry + parameter set.
 
     Flat arrays over the ``H*W`` pixels of ``view`` (the view from the light's center), at most
-    ``max_layers`` layers per pixel, sorted front to back: ``depth[p, k]`` (view depth, float32),
-    ``count[p, k]`` (light samples that see it), ``nlayers[p]``. Attenuation = count / samples.
+    ``max_layers`` layers per pixel, sorted front to back, slot-major (layer k of all pixels is
+    contiguous): ``depth[k, p]`` (view depth, float32), ``count[k, p]`` (light samples that see
+    it), ``nlayers[p]``. Attenuation = count / samples.
     """
 
     view: View
-    depth: np.ndarray  # (H*W, L) float32, +inf beyond nlayers
-    count: np.ndarray  # (H*W, L) int32
+    depth: np.ndarray  # (L, H*W) float32, +inf beyond nlayers
+    count: np.ndarray  # (L, H*W) int32
     nlayers: np.ndarray  # (H*W,) int32
     samples: int
     sample_points: np.ndarray  # (samples, 3) world positions on the light
@@ -94,15 +95,15 @@ class LayeredAttenuationMap:
 
     @property
     def attenuation(self) -> np.ndarray:
-        """(H*W, L) float32 count / samples (0 beyond nlayers)."""
+        """(L, H*W) float32 count / samples (0 beyond nlayers)."""
         return (self.count / np.float32(self.samples)).astype(np.float32)
 
     def layer_image(self, k: int) -> tuple[np.ndarray, np.ndarray]:
         """(depth, attenuation) of layer ``k`` as (H, W) images, NaN where the pixel has fewer layers."""
         H, W = self.view.height, self.view.width
         has = self.nlayers > k
-        d = np.where(has, self.depth[:, k], np.nan).reshape(H, W)
-        a = np.where(has, self.count[:, k] / self.samples, np.nan).reshape(H, W)
+        d = np.where(has, self.depth[k], np.nan).reshape(H, W)
+        a = np.where(has, self.count[k] / self.samples, np.nan).reshape(H, W)
         return d, a
 
     def stats(self) -> dict:
@@ -284,20 +285,20 @@ def _insert(p, z, eps, view_id, ldi_depth, ldi_count, ldi_n, stamp):
     best = -1
     bd = eps
     for k in range(n):
-        d = abs(ldi_depth[p, k] - z)
+        d = abs(ldi_depth[k, p] - z)
         if d <= bd:
             bd = d
             best = k
     if best >= 0:
-        if stamp[p, best] != view_id:
-            stamp[p, best] = view_id
-            ldi_count[p, best] += 1
+        if stamp[best, p] != view_id:
+            stamp[best, p] = view_id
+            ldi_count[best, p] += 1
         return 0, 0, 0
-    if n >= ldi_depth.shape[1]:
+    if n >= ldi_depth.shape[0]:
         return 0, 0, 1
-    ldi_depth[p, n] = z
-    ldi_count[p, n] = 1
-    stamp[p, n] = view_id
+    ldi_depth[n, p] = z
+    ldi_count[n, p] = 1
+    stamp[n, p] = view_id
     ldi_n[p] = n + 1
     return 1, 1 if n == 0 else 0, 0
 
@@ -358,15 +359,15 @@ def sort_layers(ldi_depth, ldi_count, ldi_n):
     for p in prange(ldi_n.shape[0]):
         n = ldi_n[p]
         for k in range(1, n):
-            d = ldi_depth[p, k]
-            c = ldi_count[p, k]
+            d = ldi_depth[k, p]
+            c = ldi_count[k, p]
             m = k - 1
-            while m >= 0 and ldi_depth[p, m] > d:
-                ldi_depth[p, m + 1] = ldi_depth[p, m]
-                ldi_count[p, m + 1] = ldi_count[p, m]
+            while m >= 0 and ldi_depth[m, p] > d:
+                ldi_depth[m + 1, p] = ldi_depth[m, p]
+                ldi_count[m + 1, p] = ldi_count[m, p]
                 m -= 1
-            ldi_depth[p, m + 1] = d
-            ldi_count[p, m + 1] = c
+            ldi_depth[m + 1, p] = d
+            ldi_count[m + 1, p] = c
 
 
 def _geometry_digest(flat) -> str:
@@ -413,8 +414,8 @@ def _warm_kernels() -> None:
     lo, hi = np.empty(4, np.int64), np.empty(4, np.int64)
     for proj in (False, True):
         warp_center(d[0], v.params(), v.params(), proj, 1.0, 1.0, tx[0], ty[0], tz[0], te[0], lo, hi)
-    ld, lc, ln = np.zeros((16, 2), np.float32), np.zeros((16, 2), np.int32), np.zeros(16, np.int32)
-    st = np.zeros((16, 2), np.int32)
+    ld, lc, ln = np.zeros((2, 16), np.float32), np.zeros((2, 16), np.int32), np.zeros(16, np.int32)
+    st = np.zeros((2, 16), np.int32)
     insert_ldi(tx, ty, tz, te, lo, hi, True, 1, 4, 4, 2, ld, lc, ln, st)
     sort_layers(ld, lc, ln)
 
@@ -433,10 +434,10 @@ def build_ldi(scene, params: dict, seed: int = 0) -> LayeredAttenuationMap:
     vpc = view.params()
     W = H = size
     L = int(params["max_layers"])
-    ldi_depth = np.full((W * H, L), np.inf, np.float32)
-    ldi_count = np.zeros((W * H, L), np.int32)
+    ldi_depth = np.full((L, W * H), np.inf, np.float32)
+    ldi_count = np.zeros((L, W * H), np.int32)
     ldi_n = np.zeros(W * H, np.int32)
-    stamp = np.full((W * H, L), -1, np.int32)
+    stamp = np.full((L, W * H), -1, np.int32)
     eps, slope_eps = float(params["epsilon"]), float(params["slope_epsilon"])
     projective = params["warp"] == "projective"
     band = 16
@@ -541,11 +542,11 @@ def _layer_att(p, z, eps, ldi_depth, ldi_count, ldi_n, inv_samples):
     best = -1
     bd = eps
     for k in range(ldi_n[p]):
-        d = abs(ldi_depth[p, k] - z)
+        d = abs(ldi_depth[k, p] - z)
         if d <= bd:
             bd = d
             best = k
-    return 0.0 if best < 0 else ldi_count[p, best] * inv_samples
+    return 0.0 if best < 0 else ldi_count[best, p] * inv_samples
 
 
 @kernel(parallel=True)
