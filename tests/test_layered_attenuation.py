@@ -196,3 +196,21 @@ def test_stratified_samples():
 def test_bad_samples():
     with pytest.raises(SoftShadowsError, match="perfect square"):
         ss.render(ss.load_scene("square"), "layered-attenuation", 32, 24, samples=10)
+
+
+def test_ldi_independent_of_thread_count():
+    """The banded parallel insertion gives the same LDI with 1 thread (one band) as with more
+    (bands per thread): each pixel's insertions happen in the same order."""
+    import numba
+
+    sc = ss.load_scene("plant")
+    n0 = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        a = la.precompute(sc, **SMALL)
+    finally:
+        numba.set_num_threads(n0)
+    b = la.precompute(sc, **SMALL)
+    np.testing.assert_array_equal(a.nlayers, b.nlayers)
+    np.testing.assert_array_equal(a.count, b.count)
+    np.testing.assert_array_equal(a.depth, b.depth)
