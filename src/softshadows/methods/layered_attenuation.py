@@ -117,6 +117,11 @@ class LayeredAttenuationMap:
             "ldi_total_layers": total,
             "ldi_max_layers": int(self.nlayers.max()) if self.nlayers.size else 0,
             "ldi_avg_depth_complexity": total / max(nonempty, 1),
+            # the paper's Fig. 10 (right): average depth complexity after 1, 2, 4, ... samples and all
+            "ldi_complexity_by_samples": {
+                int(n): round(float(self.complexity[n - 1]), 5)
+                for n in sorted({*(1 << k for k in range(int(np.log2(max(self.samples, 1))) + 1)), self.samples})
+            },
             "ldi_dropped_splats": int(self.dropped),
             "ldi_precompute_s": self.precompute_s,
             "precompute_steps_s": {k: round(v, 6) for k, v in self.steps.items()},
