@@ -157,6 +157,10 @@ def sample_view(view: View, point) -> View:
     # x'_sample = x'_center - dv / z for z in [near, far]
     ls, rs = l + min(-dx * i for i in inv), r + max(-dx * i for i in inv)
     bs, ts = b + min(-dy * i for i in inv), t + max(-dy * i for i in inv)
+    # at most the LDI's own size added on each side (geometry very close to the light plane would
+    # otherwise ask for unbounded images; what lies beyond is missing from that sample's image)
+    ls, rs = max(ls, l - view.width * pw), min(rs, r + view.width * pw)
+    bs, ts = max(bs, b - view.height * ph), min(ts, t + view.height * ph)
     w = int(np.ceil((rs - ls) / pw)) + 2
     h = int(np.ceil((ts - bs) / ph)) + 2
     ls, ts = ls - pw, ts + ph
