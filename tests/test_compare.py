@@ -57,14 +57,38 @@ def test_metrics_json_and_report_name_every_method(compared):
     assert "sortTable" in html and "numba" in html  # sortable tables, machine description
 
 
-def test_skipped_light_shape_is_noted(tmp_path):
-    from softshadows.methods import methods
+def test_skipped_light_shape_is_noted(monkeypatch):
+    from softshadows.methods import base, methods
 
-    rect_only = [n for n, m in methods().items() if m.light_shapes == ("rect",)]
-    if not rect_only:
-        pytest.skip("no rect-only method registered")
+    methods()  # load the registry, then add a rect-only method (every built-in one supports both)
+
+    class RectOnly(base.Method):
+        name = "rect-only-test"
+        light_shapes = ("rect",)
+
+    monkeypatch.setitem(base._REGISTRY, RectOnly.name, RectOnly())
     run, skipped = resolve_methods("all", "sphere")
-    assert rect_only[0] in skipped and rect_only[0] not in run
+    assert "rect-only-test" in skipped and "rect-only-test" not in run
+    assert "hard" in run and "soft-shadow-map" in run
+    run, skipped = resolve_methods("all", "rect")
+    assert "rect-only-test" in run and not skipped
+
+
+def test_receivers_only_method_is_also_measured_over_receivers(compared):
+    """The soft shadow map shades only receivers (no self-shadowing): on ``spheres`` (occluder
+    spheres in self-shadow, receiver ground) its all-surface error includes the unshadowed sides of
+    the spheres, the receivers-only error does not, so it is lower and over fewer pixels; other
+    methods get no receivers-only figures. The JSON and the report carry both, labelled."""
+    out, res = compared
+    mt = res["metrics"]["soft-shadow-map"]
+    rc = mt["receivers"]
+    assert 0 < rc["n_pixels"] < mt["n_pixels"]
+    assert rc["mae"] < mt["mae"]
+    assert all("receivers" not in x for m, x in res["metrics"].items() if m != "soft-shadow-map")
+    doc = json.loads((out / "metrics.json").read_text())
+    assert doc["methods"]["soft-shadow-map"]["metrics"]["receivers"]["mae"] == pytest.approx(rc["mae"])
+    html = (out / "report.html").read_text()
+    assert "soft-shadow-map (all surfaces)" in html and "soft-shadow-map (receivers only)" in html
 
 
 def test_bad_input_is_one_line_error(tmp_path, capsys):

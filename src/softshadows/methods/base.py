@@ -159,6 +159,9 @@ class Method:
     params: tuple = ()
     summary: str = ""
     paper: str = ""
+    #: True for methods that by design shade only receivers (faces of role receiver|both; e.g. no
+    #: self-shadowing): comparisons then also report their error over receiver pixels only
+    receivers_only: bool = False
 
     def run(self, ctx: FrameContext, **params) -> MethodOutput:  # pragma: no cover - abstract
         raise NotImplementedError
