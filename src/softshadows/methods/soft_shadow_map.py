@@ -502,39 +502,57 @@ def _disk_frame(px, py, pz, rho, out):
 
 @kernel(parallel=True)
 def disk_frames(recv_depth, svp, rho):
-    """:func:`_disk_frame` of every SSM texel's receiver point (H,W,11); zeros where no receiver."""
+    """:func:`_disk_frame` of every SSM texel's receiver point as 11 planes (11,H,W) (contiguous
+    along rows, for the vectorized pass); zeros where no receiver."""
     H, W = recv_depth.shape
     l, r, b, t = svp[12], svp[13], svp[14], svp[15]
     dxs = (r - l) / W
     dys = (t - b) / H
-    out = np.zeros((H, W, 11))
+    out = np.zeros((11, H, W))
     for i in prange(H):
         uy = t - (i + 0.5) * dys
+        f = np.empty(11)
         for j in range(W):
             zr = np.float64(recv_depth[i, j])
             if zr > 0.0:
                 ux = l + (j + 0.5) * dxs
-                _disk_frame(ux * zr, uy * zr, zr, rho, out[i, j])
+                _disk_frame(ux * zr, uy * zr, zr, rho, f)
+                for k in range(11):
+                    out[k, i, j] = f[k]
     return out
+
+
+@kernel(inline=True)
+def _outside_disk(u0, u1, u2, u3, v0, v1, v2, v3):
+    """True when the quadrilateral's bounding circle (about its corners' mean) lies outside the
+    unit disk: then it hides nothing."""
+    cu = 0.25 * (u0 + u1 + u2 + u3)
+    cv = 0.25 * (v0 + v1 + v2 + v3)
+    r2 = max(
+        max((u0 - cu) * (u0 - cu) + (v0 - cv) * (v0 - cv), (u1 - cu) * (u1 - cu) + (v1 - cv) * (v1 - cv)),
+        max((u2 - cu) * (u2 - cu) + (v2 - cv) * (v2 - cv), (u3 - cu) * (u3 - cu) + (v3 - cv) * (v3 - cv)),
+    )
+    rq = 1.0 + math.sqrt(r2)
+    return cu * cu + cv * cv >= rq * rq
 
 
 @kernel(inline=True)
 def occlusion_percentage_disk(F, fi, fj, x0, x1, y0, y1, zo, sx, sy, sz, sh, tx, ty, tz, th):
     """Fraction of a sphere light hidden by one micro-patch at one receiver point p: the light is
     the disk of radius rho through C_L (the light frame's origin) facing p (V's definition),
-    ``F[fi, fj]`` = :func:`_disk_frame` of p (indices, not a row view: a view costs a contended
+    ``F[:, fi, fj]`` = :func:`_disk_frame` of p (indices, not a row view: a view costs a contended
     reference-count update). The patch ``[x0, x1] x [y0, y1]`` at depth z_O is projected
     from p onto the disk's plane (the paper's back-projection, onto that plane instead of the
     rectangle's): a patch point q lands at disk coordinates
     ``(e1.q, e2.q) / (kappa (|p| - w.q))``, kappa = rho/|p| (radius 1); the overlap is the exact
     area of that quadrilateral intersected with the unit disk
     (:func:`softshadows.analytic.polygon_disk_area`: triangles and circular sectors), over pi.
-    Shortcuts with the same result: a quadrilateral whose bounding box misses the disk hides 0,
-    one inside it hides its own area (shoelace). Parts of the patch behind the disk's plane or not
+    Shortcuts with the same result: a quadrilateral whose bounding box or bounding circle misses
+    the disk hides 0, one inside it hides its own area (shoelace). Parts of the patch behind the disk's plane or not
     in front of p (w.q outside (0, |p|)) hide nothing and are clipped off first.
     ``sx..th``: scratch arrays of 8."""
-    wx, wy, wz = F[fi, fj, 0], F[fi, fj, 1], F[fi, fj, 2]
-    hp, kap = F[fi, fj, 9], F[fi, fj, 10]
+    wx, wy, wz = F[0, fi, fj], F[1, fi, fj], F[2, fi, fj]
+    hp, kap = F[9, fi, fj], F[10, fi, fj]
     hmax = hp * (1.0 - 1e-9)
     # corners in order (x0,y0) (x1,y0) (x1,y1) (x0,y1); everything is affine in x and y
     hz = wz * zo
@@ -543,16 +561,16 @@ def occlusion_percentage_disk(F, fi, fj, x0, x1, y0, y1, zo, sx, sy, sz, sh, tx,
     h2 = wx * x1 + wy * y1 + hz
     h3 = wx * x0 + wy * y1 + hz
     if h0 > 0.0 and h1 > 0.0 and h2 > 0.0 and h3 > 0.0 and h0 < hmax and h1 < hmax and h2 < hmax and h3 < hmax:
-        az = F[fi, fj, 5] * zo
-        bz = F[fi, fj, 8] * zo
-        a0 = F[fi, fj, 3] * x0 + F[fi, fj, 4] * y0 + az
-        a1 = F[fi, fj, 3] * x1 + F[fi, fj, 4] * y0 + az
-        a2 = F[fi, fj, 3] * x1 + F[fi, fj, 4] * y1 + az
-        a3 = F[fi, fj, 3] * x0 + F[fi, fj, 4] * y1 + az
-        b0 = F[fi, fj, 6] * x0 + F[fi, fj, 7] * y0 + bz
-        b1 = F[fi, fj, 6] * x1 + F[fi, fj, 7] * y0 + bz
-        b2 = F[fi, fj, 6] * x1 + F[fi, fj, 7] * y1 + bz
-        b3 = F[fi, fj, 6] * x0 + F[fi, fj, 7] * y1 + bz
+        az = F[5, fi, fj] * zo
+        bz = F[8, fi, fj] * zo
+        a0 = F[3, fi, fj] * x0 + F[4, fi, fj] * y0 + az
+        a1 = F[3, fi, fj] * x1 + F[4, fi, fj] * y0 + az
+        a2 = F[3, fi, fj] * x1 + F[4, fi, fj] * y1 + az
+        a3 = F[3, fi, fj] * x0 + F[4, fi, fj] * y1 + az
+        b0 = F[6, fi, fj] * x0 + F[7, fi, fj] * y0 + bz
+        b1 = F[6, fi, fj] * x1 + F[7, fi, fj] * y0 + bz
+        b2 = F[6, fi, fj] * x1 + F[7, fi, fj] * y1 + bz
+        b3 = F[6, fi, fj] * x0 + F[7, fi, fj] * y1 + bz
         d0 = 1.0 / (kap * (hp - h0))
         d1 = 1.0 / (kap * (hp - h1))
         d2 = 1.0 / (kap * (hp - h2))
@@ -562,6 +580,8 @@ def occlusion_percentage_disk(F, fi, fj, x0, x1, y0, y1, zo, sx, sy, sz, sh, tx,
         if max(u0, u1, u2, u3) <= -1.0 or min(u0, u1, u2, u3) >= 1.0:
             return 0.0
         if max(v0, v1, v2, v3) <= -1.0 or min(v0, v1, v2, v3) >= 1.0:
+            return 0.0
+        if _outside_disk(u0, u1, u2, u3, v0, v1, v2, v3):
             return 0.0
         if (
             u0 * u0 + v0 * v0 <= 1.0
@@ -601,8 +621,8 @@ def occlusion_percentage_disk(F, fi, fj, x0, x1, y0, y1, zo, sx, sy, sz, sh, tx,
         return 0.0
     for c in range(n):
         d = 1.0 / (kap * (hp - sh[c]))
-        tx[c] = (F[fi, fj, 3] * sx[c] + F[fi, fj, 4] * sy[c] + F[fi, fj, 5] * sz[c]) * d
-        ty[c] = (F[fi, fj, 6] * sx[c] + F[fi, fj, 7] * sy[c] + F[fi, fj, 8] * sz[c]) * d
+        tx[c] = (F[3, fi, fj] * sx[c] + F[4, fi, fj] * sy[c] + F[5, fi, fj] * sz[c]) * d
+        ty[c] = (F[6, fi, fj] * sx[c] + F[7, fi, fj] * sy[c] + F[8, fi, fj] * sz[c]) * d
     return polygon_disk_area(tx, ty, n, 1.0) / math.pi
 
 
@@ -612,8 +632,10 @@ def occlusion_percentage_disk_at(patch, ux, uy, z_r, rho) -> float:
     x0, x1, y0, y1, zo = (float(v) for v in patch)
     if not z_r > zo:
         return 0.0
-    F = np.empty((1, 1, 11))
-    _disk_frame(ux * z_r, uy * z_r, z_r, rho, F[0, 0])
+    F = np.empty((11, 1, 1))
+    f = np.empty(11)
+    _disk_frame(ux * z_r, uy * z_r, z_r, rho, f)
+    F[:, 0, 0] = f
     sc = [np.empty(8) for _ in range(8)]
     return float(occlusion_percentage_disk(F, 0, 0, x0, x1, y0, y1, zo, *sc))
 
@@ -770,6 +792,71 @@ def accumulate_soft_shadow_map(
     return touched
 
 
+@kernel(inline=True)
+def _disk_row_pass(F, recv_depth, recv_mesh, ssm, flags, i, j0, j1, x0, x1, y0, y1, zo, pm, check_mesh):
+    """One SSM row of one micro-patch for :func:`accumulate_soft_shadow_map_sphere`, branch-free:
+    adds :func:`occlusion_percentage_disk`'s value where one of its shortcuts applies (nothing
+    hidden: receiver not behind the patch, own mesh, or the projected quad's bounding box misses
+    the disk; the quad's own area: inside the disk), with the same float64 arithmetic, and sets
+    ``flags[j - j0]`` where the exact routine is needed. Returns how many."""
+    n = 0
+    ii = np.uint64(i)
+    for jj in range(j1 - j0):
+        jx = np.uint64(j0 + jj)
+        zr = np.float64(recv_depth[ii, jx])
+        ok = zr > zo
+        if check_mesh:
+            ok = ok and recv_mesh[ii, jx] != pm
+        wx = F[0, ii, jx]
+        wy = F[1, ii, jx]
+        wz = F[2, ii, jx]
+        hp = F[9, ii, jx]
+        kap = F[10, ii, jx]
+        hmax = hp * (1.0 - 1e-9)
+        hz = wz * zo
+        h0 = wx * x0 + wy * y0 + hz
+        h1 = wx * x1 + wy * y0 + hz
+        h2 = wx * x1 + wy * y1 + hz
+        h3 = wx * x0 + wy * y1 + hz
+        inr = (h0 > 0.0) & (h1 > 0.0) & (h2 > 0.0) & (h3 > 0.0) & (h0 < hmax) & (h1 < hmax) & (h2 < hmax) & (h3 < hmax)
+        az = F[5, ii, jx] * zo
+        bz = F[8, ii, jx] * zo
+        a0 = F[3, ii, jx] * x0 + F[4, ii, jx] * y0 + az
+        a1 = F[3, ii, jx] * x1 + F[4, ii, jx] * y0 + az
+        a2 = F[3, ii, jx] * x1 + F[4, ii, jx] * y1 + az
+        a3 = F[3, ii, jx] * x0 + F[4, ii, jx] * y1 + az
+        b0 = F[6, ii, jx] * x0 + F[7, ii, jx] * y0 + bz
+        b1 = F[6, ii, jx] * x1 + F[7, ii, jx] * y0 + bz
+        b2 = F[6, ii, jx] * x1 + F[7, ii, jx] * y1 + bz
+        b3 = F[6, ii, jx] * x0 + F[7, ii, jx] * y1 + bz
+        d0 = 1.0 / (kap * (hp - h0))
+        d1 = 1.0 / (kap * (hp - h1))
+        d2 = 1.0 / (kap * (hp - h2))
+        d3 = 1.0 / (kap * (hp - h3))
+        u0, u1, u2, u3 = a0 * d0, a1 * d1, a2 * d2, a3 * d3
+        v0, v1, v2, v3 = b0 * d0, b1 * d1, b2 * d2, b3 * d3
+        rej = (
+            (max(max(u0, u1), max(u2, u3)) <= -1.0)
+            | (min(min(u0, u1), min(u2, u3)) >= 1.0)
+            | (max(max(v0, v1), max(v2, v3)) <= -1.0)
+            | (min(min(v0, v1), min(v2, v3)) >= 1.0)
+            | _outside_disk(u0, u1, u2, u3, v0, v1, v2, v3)
+        )
+        ins = (
+            (u0 * u0 + v0 * v0 <= 1.0)
+            & (u1 * u1 + v1 * v1 <= 1.0)
+            & (u2 * u2 + v2 * v2 <= 1.0)
+            & (u3 * u3 + v3 * v3 <= 1.0)
+        )
+        area = 0.5 * abs((u0 - u2) * (v1 - v3) - (u1 - u3) * (v0 - v2)) / math.pi
+        add = area if (ok & inr & ~rej & ins) else 0.0
+        ssm[ii, jx] += np.float32(add)
+        need = ok & ~(inr & (rej | ins))
+        flags[jj] = need
+        n += 1 if need else 0
+    return n
+
+
 @kernel(parallel=True)
 def accumulate_soft_shadow_map_sphere(
     patches,
@@ -791,7 +878,7 @@ def accumulate_soft_shadow_map_sphere(
     :func:`occlusion_percentage_disk` (float64 arithmetic; the sum is stored in float32, or
     rounded to half precision with ``fp16``). Same bands, order and skipping rules. ``frames``:
     :func:`disk_frames` of the texels."""
-    H = recv_depth.shape[0]
+    H, W = recv_depth.shape
     n_bands = band_ptr.shape[0] - 1
     touched = np.zeros(n_bands, np.int64)
     for slot in prange(nslot):
@@ -803,6 +890,7 @@ def accumulate_soft_shadow_map_sphere(
         ty = np.empty(8)
         tz = np.empty(8)
         th = np.empty(8)
+        flags = np.zeros(W, np.bool_)
         for bnd in range(slot, n_bands, nslot):
             r0 = bnd * band_rows
             r1 = min(r0 + band_rows, H) - 1
@@ -814,17 +902,34 @@ def accumulate_soft_shadow_map_sphere(
                 i0 = max(ext[p, 0], r0)
                 i1 = min(ext[p, 1], r1)
                 for i in range(i0, i1 + 1):
-                    for j in range(ext[p, 2], ext[p, 3] + 1):
-                        cnt += 1
-                        zr = np.float64(recv_depth[i, j])
-                        if not (zr > zo) or (check_mesh and recv_mesh[i, j] == pm):
-                            continue
-                        c = occlusion_percentage_disk(frames, i, j, x0, x1, y0, y1, zo, sx, sy, sz, sh, tx, ty, tz, th)
-                        if c > 0.0:
-                            if fp16:
+                    j0 = ext[p, 2]
+                    j1 = ext[p, 3] + 1
+                    cnt += j1 - j0
+                    if fp16:
+                        for j in range(j0, j1):
+                            zr = np.float64(recv_depth[i, j])
+                            if not (zr > zo) or (check_mesh and recv_mesh[i, j] == pm):
+                                continue
+                            c = occlusion_percentage_disk(
+                                frames, i, j, x0, x1, y0, y1, zo, sx, sy, sz, sh, tx, ty, tz, th
+                            )
+                            if c > 0.0:
                                 ssm[i, j] = np.float32(round_half(np.float64(ssm[i, j]) + round_half(c, rtz), rtz))
-                            else:
-                                ssm[i, j] += np.float32(c)
+                        continue
+                    # float32 sums: a branch-free pass over the row (vectorizes) does what
+                    # occlusion_percentage_disk's shortcuts do (quads fully inside or whose bounding
+                    # box misses the disk, the same arithmetic) and flags the other texels, which
+                    # get the exact routine: one addition per texel and patch, as before
+                    n_exact = _disk_row_pass(
+                        frames, recv_depth, recv_mesh, ssm, flags, i, j0, j1, x0, x1, y0, y1, zo, pm, check_mesh
+                    )
+                    if n_exact:
+                        for jj in range(j1 - j0):
+                            if flags[jj]:
+                                c = occlusion_percentage_disk(
+                                    frames, i, j0 + jj, x0, x1, y0, y1, zo, sx, sy, sz, sh, tx, ty, tz, th
+                                )
+                                ssm[i, j0 + jj] += np.float32(c)
             touched[bnd] = cnt
     return touched
 
