@@ -68,8 +68,9 @@ def main():
     esc = gtm._embree_for(scene)
     S = a.samples
     side = int(round(np.sqrt(S)))
-    lo, hi = scene.bounds()
-    eps = 1e-4 * float(np.linalg.norm(hi - lo))
+    pts, nrm, err_point, err_embree, grazing, own_blocks = gtm.hit_points(flat, g, idx, nrm)
+    off = gtm.BOUND_SAFETY * (err_point + err_embree)
+    grazing = gtm.BOUND_SAFETY * grazing
     shape, center, u, v, radius = gtm.light_arrays(scene.light)
     per = max(1, gtm.CHUNK_RAYS // S)
     batches = []
@@ -84,7 +85,9 @@ def main():
             pts[start:stop],
             nrm[start:stop],
             idx[start:stop],
-            eps,
+            off[start:stop],
+            grazing[start:stop],
+            own_blocks[start:stop],
             0,
             side,
             shape,

@@ -3,7 +3,9 @@
     python benchmarks/summary.py [--out DIR] [--size 256x192] [--samples 256] [--repeats 7]
 
 1. Error against ground truth of every method on square, spheres, bunny (rect and sphere light),
-   through ``softshadows.compare`` (one report per scene/light under --out).
+   through ``softshadows.compare`` (one report per scene/light under --out). Over all surface
+   pixels; a method that by design shades only receivers (``Method.receivers_only``: the soft
+   shadow map, no self-shadowing) gets a second row over receiver pixels only.
 2. Frame time at 512x512 on bunny (rect and sphere light), medians after warm-up, with the ratio
    to ``hard`` measured in the same run (``softshadows.bench``).
 Writes DIR/summary.md and prints it.
@@ -55,17 +57,25 @@ def main():
     cols = [(s, l) for s in ("square", "spheres", "bunny") for l in ("rect", "sphere")]
     lines.append(
         f"Error against ground truth ({a.samples} samples), {w}x{h}: MAE / ssm_error "
-        "(mean |dV| over umbra+penumbra); '-' = light shape not supported"
+        "(mean |dV| over umbra+penumbra) over all surface pixels; '-' = light shape not supported. "
+        "Methods that by design shade only receivers (no self-shadowing) have a second row, "
+        "*receivers only*: the same over pixels of faces with role receiver or both."
     )
     lines.append("")
     lines.append("| method | " + " | ".join(f"{s} {l}" for s, l in cols) + " |")
     lines.append("|---|" + "---|" * len(cols))
     for m in err:
-        cells = []
-        for c in cols:
-            met = err[m].get(c)
-            cells.append("-" if met is None else f"{met['mae']:.4f} / {met['ssm_error']:.3f}")
-        lines.append(f"| {m} | " + " | ".join(cells) + " |")
+        ronly = any("receivers" in met for met in err[m].values())
+        for label, pick in (
+            [(f"{m} (all surfaces)", lambda x: x), (f"{m} (receivers only)", lambda x: x["receivers"])]
+            if ronly
+            else [(m, lambda x: x)]
+        ):
+            cells = []
+            for c in cols:
+                met = err[m].get(c)
+                cells.append("-" if met is None else f"{pick(met)['mae']:.4f} / {pick(met)['ssm_error']:.3f}")
+            lines.append(f"| {label} | " + " | ".join(cells) + " |")
     lines.append("")
     for light in ("rect", "sphere"):
         b = bench("bunny", "all", sizes=(512,), repeats=a.repeats, warmup=1, light=light, verbose=False)

@@ -60,7 +60,7 @@ def test_metrics_json_and_report_name_every_method(compared):
 def test_skipped_light_shape_is_noted(monkeypatch):
     from softshadows.methods import base, methods
 
-    methods()  # load the built-in methods first
+    methods()  # load the registry, then add a rect-only method (every built-in one supports both)
 
     class RectOnly(base.Method):
         name = "rect-only-test"
@@ -68,10 +68,28 @@ def test_skipped_light_shape_is_noted(monkeypatch):
 
     monkeypatch.setitem(base._REGISTRY, RectOnly.name, RectOnly())
     run, skipped = resolve_methods("all", "sphere")
-    assert RectOnly.name in skipped and RectOnly.name not in run
-    assert "rect" in skipped[RectOnly.name]
+    assert "rect-only-test" in skipped and "rect-only-test" not in run
+    assert "rect" in skipped["rect-only-test"]
+    assert "hard" in run and "soft-shadow-map" in run
     run, skipped = resolve_methods("all", "rect")
-    assert RectOnly.name in run and RectOnly.name not in skipped
+    assert "rect-only-test" in run and not skipped
+
+
+def test_receivers_only_method_is_also_measured_over_receivers(compared):
+    """The soft shadow map shades only receivers (no self-shadowing): on ``spheres`` (occluder
+    spheres in self-shadow, receiver ground) its all-surface error includes the unshadowed sides of
+    the spheres, the receivers-only error does not, so it is lower and over fewer pixels; other
+    methods get no receivers-only figures. The JSON and the report carry both, labelled."""
+    out, res = compared
+    mt = res["metrics"]["soft-shadow-map"]
+    rc = mt["receivers"]
+    assert 0 < rc["n_pixels"] < mt["n_pixels"]
+    assert rc["mae"] < mt["mae"]
+    assert all("receivers" not in x for m, x in res["metrics"].items() if m != "soft-shadow-map")
+    doc = json.loads((out / "metrics.json").read_text())
+    assert doc["methods"]["soft-shadow-map"]["metrics"]["receivers"]["mae"] == pytest.approx(rc["mae"])
+    html = (out / "report.html").read_text()
+    assert "soft-shadow-map (all surfaces)" in html and "soft-shadow-map (receivers only)" in html
 
 
 def test_bad_input_is_one_line_error(tmp_path, capsys):

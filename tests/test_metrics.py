@@ -97,3 +97,31 @@ def test_flip_self_zero_and_grows_with_perturbation():
 def test_shape_mismatch_raises():
     with pytest.raises(ValueError):
         compute_metrics(np.zeros((2, 2)), np.zeros((2, 3)))
+
+
+def test_mask_restricts_every_metric():
+    v_ref = np.array([[0.0, 0.5, 1.0], [1.0, np.nan, 0.2]])
+    v = np.array([[0.1, 0.5, 0.7], [1.0, 0.3, 0.2]])
+    mask = np.array([[True, True, False], [False, True, True]])
+    m = compute_metrics(v, v_ref, mask=mask)
+    # masked pixels with a surface: (0,0) err +0.1, (0,1) 0, (1,2) 0; (1,1) is background
+    assert m["n_pixels"] == 3
+    assert m["mae"] == pytest.approx(0.1 / 3)
+    assert m["max"] == pytest.approx(0.1)
+    assert m["n_umbra"] == 1 and m["n_lit"] == 0 and m["n_penumbra"] == 2
+    full = compute_metrics(v, v_ref)
+    assert full["max"] == pytest.approx(0.3) and full["n_pixels"] == 5
+
+
+def test_receiver_pixels_are_the_receiver_faces():
+    import softshadows as ss
+    from softshadows.metrics import receiver_pixels
+
+    sc = ss.load_scene("square")  # ground: receiver; square: occluder
+    rec = receiver_pixels(sc, 48, 36)
+    r = ss.render(sc, "hard", 48, 36)
+    pos = r.position.reshape(-1, 3)[rec.ravel()]
+    assert rec.sum() > 500 and np.all(np.abs(pos[:, 1]) < 1e-5)  # exactly the ground's pixels
+    on_square = r.mask & ~rec
+    assert on_square.sum() > 20
+    assert np.allclose(r.position[on_square][:, 1], 1.0, atol=1e-5)

@@ -5,11 +5,18 @@
   intersected with the light) / area(light).
 * :func:`disk_halfplane_visibility` — a disk light (the sphere light's facing disk) and a
   half-plane occluder: V = 1 - circular segment / disk area.
+* :func:`polygon_disk_area` — area of a polygon intersected with a disk (exact: triangles and
+  circular sectors), and :func:`disk_polygon_occluder_visibility` — a disk light and a planar
+  convex polygon occluder: V = 1 - area(disk ∩ polygon projected from p onto the disk) / disk area.
 """
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
+
+from ._jit import kernel
 
 
 def _overlap_1d(a0, a1, b0, b1):
@@ -79,4 +86,87 @@ def disk_halfplane_visibility(points, light_center, radius, edge_point, edge_dir
         # occluded part: the side where n.(x - p) > 0; its area is the segment beyond distance -s
         occluded = circular_segment(-s, radius)
         out[k] = 1.0 - occluded / (np.pi * radius * radius)
+    return out
+
+
+@kernel(inline=True)
+def _edge_disk_area(ax, ay, bx, by, r):
+    """Signed area of the triangle (origin, a, b) intersected with the disk of radius r centered
+    at the origin: the segment a-b is split where it crosses the circle; pieces inside add their
+    triangle (cross / 2), pieces outside their circular sector (r^2 angle / 2)."""
+    dx = bx - ax
+    dy = by - ay
+    qa = dx * dx + dy * dy
+    qb = 2.0 * (ax * dx + ay * dy)
+    qc = ax * ax + ay * ay - r * r
+    t0 = 1.0  # no crossing: one outside piece [0, 1]
+    t1 = 1.0
+    disc = qb * qb - 4.0 * qa * qc
+    if qa > 0.0 and disc > 0.0:
+        sq = math.sqrt(disc)
+        # numerically stable roots of qa t^2 + qb t + qc
+        q = -0.5 * (qb + sq) if qb >= 0.0 else -0.5 * (qb - sq)
+        r0 = q / qa
+        r1 = qc / q if q != 0.0 else r0
+        lo = min(r0, r1)
+        hi = max(r0, r1)
+        t0 = min(max(lo, 0.0), 1.0)
+        t1 = min(max(hi, 0.0), 1.0)
+    area = 0.0
+    # pieces [0, t0], [t0, t1], [t1, 1]: the middle one is inside the circle, the outer ones outside
+    for piece in range(3):
+        if piece == 0:
+            ta, tb = 0.0, t0
+        elif piece == 1:
+            ta, tb = t0, t1
+        else:
+            ta, tb = t1, 1.0
+        if tb <= ta:
+            continue
+        x0 = ax + ta * dx
+        y0 = ay + ta * dy
+        x1 = ax + tb * dx
+        y1 = ay + tb * dy
+        cr = x0 * y1 - y0 * x1
+        if piece == 1:
+            area += 0.5 * cr
+        else:
+            area += 0.5 * r * r * math.atan2(cr, x0 * x1 + y0 * y1)
+    return area
+
+
+@kernel
+def polygon_disk_area(xs, ys, n, r):
+    """Area of the intersection of the simple polygon (xs[:n], ys[:n]) (either orientation) with
+    the disk of radius ``r`` centered at the origin; exact up to rounding."""
+    a = 0.0
+    for i in range(n):
+        j = i + 1 if i + 1 < n else 0
+        a += _edge_disk_area(xs[i], ys[i], xs[j], ys[j], r)
+    return abs(a)
+
+
+def disk_polygon_occluder_visibility(points, polygon, light_center, radius):
+    """V at ``points`` (K,3) for a disk light of ``radius`` at ``light_center`` facing each point
+    and a planar convex polygon occluder ``polygon`` (M,3) lying between the points and the disk's
+    plane: V = 1 - area(disk ∩ central projection of the polygon from p onto the disk's plane) /
+    (pi radius^2)."""
+    p = np.asarray(points, float).reshape(-1, 3)
+    c = np.asarray(light_center, float)
+    poly = np.asarray(polygon, float).reshape(-1, 3)
+    out = np.empty(len(p))
+    for k, pk in enumerate(p):
+        w = pk - c
+        hp = np.linalg.norm(w)
+        w /= hp
+        a = np.array([1.0, 0.0, 0.0]) if abs(w[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+        e1 = np.cross(a, w)
+        e1 /= np.linalg.norm(e1)
+        e2 = np.cross(w, e1)
+        h = (poly - c) @ w  # heights above the disk's plane
+        if np.any(h <= 0.0) or np.any(h >= hp):
+            raise ValueError("the occluder must lie between the point and the disk's plane")
+        t = hp / (hp - h)
+        x = pk + t[:, None] * (poly - pk) - c
+        out[k] = 1.0 - polygon_disk_area(x @ e1, x @ e2, len(poly), radius) / (np.pi * radius * radius)
     return out

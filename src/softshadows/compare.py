@@ -15,6 +15,11 @@ Files written to ``out_dir``:
 * ``grid.png`` — one labelled image of everything; ``metrics.json`` — metrics, per-phase
   timings, parameters, statistics, scene and machine; ``report.html`` — all of it, self-contained.
 
+A method that by design shades only receivers (``Method.receivers_only``: the soft shadow map
+computes no self-shadowing) is measured twice: over all surface pixels (``metrics``, the method's
+limit included) and over receiver pixels only (``metrics["receivers"]``, its quality where it
+applies); the report, the CLI table and ``metrics.json`` show both, labelled.
+
 Methods whose light shapes do not include the scene's light are skipped with a note in the report;
 a method that fails at run time is reported (note + stderr) and the others still run.
 """
@@ -202,7 +207,7 @@ def compare(
     """
     from . import render
     from .methods import get_method
-    from .metrics import compute_metrics, signed_error_map
+    from .metrics import compute_metrics, receiver_pixels, signed_error_map
     from .report import colorbar_png, error_heatmap, error_limit, error_rgb, grid_image, machine_info, write_html
     from .shading import to_srgb8, visibility_to_rgb
 
@@ -250,9 +255,14 @@ def compare(
                 traceback.print_exc()
 
     # metrics and images
+    # methods that by design shade only receivers: also over receiver pixels (metrics["receivers"])
     metrics, errors = {}, {}
+    recv = None
     for m, r in results.items():
         metrics[m] = compute_metrics(r.visibility, gt.visibility, r.image, gt.image)
+        if get_method(m).receivers_only:
+            recv = receiver_pixels(sc, width, height) if recv is None else recv
+            metrics[m]["receivers"] = compute_metrics(r.visibility, gt.visibility, r.image, gt.image, mask=recv)
         errors[m] = signed_error_map(r.visibility, gt.visibility)
     limit = error_limit(list(errors.values()))
     files = []
@@ -287,7 +297,7 @@ def compare(
     for m, r in results.items():
         e = entry(m, r, errors[m])
         meth = get_method(m)
-        e.update(metrics=metrics[m], summary=meth.summary, paper=meth.paper)
+        e.update(metrics=metrics[m], summary=meth.summary, paper=meth.paper, receivers_only=meth.receivers_only)
         entries.append(e)
     gmeth = get_method(REFERENCE)
     ref_entry.update(summary=gmeth.summary, paper=gmeth.paper)
@@ -310,7 +320,8 @@ def compare(
                 "v": e["v8"],
                 "error": errors[e["name"]],
                 "caption": f"{e['timings']['total'] * 1e3:.0f} ms",
-                "error_caption": f"MAE {mt['mae']:.4f}  ssm {mt['ssm_error']:.4f}  FLIP {mt.get('flip', float('nan')):.3f}",
+                "error_caption": f"MAE {mt['mae']:.4f}  ssm {mt['ssm_error']:.4f}  FLIP {mt.get('flip', float('nan')):.3f}"
+                + (f"  (receivers: MAE {mt['receivers']['mae']:.4f})" if "receivers" in mt else ""),
             }
         )
     grid_png = grid_image(rows, limit, out("grid.png"), title=f"{sc.name}, {sc.light.shape} light, {width}x{height}")
@@ -399,12 +410,16 @@ def _cmd_compare(args) -> int:
         command=" ".join(argv) if len(argv) > 2 else None,
     )
     if not args.quiet:
-        print(f"{'method':<22}{'MAE':>9}{'ssm':>9}{'bias':>9}{'FLIP':>8}{'ms':>10}")
+        print(f"{'method':<30}{'MAE':>9}{'ssm':>9}{'bias':>9}{'FLIP':>8}{'ms':>10}")
         for m, mt in res["metrics"].items():
-            print(
-                f"{m:<22}{mt['mae']:9.4f}{mt['ssm_error']:9.4f}{mt['bias']:9.4f}{mt.get('flip', float('nan')):8.4f}"
-                f"{res['timings'][m]['total'] * 1e3:10.1f}"
-            )
+            rows = [(m, mt)]
+            if "receivers" in mt:  # a receivers-only method: all surfaces, then receiver pixels only
+                rows = [(m + " (all surfaces)", mt), (m + " (receivers)", mt["receivers"])]
+            for label, x in rows:
+                print(
+                    f"{label:<30}{x['mae']:9.4f}{x['ssm_error']:9.4f}{x['bias']:9.4f}{x.get('flip', float('nan')):8.4f}"
+                    f"{res['timings'][m]['total'] * 1e3:10.1f}"
+                )
         for m, why in res["skipped"].items():
             print(f"skipped {m}: {why}")
         print(f"done in {time.perf_counter() - t0:.1f} s")

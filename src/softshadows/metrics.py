@@ -19,6 +19,12 @@ Every metric ignores background pixels (NaN in V_ref, i.e. no surface). Errors a
   (``shading.to_srgb8``); the per-pixel FLIP map is averaged over surface pixels only. Present
   only when both images are given.
 
+``mask`` (optional (H,W) bool) restricts every metric to those pixels. :func:`receiver_pixels`
+gives the pixels whose surface has role ``receiver`` or ``both``: methods that by design shade only
+receivers (``Method.receivers_only``, e.g. the soft shadow map: no self-shadowing, V = 1 on
+occluder-only geometry) are reported over all surface pixels (their limit) *and* over receiver
+pixels only (their quality where they apply), under ``metrics["receivers"]``.
+
 ``eps = 1e-3`` (:data:`EPS`): ground truth V is a multiple of 1/N for N light samples (256 by
 default, up to 1000 still resolves), so eps below 1/N makes "umbra" mean *no* sample reaches the
 light and "lit" mean *every* sample does, while absorbing float32 rounding.
@@ -87,11 +93,28 @@ def flip_error(image, image_ref, mask=None) -> float:
     return float(fmap.mean())
 
 
-def compute_metrics(v, v_ref, image=None, image_ref=None, eps: float = EPS) -> dict:
-    """All metrics of ``v`` against ``v_ref`` (see the module docstring)."""
-    d = signed_error_map(v, v_ref)
+def receiver_pixels(scene, width: int, height: int) -> np.ndarray:
+    """(H,W) bool: eye pixels whose surface is a face of role ``receiver`` or ``both``."""
+    from .api import eye_view
+    from .raster import rasterize
+
+    flat = scene.flat
+    g = rasterize(eye_view(scene, width, height), flat.vertices, flat.faces, cull="none")
+    return g.mask & flat.receiver[np.maximum(g.tri_id, 0)]
+
+
+def compute_metrics(v, v_ref, image=None, image_ref=None, eps: float = EPS, mask=None) -> dict:
+    """All metrics of ``v`` against ``v_ref`` (see the module docstring); over the ``mask``
+    pixels only when given."""
     r = _as2d(v_ref, "v_ref")
     a = _as2d(v, "v")
+    if mask is not None:
+        m = np.asarray(mask, bool)
+        if m.shape != r.shape:
+            raise ValueError(f"shape mismatch: mask {m.shape} vs v_ref {r.shape}")
+        r = np.where(m, r, np.nan)
+        a = np.where(m, a, np.nan)
+    d = signed_error_map(a, r)
     masks = region_masks(r, eps)
     surf = masks["surface"]
     valid = np.isfinite(d)

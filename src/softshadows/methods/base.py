@@ -169,7 +169,9 @@ class Method:
     #: renders the occluders into map(s) from the light's centre (or the light plane): cannot cover
     #: occluders around or touching the light (render() warns; softshadows.limits)
     light_view: bool = False
-    #: shadows receiver faces only (V = 1 without receivers; render() warns)
+    #: True for methods that by design shade only receivers (faces of role receiver|both; e.g. no
+    #: self-shadowing): render() warns when a scene has none, and comparisons also report their
+    #: error over receiver pixels only
     receivers_only: bool = False
 
     def run(self, ctx: FrameContext, **params) -> MethodOutput:  # pragma: no cover - abstract

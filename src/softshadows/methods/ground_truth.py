@@ -1,10 +1,11 @@
 """``ground-truth``: distribution ray tracing on the exact geometry with Embree (``embreex``).
 
-Occlusion rays from every visible point, offset along its normal, to ``samples`` = N x N stratified,
-jittered points of the light (the rectangle, or the sphere's disk facing the point through the
-concentric map) give V = unoccluded rays / N^2 (docs/design.md). Jitter is a counter-based hash of
-(seed, pixel, sample), so the image does not depend on threading; ray generation and reduction are
-Numba ``nogil`` kernels overlapped with Embree's single-threaded tracing (:func:`trace_in_pipeline`).
+For every eye pixel with a surface point p (recomputed in float64 on the triangle as Embree stores
+it: :func:`hit_points`), occlusion rays from p, offset along its normal by a bound on the
+floating-point error of p and of Embree's triangle test (pbrt-v4's ``OffsetRayOrigin``; no
+scene-size fraction), to ``samples`` = N x N stratified, jittered points of the light (the
+rectangle, or the sphere's disk facing the point) give V = unoccluded rays / N^2 (docs/design.md).
+Jitter is a counter-based hash of (seed, pixel, sample), so the image does not depend on threading.
 
 Steps, parameters, deviations and known limits: ``docs/methods/ground-truth.md``.
 """
@@ -68,18 +69,97 @@ def jitter_pair(seed, pixel, sample):
     return a, b
 
 
+#: unit roundoff of float32 (Embree's arithmetic) and float64 (our hit points)
+U32 = 2.0**-24
+U64 = 2.0**-53
+#: factor over the first-order error bounds below (covers their O(u^2) terms, the reciprocal
+#: Embree computes t with, and nothing else: it is not a tuning knob)
+BOUND_SAFETY = 2.0
+
+
+def hit_points(flat, eye, idx, nrm):
+    """Hit points recomputed in float64 and their error bounds (docs/methods/ground-truth.md).
+
+    For the eye pixels ``idx`` (flat indices into the G-buffer), with eye-facing normals ``nrm``
+    (from :meth:`FrameContext.points`): the point ``p = b0 V0 + b1 V1 + b2 V2`` on the triangle
+    *as Embree stores it* (float32 vertices, computed in float64 from the G-buffer's tri_id and
+    barycentrics, b0 = 1 - b1 - b2), its unit geometric normal n (float64, turned like ``nrm``),
+    and two distances along n, the terms of the ray-origin offset:
+
+    * ``err_point``: the error of p itself: float64 rounding of the barycentric sum
+      (gamma_5(u64) (sum_j |b_j V_j| + |V0|) per component) plus the float32 conversion of the
+      origin Embree receives (u32 |p| per component), projected as pbrt's ``dot(|n|, pError)``;
+    * ``err_embree``: a bound on the error of the signed distance that Embree's (robust, Pluecker)
+      triangle test computes for an origin near the triangle: with R the largest distance from the
+      origin to a vertex and A the area, u32 (4 R + 16 R^3 / A) (vertices relative to the origin
+      and edges rounded, normal from a rounded cross product, |dN| <= 32 u32 R^2, then a rounded
+      dot product);
+    * ``grazing``: u32 (16 R^2 / A + 3): the error of the cosine between the computed normal and
+      the ray, below which the sign of Embree's denominator (front or back) is not certain.
+
+    Also ``own_blocks``: the pixel's triangle is an occluder (it is in the BVH), so a ray leaving
+    its back side is blocked by it."""
+    tri = eye.tri_id.ravel()[idx]
+    bary = eye.bary.reshape(-1, 2)[idx].astype(np.float64)
+    V = flat.vertices[flat.faces[tri]].astype(np.float32).astype(np.float64)  # (K,3,3), Embree's
+    b1, b2 = bary[:, 0:1], bary[:, 1:2]
+    b0 = 1.0 - b1 - b2
+    p = b0 * V[:, 0] + b1 * V[:, 1] + b2 * V[:, 2]
+    cr = np.cross(V[:, 1] - V[:, 0], V[:, 2] - V[:, 0])
+    twice_area = np.linalg.norm(cr, axis=1)
+    n = cr / np.maximum(twice_area, np.finfo(np.float64).tiny)[:, None]
+    n *= np.where(np.sum(n * nrm, axis=1) < 0.0, -1.0, 1.0)[:, None]
+    abs_n = np.abs(n)
+    g5 = 5 * U64 / (1 - 5 * U64)
+    perr64 = g5 * (np.abs(b0 * V[:, 0]) + np.abs(b1 * V[:, 1]) + np.abs(b2 * V[:, 2]) + np.abs(V[:, 0]))
+    err_point = np.sum(abs_n * (perr64 + U32 * np.abs(p)), axis=1)
+    area = np.maximum(0.5 * twice_area, np.finfo(np.float64).tiny)
+    R = np.max(np.linalg.norm(V - p[:, None, :], axis=2), axis=1)
+    q = R * R / area
+    grazing = U32 * (16.0 * q + 3.0)
+    err_embree = U32 * R * (4.0 + 16.0 * q)
+    # the origin sits err_* above p: R grows by that much (one fixed-point step is enough, it is tiny)
+    R = R + BOUND_SAFETY * (err_point + err_embree)
+    q = R * R / area
+    err_embree = U32 * R * (4.0 + 16.0 * q)
+    own_blocks = flat.occluder[tri]
+    return p, n, err_point, err_embree, grazing, own_blocks
+
+
 @kernel(parallel=True, nogil=True)
-def generate_light_rays(pts, nrm, pix, eps, seed, n_side, shape, center, u, v, radius, org, dirs, dist, geo):
+def generate_light_rays(
+    pts, nrm, pix, off, grazing, own_blocks, seed, n_side, shape, center, u, v, radius, org, dirs, dist, geo
+):
     """Fill origins/directions/lengths for len(pts) points x n_side^2 samples (sample s of point k
     at row k*S+s). geo = cos_p * cos_l / r^2 (for the physical mode). ``pix``: global pixel ids
-    seeding the jitter."""
+    seeding the jitter.
+
+    Ray origins (pbrt's ``OffsetRayOrigin``): ``p + off[k] n``, n the normal on the side the ray
+    leaves to, rounded to float32 away from the surface (the next float32 outward where rounding
+    to nearest came back toward it). ``off``: the error bound of :func:`hit_points`. A ray that
+    leaves the surface on the side the eye does not see (cos_p <= ``grazing[k]``, the float32
+    resolution of that side) is blocked by the surface itself when the surface is an occluder
+    (``own_blocks``): it is not traced (length 0) and marked with geo = -1."""
     S = n_side * n_side
     for k in prange(pts.shape[0]):
-        ox = pts[k, 0] + eps * nrm[k, 0]
-        oy = pts[k, 1] + eps * nrm[k, 1]
-        oz = pts[k, 2] + eps * nrm[k, 2]
+        px, py, pz = pts[k, 0], pts[k, 1], pts[k, 2]
+        nx, ny, nz = nrm[k, 0], nrm[k, 1], nrm[k, 2]
+        ox = px + off[k] * nx
+        oy = py + off[k] * ny
+        oz = pz + off[k] * nz
+        ox32 = np.float32(ox)
+        oy32 = np.float32(oy)
+        oz32 = np.float32(oz)
+        # round away from the surface: where rounding to nearest moved a coordinate back toward
+        # the surface, take the next float32 outward
+        if (ox32 - ox) * nx < 0.0:
+            ox32 = np.nextafter(ox32, np.float32(np.inf) if nx > 0.0 else np.float32(-np.inf))
+        if (oy32 - oy) * ny < 0.0:
+            oy32 = np.nextafter(oy32, np.float32(np.inf) if ny > 0.0 else np.float32(-np.inf))
+        if (oz32 - oz) * nz < 0.0:
+            oz32 = np.nextafter(oz32, np.float32(np.inf) if nz > 0.0 else np.float32(-np.inf))
         if shape == 1:  # sphere: disk facing p
-            wx, wy, wz = pts[k, 0] - center[0], pts[k, 1] - center[1], pts[k, 2] - center[2]
+            wx, wy, wz = px - center[0], py - center[1], pz - center[2]
             wl = np.sqrt(wx * wx + wy * wy + wz * wz)
             wx /= wl
             wy /= wl
@@ -119,17 +199,28 @@ def generate_light_rays(pts, nrm, pix, eps, seed, n_side, shape, center, u, v, r
                     sx = center[0] + (a - 0.5) * u[0] + (b - 0.5) * v[0]
                     sy = center[1] + (a - 0.5) * u[1] + (b - 0.5) * v[1]
                     sz = center[2] + (a - 0.5) * u[2] + (b - 0.5) * v[2]
-                rx, ry, rz = sx - ox, sy - oy, sz - oz
-                rl = np.sqrt(rx * rx + ry * ry + rz * rz)
                 q = k * S + s
-                org[q, 0] = ox
-                org[q, 1] = oy
-                org[q, 2] = oz
+                # cosine at p toward the sample (from p itself: the side the ray leaves to)
+                qx, qy, qz = sx - px, sy - py, sz - pz
+                ql = np.sqrt(qx * qx + qy * qy + qz * qz)
+                cp = (nx * qx + ny * qy + nz * qz) / ql
+                org[q, 0] = ox32
+                org[q, 1] = oy32
+                org[q, 2] = oz32
+                if own_blocks[k] and cp <= grazing[k]:
+                    # leaves through the back of the pixel's own (occluder) triangle: blocked
+                    dirs[q, 0] = nx
+                    dirs[q, 1] = ny
+                    dirs[q, 2] = nz
+                    dist[q] = 0.0
+                    geo[q] = -1.0
+                    continue
+                rx, ry, rz = sx - ox32, sy - oy32, sz - oz32
+                rl = np.sqrt(rx * rx + ry * ry + rz * rz)
                 dirs[q, 0] = rx / rl
                 dirs[q, 1] = ry / rl
                 dirs[q, 2] = rz / rl
                 dist[q] = rl * (1.0 - 1e-6)
-                cp = (nrm[k, 0] * rx + nrm[k, 1] * ry + nrm[k, 2] * rz) / rl
                 cl = -(lnx * rx + lny * ry + lnz * rz) / rl
                 if cp < 0.0:
                     cp = 0.0
@@ -140,20 +231,21 @@ def generate_light_rays(pts, nrm, pix, eps, seed, n_side, shape, center, u, v, r
 
 @kernel(parallel=True, nogil=True)
 def reduce_visibility(hits, geo, S, vis, irr, offset):
-    """vis[k] = unoccluded fraction; irr[k] = sum of geo over unoccluded samples / S."""
+    """vis[k] = unoccluded fraction; irr[k] = sum of geo over unoccluded samples / S (samples with
+    geo < 0 are blocked without tracing, see :func:`generate_light_rays`)."""
     n = hits.shape[0] // S
     for k in prange(n):
         c = 0
         e = 0.0
         for s in range(S):
-            if hits[k * S + s] < 0:  # embree: -1 = not occluded
+            if hits[k * S + s] < 0 and geo[k * S + s] >= 0.0:  # embree: -1 = not occluded; geo -1: blocked
                 c += 1
                 e += geo[k * S + s]
         vis[offset + k] = c / S
         irr[offset + k] = e / S
 
 
-def trace_in_pipeline(esc, pts, nrm, pix, eps, seed, n_side, light, vis, irr, progress=False):
+def trace_in_pipeline(esc, pts, nrm, pix, off, grazing, own_blocks, seed, n_side, light, vis, irr, progress=False):
     """Generate, trace and reduce rays chunk by chunk. Embree's ``run`` is single-threaded and holds
     the GIL, so ray generation and reduction (Numba, ``nogil``) run in one worker thread, overlapped
     with tracing: chunk i+1 is generated while chunk i is traced. Returns (trace, generation,
@@ -180,7 +272,9 @@ def trace_in_pipeline(esc, pts, nrm, pix, eps, seed, n_side, light, vis, irr, pr
             pts[start:stop],
             nrm[start:stop],
             pix[start:stop],
-            eps,
+            off[start:stop],
+            grazing[start:stop],
+            own_blocks[start:stop],
             seed,
             n_side,
             shape,
@@ -249,7 +343,13 @@ class GroundTruth(Method):
             check=lambda n: None if round(n**0.5) ** 2 == n else "a perfect square (N x N strata)",
         ),
         Param("physical", False, "image = full area-light integral (cosines, 1/r^2) per sample"),
-        Param("offset", 1e-4, "ray origin offset along the normal, x scene diagonal", min=0.0),
+        Param(
+            "offset",
+            0.0,
+            "extra ray-origin offset along the normal, x scene diagonal, added to the float error bound "
+            "(0: the bound alone; for studies)",
+            min=0.0,
+        ),
     )
 
     #: what `softshadows pareto` sweeps (Method.sweep)
@@ -258,9 +358,14 @@ class GroundTruth(Method):
     def run(self, ctx, samples, physical, offset):
         n_side = int(round(np.sqrt(samples)))
         scene = ctx.scene
-        pts, nrm, idx = ctx.points()
-        lo, hi = scene.bounds()
-        eps = offset * float(np.linalg.norm(hi - lo))
+        _, nrm_eye, idx = ctx.points()
+        with ctx.timer.phase("ray_origins"):
+            pts, nrm, err_point, err_embree, grazing, own_blocks = hit_points(ctx.flat, ctx.eye, idx, nrm_eye)
+            off = BOUND_SAFETY * (err_point + err_embree)
+            if offset > 0.0:
+                lo, hi = scene.bounds()
+                off = off + offset * float(np.linalg.norm(hi - lo))
+            grazing = BOUND_SAFETY * grazing
         with ctx.timer.phase("bvh_build"):
             esc = _embree_for(scene)
         S = samples
@@ -268,7 +373,7 @@ class GroundTruth(Method):
         vis = np.zeros(K, np.float32)
         irr = np.zeros(K, np.float64)
         trace_t, gen_t, red_t, wall = trace_in_pipeline(
-            esc, pts, nrm, idx, eps, ctx.seed, n_side, scene.light, vis, irr, progress=ctx.progress
+            esc, pts, nrm, idx, off, grazing, own_blocks, ctx.seed, n_side, scene.light, vis, irr, progress=ctx.progress
         )
         # generation and reduction overlap tracing: the phase is their wall time; parts go to stats
         ctx.timer.times["rays"] = ctx.timer.times.get("rays", 0.0) + wall
@@ -278,7 +383,8 @@ class GroundTruth(Method):
             "samples": S,
             "rays": int(K * S),
             "points": int(K),
-            "eps": eps,
+            "origin_offset_median": float(np.median(off)) if K else 0.0,
+            "origin_offset_max": float(np.max(off)) if K else 0.0,
             "rays_per_second": float(K * S / t_trace) if t_trace > 0 else float("nan"),
             "trace_seconds": trace_t,
             "ray_generation_seconds": gen_t,

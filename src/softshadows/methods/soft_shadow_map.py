@@ -1,11 +1,14 @@
-"""``soft-shadow-map``: Soft Shadow Maps (Atty, Holzschuch, Lapierre, Hasenfratz, Hansen, Sillion, CGF 2006).
+"""``soft-shadow-map``: Soft Shadow Maps (Atty, Holzschuch, Lapierre, Hasenfratz, Hansen, Sillion, CGF 2006),
+rectangle and sphere lights.
 
-The occluders seen from the center of the rectangle light become one micro-patch per occluder-map pixel
+The occluders seen from the center of the light become one micro-patch per occluder-map pixel
 (:func:`discretize_occluders`); the fraction of the light each patch hides is computed at every
 texel of the soft shadow map inside its penumbra extent (:func:`penumbra_extents`,
 :func:`occlusion_percentage`), summed in draw order like GPU blending
 (:func:`accumulate_soft_shadow_map`, optionally in FP16), clamped, and projected onto the eye view
 (:func:`project_soft_shadow_map`). :func:`compute_soft_shadow_map` runs every step up to the map.
+With a sphere light each patch is back-projected onto the disk facing the texel's receiver point and
+its exact overlap with that disk is taken (:func:`occlusion_percentage_disk`).
 
 Steps, parameters, deviations and known limits: ``docs/methods/soft-shadow-map.md``.
 """
@@ -21,6 +24,7 @@ import numpy as np
 from numba import prange
 
 from .._jit import kernel
+from ..analytic import polygon_disk_area
 from ..errors import SoftShadowsError
 from ..raster import View, rasterize_depth, rasterize_fragments
 from ..raster.kernels import sample_bilinear, view_project
@@ -33,7 +37,10 @@ FP16_MAX = 65504.0
 
 # ---- 1. the light-aligned views ---------------------------------------------------------------
 def light_half_extents(light, view: View) -> tuple[float, float]:
-    """Half sizes (hx, hy) of the rectangle light along the view's right and up axes."""
+    """Half sizes (hx, hy) of the rectangle light along the view's right and up axes (sphere: the
+    radius, twice)."""
+    if light.shape == "sphere":
+        return light.radius, light.radius
     hx = 0.5 * abs(float(np.dot(light.u, view.right)))
     hy = 0.5 * abs(float(np.dot(light.v, view.up)))
     return hx, hy
@@ -67,13 +74,20 @@ def compute_map_views(scene, map_size: int, ssm_size: int, margin: float = 0.02)
     ov = View(
         ov.origin, ov.right, ov.up, ov.forward, _with_aspect(ov.window, aspect), ov.near, ov.far, map_size, map_size
     )
-    rv = light_view(light, rec_pts, ssm_size, ssm_size, margin=0.0)
+    # both maps in one light frame (a sphere light's frame otherwise depends on the points)
+    rv = light_view(light, rec_pts, ssm_size, ssm_size, margin=0.0, frame=(ov.right, ov.up, ov.forward))
     # Widest penumbra around the occluder window (projective units): a point at depth z_P, seen
     # from any light point, lands within hx (1/z_P - 1/z_R) of its central projection at depth z_R.
+    # Sphere: light points fill a ball of radius rho (the facing disks), so also off the z = 0
+    # plane: the offset is at most rho (1 + W) / (1 - rho / z_P) (1/z_P - 1/z_R), W the largest
+    # |projective coordinate| of the occluder window.
     zo = ov.to_view(occ_pts)[:, 2]
     zo_min = max(float(zo[zo > ov.near * 0.5].min()) if np.any(zo > ov.near * 0.5) else ov.near, 1e-9)
     zr_max = rv.far
     l, r, b, t = ov.window
+    if light.shape == "sphere":
+        grow = (1.0 + max(abs(l), abs(r), abs(b), abs(t))) / (1.0 - hx / zo_min) if zo_min > hx else np.inf
+        hx, hy = hx * grow, hy * grow
     px, py = (r - l) / map_size, (t - b) / map_size
     mx = max(hx * (1.0 / zo_min - 1.0 / zr_max), 0.0) + 2 * px
     my = max(hy * (1.0 / zo_min - 1.0 / zr_max), 0.0) + 2 * py
@@ -225,6 +239,69 @@ def penumbra_extents(patches, hx, hy, z_plane, svp):
     return out
 
 
+@kernel
+def penumbra_extents_sphere(patches, rho, z_plane, svp):
+    """:func:`penumbra_extents` for a sphere light (its disks facing each point lie in the ball of
+    radius ``rho`` about C_L). The shadow on the plane at depth z of a patch corner q seen from a
+    light point l is projective in l and in q, so it lies in the convex hull of the 32 shadows of
+    the patch's 4 corners seen from the 8 corners of the box [-rho, rho]^3; in projective
+    coordinates each such shadow moves monotonically in 1/z from q's own projection (depth z_O)
+    to its projection at ``z_plane``, so the rectangle bounding both sets contains the patch's
+    penumbra at every receiver depth. Empty when the patch is not in front of the ball."""
+    n = patches.shape[0]
+    out = np.empty((n, 4), np.int32)
+    l, r, b, t = svp[12], svp[13], svp[14], svp[15]
+    W = svp[18]
+    H = svp[19]
+    dxs = (r - l) / W
+    dys = (t - b) / H
+    for k in range(n):
+        z = patches[k, 4]
+        out[k, 0] = 1
+        out[k, 1] = 0
+        out[k, 2] = 1
+        out[k, 3] = 0
+        if not (z < z_plane):
+            continue
+        if z > rho:
+            x_lo = min(patches[k, 0] / z, patches[k, 1] / z)
+            x_hi = max(patches[k, 0] / z, patches[k, 1] / z)
+            y_lo = min(patches[k, 2] / z, patches[k, 3] / z)
+            y_hi = max(patches[k, 2] / z, patches[k, 3] / z)
+            for c in range(8):
+                lx = rho if (c & 1) else -rho
+                ly = rho if (c & 2) else -rho
+                lz = rho if (c & 4) else -rho
+                s = (z_plane - lz) / (z - lz)
+                for cx in range(2):
+                    qx = patches[k, cx]
+                    X = (lx + (qx - lx) * s) / z_plane
+                    x_lo = min(x_lo, X)
+                    x_hi = max(x_hi, X)
+                for cy in range(2):
+                    qy = patches[k, 2 + cy]
+                    Y = (ly + (qy - ly) * s) / z_plane
+                    y_lo = min(y_lo, Y)
+                    y_hi = max(y_hi, Y)
+        else:  # the patch is inside the light's ball: every texel
+            x_lo, x_hi, y_lo, y_hi = l, r, b, t
+        fj0 = math.ceil((x_lo - l) / dxs - 0.5)
+        fj1 = math.floor((x_hi - l) / dxs - 0.5)
+        fi0 = math.ceil((t - y_hi) / dys - 0.5)
+        fi1 = math.floor((t - y_lo) / dys - 0.5)
+        fj0 = max(fj0, 0.0)
+        fi0 = max(fi0, 0.0)
+        fj1 = min(fj1, W - 1.0)
+        fi1 = min(fi1, H - 1.0)
+        if fj0 > fj1 or fi0 > fi1:
+            continue
+        out[k, 0] = int(fi0)
+        out[k, 1] = int(fi1)
+        out[k, 2] = int(fj0)
+        out[k, 3] = int(fj1)
+    return out
+
+
 # ---- 6. the fragment program: percentage of occlusion ------------------------------------------
 @kernel(inline=True)
 def _sat(x):
@@ -289,6 +366,201 @@ def occlusion_percentage_at(patch, ux, uy, z_r, hx, hy) -> float:
             (y1 - uy * zo) / (2 * hy),
         )
     )
+
+
+@kernel(inline=True)
+def _clip_height(ix, iy, iz, ih, n, level, keep_above, ox, oy, oz, oh):
+    """Sutherland-Hodgman: the polygon (ix, iy, iz)[:n] with heights ih, clipped to
+    h >= level (``keep_above``) or h <= level; written to (ox, oy, oz, oh), returns its size."""
+    m = 0
+    for i in range(n):
+        j = i + 1 if i + 1 < n else 0
+        di = ih[i] - level if keep_above else level - ih[i]
+        dj = ih[j] - level if keep_above else level - ih[j]
+        if di >= 0.0:
+            ox[m] = ix[i]
+            oy[m] = iy[i]
+            oz[m] = iz[i]
+            oh[m] = ih[i]
+            m += 1
+        if (di >= 0.0) != (dj >= 0.0):
+            f = di / (di - dj)
+            ox[m] = ix[i] + f * (ix[j] - ix[i])
+            oy[m] = iy[i] + f * (iy[j] - iy[i])
+            oz[m] = iz[i] + f * (iz[j] - iz[i])
+            oh[m] = level
+            m += 1
+    return m
+
+
+@kernel(inline=True)
+def _disk_frame(px, py, pz, rho, out):
+    """The facing disk of receiver point p = (px, py, pz) (light frame, C_L at the origin):
+    ``out`` = (w, e1, e2, |p|, rho/|p|), w = p/|p| the disk's normal, e1, e2 its in-plane axes."""
+    hp = math.sqrt(px * px + py * py + pz * pz)
+    wx = px / hp
+    wy = py / hp
+    wz = pz / hp
+    if abs(wx) < 0.9:
+        ax, ay, az = 1.0, 0.0, 0.0
+    else:
+        ax, ay, az = 0.0, 1.0, 0.0
+    e1x, e1y, e1z = ay * wz - az * wy, az * wx - ax * wz, ax * wy - ay * wx
+    el = math.sqrt(e1x * e1x + e1y * e1y + e1z * e1z)
+    e1x /= el
+    e1y /= el
+    e1z /= el
+    out[0] = wx
+    out[1] = wy
+    out[2] = wz
+    out[3] = e1x
+    out[4] = e1y
+    out[5] = e1z
+    out[6] = wy * e1z - wz * e1y
+    out[7] = wz * e1x - wx * e1z
+    out[8] = wx * e1y - wy * e1x
+    out[9] = hp
+    out[10] = rho / hp
+
+
+@kernel(parallel=True)
+def disk_frames(recv_depth, svp, rho):
+    """:func:`_disk_frame` of every SSM texel's receiver point as 11 planes (11,H,W) (contiguous
+    along rows, for the vectorized pass); zeros where no receiver."""
+    H, W = recv_depth.shape
+    l, r, b, t = svp[12], svp[13], svp[14], svp[15]
+    dxs = (r - l) / W
+    dys = (t - b) / H
+    out = np.zeros((11, H, W))
+    for i in prange(H):
+        uy = t - (i + 0.5) * dys
+        f = np.empty(11)
+        for j in range(W):
+            zr = np.float64(recv_depth[i, j])
+            if zr > 0.0:
+                ux = l + (j + 0.5) * dxs
+                _disk_frame(ux * zr, uy * zr, zr, rho, f)
+                for k in range(11):
+                    out[k, i, j] = f[k]
+    return out
+
+
+@kernel(inline=True)
+def _outside_disk(u0, u1, u2, u3, v0, v1, v2, v3):
+    """True when the quadrilateral's bounding circle (about its corners' mean) lies outside the
+    unit disk: then it hides nothing."""
+    cu = 0.25 * (u0 + u1 + u2 + u3)
+    cv = 0.25 * (v0 + v1 + v2 + v3)
+    r2 = max(
+        max((u0 - cu) * (u0 - cu) + (v0 - cv) * (v0 - cv), (u1 - cu) * (u1 - cu) + (v1 - cv) * (v1 - cv)),
+        max((u2 - cu) * (u2 - cu) + (v2 - cv) * (v2 - cv), (u3 - cu) * (u3 - cu) + (v3 - cv) * (v3 - cv)),
+    )
+    rq = 1.0 + math.sqrt(r2)
+    return cu * cu + cv * cv >= rq * rq
+
+
+@kernel(inline=True)
+def occlusion_percentage_disk(F, fi, fj, x0, x1, y0, y1, zo, sx, sy, sz, sh, tx, ty, tz, th):
+    """Fraction of a sphere light hidden by one micro-patch at one receiver point p: the light is
+    the disk of radius rho through C_L (the light frame's origin) facing p (V's definition),
+    ``F[:, fi, fj]`` = :func:`_disk_frame` of p (indices, not a row view: a view costs a contended
+    reference-count update). The patch ``[x0, x1] x [y0, y1]`` at depth z_O is projected
+    from p onto the disk's plane (the paper's back-projection, onto that plane instead of the
+    rectangle's): a patch point q lands at disk coordinates
+    ``(e1.q, e2.q) / (kappa (|p| - w.q))``, kappa = rho/|p| (radius 1); the overlap is the exact
+    area of that quadrilateral intersected with the unit disk
+    (:func:`softshadows.analytic.polygon_disk_area`: triangles and circular sectors), over pi.
+    Shortcuts with the same result: a quadrilateral whose bounding box or bounding circle misses
+    the disk hides 0, one inside it hides its own area (shoelace). Parts of the patch behind the disk's plane or not
+    in front of p (w.q outside (0, |p|)) hide nothing and are clipped off first.
+    ``sx..th``: scratch arrays of 8."""
+    wx, wy, wz = F[0, fi, fj], F[1, fi, fj], F[2, fi, fj]
+    hp, kap = F[9, fi, fj], F[10, fi, fj]
+    hmax = hp * (1.0 - 1e-9)
+    # corners in order (x0,y0) (x1,y0) (x1,y1) (x0,y1); everything is affine in x and y
+    hz = wz * zo
+    h0 = wx * x0 + wy * y0 + hz
+    h1 = wx * x1 + wy * y0 + hz
+    h2 = wx * x1 + wy * y1 + hz
+    h3 = wx * x0 + wy * y1 + hz
+    if h0 > 0.0 and h1 > 0.0 and h2 > 0.0 and h3 > 0.0 and h0 < hmax and h1 < hmax and h2 < hmax and h3 < hmax:
+        az = F[5, fi, fj] * zo
+        bz = F[8, fi, fj] * zo
+        a0 = F[3, fi, fj] * x0 + F[4, fi, fj] * y0 + az
+        a1 = F[3, fi, fj] * x1 + F[4, fi, fj] * y0 + az
+        a2 = F[3, fi, fj] * x1 + F[4, fi, fj] * y1 + az
+        a3 = F[3, fi, fj] * x0 + F[4, fi, fj] * y1 + az
+        b0 = F[6, fi, fj] * x0 + F[7, fi, fj] * y0 + bz
+        b1 = F[6, fi, fj] * x1 + F[7, fi, fj] * y0 + bz
+        b2 = F[6, fi, fj] * x1 + F[7, fi, fj] * y1 + bz
+        b3 = F[6, fi, fj] * x0 + F[7, fi, fj] * y1 + bz
+        d0 = 1.0 / (kap * (hp - h0))
+        d1 = 1.0 / (kap * (hp - h1))
+        d2 = 1.0 / (kap * (hp - h2))
+        d3 = 1.0 / (kap * (hp - h3))
+        u0, u1, u2, u3 = a0 * d0, a1 * d1, a2 * d2, a3 * d3
+        v0, v1, v2, v3 = b0 * d0, b1 * d1, b2 * d2, b3 * d3
+        if max(u0, u1, u2, u3) <= -1.0 or min(u0, u1, u2, u3) >= 1.0:
+            return 0.0
+        if max(v0, v1, v2, v3) <= -1.0 or min(v0, v1, v2, v3) >= 1.0:
+            return 0.0
+        if _outside_disk(u0, u1, u2, u3, v0, v1, v2, v3):
+            return 0.0
+        if (
+            u0 * u0 + v0 * v0 <= 1.0
+            and u1 * u1 + v1 * v1 <= 1.0
+            and u2 * u2 + v2 * v2 <= 1.0
+            and u3 * u3 + v3 * v3 <= 1.0
+        ):
+            # a convex quadrilateral inside the (convex) disk: its own area
+            return 0.5 * abs((u0 - u2) * (v1 - v3) - (u1 - u3) * (v0 - v2)) / math.pi
+        tx[0] = u0
+        tx[1] = u1
+        tx[2] = u2
+        tx[3] = u3
+        ty[0] = v0
+        ty[1] = v1
+        ty[2] = v2
+        ty[3] = v3
+        return polygon_disk_area(tx, ty, 4, 1.0) / math.pi
+    # general case: clip to 0 < w.q < |p| first
+    sx[0] = x0
+    sx[1] = x1
+    sx[2] = x1
+    sx[3] = x0
+    sy[0] = y0
+    sy[1] = y0
+    sy[2] = y1
+    sy[3] = y1
+    sh[0] = h0
+    sh[1] = h1
+    sh[2] = h2
+    sh[3] = h3
+    for c in range(4):
+        sz[c] = zo
+    n = _clip_height(sx, sy, sz, sh, 4, 0.0, True, tx, ty, tz, th)
+    n = _clip_height(tx, ty, tz, th, n, hmax, False, sx, sy, sz, sh)
+    if n < 3:
+        return 0.0
+    for c in range(n):
+        d = 1.0 / (kap * (hp - sh[c]))
+        tx[c] = (F[3, fi, fj] * sx[c] + F[4, fi, fj] * sy[c] + F[5, fi, fj] * sz[c]) * d
+        ty[c] = (F[6, fi, fj] * sx[c] + F[7, fi, fj] * sy[c] + F[8, fi, fj] * sz[c]) * d
+    return polygon_disk_area(tx, ty, n, 1.0) / math.pi
+
+
+def occlusion_percentage_disk_at(patch, ux, uy, z_r, rho) -> float:
+    """Reference form of :func:`occlusion_percentage_disk` for one patch ``(x0, x1, y0, y1, z_O)``
+    and one receiver point (projective ``ux, uy`` and depth ``z_r``); 0 unless z_O < z_r."""
+    x0, x1, y0, y1, zo = (float(v) for v in patch)
+    if not z_r > zo:
+        return 0.0
+    F = np.empty((11, 1, 1))
+    f = np.empty(11)
+    _disk_frame(ux * z_r, uy * z_r, z_r, rho, f)
+    F[:, 0, 0] = f
+    sc = [np.empty(8) for _ in range(8)]
+    return float(occlusion_percentage_disk(F, 0, 0, x0, x1, y0, y1, zo, *sc))
 
 
 # ---- 7. accumulation into the soft shadow map --------------------------------------------------
@@ -443,6 +715,148 @@ def accumulate_soft_shadow_map(
     return touched
 
 
+@kernel(inline=True)
+def _disk_row_pass(F, recv_depth, recv_mesh, ssm, flags, i, j0, j1, x0, x1, y0, y1, zo, pm, check_mesh):
+    """One SSM row of one micro-patch for :func:`accumulate_soft_shadow_map_sphere`, branch-free:
+    adds :func:`occlusion_percentage_disk`'s value where one of its shortcuts applies (nothing
+    hidden: receiver not behind the patch, own mesh, or the projected quad's bounding box misses
+    the disk; the quad's own area: inside the disk), with the same float64 arithmetic, and sets
+    ``flags[j - j0]`` where the exact routine is needed. Returns how many."""
+    n = 0
+    ii = np.uint64(i)
+    for jj in range(j1 - j0):
+        jx = np.uint64(j0 + jj)
+        zr = np.float64(recv_depth[ii, jx])
+        ok = zr > zo
+        if check_mesh:
+            ok = ok and recv_mesh[ii, jx] != pm
+        wx = F[0, ii, jx]
+        wy = F[1, ii, jx]
+        wz = F[2, ii, jx]
+        hp = F[9, ii, jx]
+        kap = F[10, ii, jx]
+        hmax = hp * (1.0 - 1e-9)
+        hz = wz * zo
+        h0 = wx * x0 + wy * y0 + hz
+        h1 = wx * x1 + wy * y0 + hz
+        h2 = wx * x1 + wy * y1 + hz
+        h3 = wx * x0 + wy * y1 + hz
+        inr = (h0 > 0.0) & (h1 > 0.0) & (h2 > 0.0) & (h3 > 0.0) & (h0 < hmax) & (h1 < hmax) & (h2 < hmax) & (h3 < hmax)
+        az = F[5, ii, jx] * zo
+        bz = F[8, ii, jx] * zo
+        a0 = F[3, ii, jx] * x0 + F[4, ii, jx] * y0 + az
+        a1 = F[3, ii, jx] * x1 + F[4, ii, jx] * y0 + az
+        a2 = F[3, ii, jx] * x1 + F[4, ii, jx] * y1 + az
+        a3 = F[3, ii, jx] * x0 + F[4, ii, jx] * y1 + az
+        b0 = F[6, ii, jx] * x0 + F[7, ii, jx] * y0 + bz
+        b1 = F[6, ii, jx] * x1 + F[7, ii, jx] * y0 + bz
+        b2 = F[6, ii, jx] * x1 + F[7, ii, jx] * y1 + bz
+        b3 = F[6, ii, jx] * x0 + F[7, ii, jx] * y1 + bz
+        d0 = 1.0 / (kap * (hp - h0))
+        d1 = 1.0 / (kap * (hp - h1))
+        d2 = 1.0 / (kap * (hp - h2))
+        d3 = 1.0 / (kap * (hp - h3))
+        u0, u1, u2, u3 = a0 * d0, a1 * d1, a2 * d2, a3 * d3
+        v0, v1, v2, v3 = b0 * d0, b1 * d1, b2 * d2, b3 * d3
+        rej = (
+            (max(max(u0, u1), max(u2, u3)) <= -1.0)
+            | (min(min(u0, u1), min(u2, u3)) >= 1.0)
+            | (max(max(v0, v1), max(v2, v3)) <= -1.0)
+            | (min(min(v0, v1), min(v2, v3)) >= 1.0)
+            | _outside_disk(u0, u1, u2, u3, v0, v1, v2, v3)
+        )
+        ins = (
+            (u0 * u0 + v0 * v0 <= 1.0)
+            & (u1 * u1 + v1 * v1 <= 1.0)
+            & (u2 * u2 + v2 * v2 <= 1.0)
+            & (u3 * u3 + v3 * v3 <= 1.0)
+        )
+        area = 0.5 * abs((u0 - u2) * (v1 - v3) - (u1 - u3) * (v0 - v2)) / math.pi
+        add = area if (ok & inr & ~rej & ins) else 0.0
+        ssm[ii, jx] += np.float32(add)
+        need = ok & ~(inr & (rej | ins))
+        flags[jj] = need
+        n += 1 if need else 0
+    return n
+
+
+@kernel(parallel=True)
+def accumulate_soft_shadow_map_sphere(
+    patches,
+    pmesh,
+    ext,
+    band_ptr,
+    band_idx,
+    band_rows,
+    recv_depth,
+    recv_mesh,
+    frames,
+    fp16,
+    rtz,
+    check_mesh,
+    ssm,
+    nslot=1,
+):
+    """:func:`accumulate_soft_shadow_map` for a sphere light: the fragment program is
+    :func:`occlusion_percentage_disk` (float64 arithmetic; the sum is stored in float32, or
+    rounded to half precision with ``fp16``). Same bands, order and skipping rules. ``frames``:
+    :func:`disk_frames` of the texels."""
+    H, W = recv_depth.shape
+    n_bands = band_ptr.shape[0] - 1
+    touched = np.zeros(n_bands, np.int64)
+    for slot in prange(nslot):
+        sx = np.empty(8)
+        sy = np.empty(8)
+        sz = np.empty(8)
+        sh = np.empty(8)
+        tx = np.empty(8)
+        ty = np.empty(8)
+        tz = np.empty(8)
+        th = np.empty(8)
+        flags = np.zeros(W, np.bool_)
+        for bnd in range(slot, n_bands, nslot):
+            r0 = bnd * band_rows
+            r1 = min(r0 + band_rows, H) - 1
+            cnt = 0
+            for q in range(band_ptr[bnd], band_ptr[bnd + 1]):
+                p = band_idx[q]
+                x0, x1, y0, y1, zo = patches[p, 0], patches[p, 1], patches[p, 2], patches[p, 3], patches[p, 4]
+                pm = pmesh[p]
+                i0 = max(ext[p, 0], r0)
+                i1 = min(ext[p, 1], r1)
+                for i in range(i0, i1 + 1):
+                    j0 = ext[p, 2]
+                    j1 = ext[p, 3] + 1
+                    cnt += j1 - j0
+                    if fp16:
+                        for j in range(j0, j1):
+                            zr = np.float64(recv_depth[i, j])
+                            if not (zr > zo) or (check_mesh and recv_mesh[i, j] == pm):
+                                continue
+                            c = occlusion_percentage_disk(
+                                frames, i, j, x0, x1, y0, y1, zo, sx, sy, sz, sh, tx, ty, tz, th
+                            )
+                            if c > 0.0:
+                                ssm[i, j] = np.float32(round_half(np.float64(ssm[i, j]) + round_half(c, rtz), rtz))
+                        continue
+                    # float32 sums: a branch-free pass over the row (vectorizes) does what
+                    # occlusion_percentage_disk's shortcuts do (quads fully inside or whose bounding
+                    # box misses the disk, the same arithmetic) and flags the other texels, which
+                    # get the exact routine: one addition per texel and patch, as before
+                    n_exact = _disk_row_pass(
+                        frames, recv_depth, recv_mesh, ssm, flags, i, j0, j1, x0, x1, y0, y1, zo, pm, check_mesh
+                    )
+                    if n_exact:
+                        for jj in range(j1 - j0):
+                            if flags[jj]:
+                                c = occlusion_percentage_disk(
+                                    frames, i, j0 + jj, x0, x1, y0, y1, zo, sx, sy, sz, sh, tx, ty, tz, th
+                                )
+                                ssm[i, j0 + jj] += np.float32(c)
+            touched[bnd] = cnt
+    return touched
+
+
 @kernel(parallel=True)
 def clamp_soft_shadow_map(ssm):
     """Clamp the summed percentages to [0, 1] in place (the paper clamps at display)."""
@@ -517,11 +931,10 @@ def compute_soft_shadow_map(
     margin: float = 0.02,
     timer=None,
 ) -> SoftShadowMap:
-    """Steps 1-8 for ``scene`` (rectangle light): the clamped soft shadow map and statistics."""
+    """Steps 1-8 for ``scene`` (rect or sphere light): the clamped soft shadow map and statistics."""
     timer = timer or _NullTimer()
-    if scene.light.shape != "rect":
-        raise SoftShadowsError(f"soft-shadow-map supports rect lights, not '{scene.light.shape}'")
     check_roles(scene)
+    sphere = scene.light.shape == "sphere"
     flat = scene.flat
     fp16 = accumulate.startswith("float16")
     stats = {
@@ -550,32 +963,45 @@ def compute_soft_shadow_map(
     ovp, svp = ov.params(), sv.params()
     n_bands = (ssm_size + BAND_ROWS - 1) // BAND_ROWS
     passes = {}
+    frames = None
     fp16_safe = True
     for s in sides:
         with timer.phase("penumbra_extents"):
             patches, pmesh = discretize_occluders(omaps[s][0], omaps[s][1], ovp)
-            ext = penumbra_extents(patches, hx, hy, z_plane, svp)
+            if sphere:
+                ext = penumbra_extents_sphere(patches, hx, z_plane, svp)
+            else:
+                ext = penumbra_extents(patches, hx, hy, z_plane, svp)
             ptr, idx = bin_patches_by_band(ext, n_bands, BAND_ROWS)
         with timer.phase("soft_shadow_map"):
             ssm = np.zeros((ssm_size, ssm_size), np.float32)
-            touched = accumulate_soft_shadow_map(
-                patches,
-                pmesh,
-                ext,
-                ptr,
-                idx,
-                BAND_ROWS,
-                rdepth0,
-                rmesh,
-                svp,
-                hx,
-                hy,
-                fp16,
-                accumulate == "float16-rtz",
-                check_mesh,
-                ssm,
-                numba.get_num_threads(),
-            )
+            rtz = accumulate == "float16-rtz"
+            nslot = numba.get_num_threads()
+            if sphere:
+                if frames is None:
+                    frames = disk_frames(rdepth0, svp, hx)
+                touched = accumulate_soft_shadow_map_sphere(
+                    patches, pmesh, ext, ptr, idx, BAND_ROWS, rdepth0, rmesh, frames, fp16, rtz, check_mesh, ssm, nslot
+                )
+            else:
+                touched = accumulate_soft_shadow_map(
+                    patches,
+                    pmesh,
+                    ext,
+                    ptr,
+                    idx,
+                    BAND_ROWS,
+                    rdepth0,
+                    rmesh,
+                    svp,
+                    hx,
+                    hy,
+                    fp16,
+                    rtz,
+                    check_mesh,
+                    ssm,
+                    nslot,
+                )
             clamp_soft_shadow_map(ssm)
         passes[s] = ssm
         stats[f"micro_patches_{s}"] = int(len(patches))
@@ -604,7 +1030,8 @@ def fp16_condition(z_o, z_r, hx, ov: View) -> np.ndarray:
 @register
 class SoftShadowMapMethod(Method):
     name = "soft-shadow-map"
-    light_shapes = ("rect",)
+    light_shapes = ("rect", "sphere")
+    receivers_only = True  # no self-shadowing, V = 1 on occluder-only geometry (the paper's design)
     summary = "soft shadow maps: occluder-map pixels as micro-patches, occlusion summed in a projective map"
     paper = "Atty et al. 2006, Soft Shadow Maps: Efficient Sampling of Light Source Visibility"
     light_view = True  # maps from the light's centre (limits: softshadows.limits)

@@ -193,13 +193,15 @@ def light_view(
     margin: float = 0.02,
     near_min: float = 1e-3,
     square_pixels: bool = False,
+    frame: tuple | None = None,
 ) -> View:
     """A view from the light's center (rect: along its normal; sphere: toward the points' centroid)
     whose window fits ``points`` (e.g. the scene's bounding-box corners or vertices in front of
-    the light). near/far bracket the points' depths."""
+    the light). near/far bracket the points' depths. ``frame``: (right, up, forward) to use instead
+    (e.g. another view's, so that two maps of a sphere light share one frame)."""
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     lo, hi = pts.min(axis=0), pts.max(axis=0)
-    r, u, f = light_frame(light, toward=(lo + hi) / 2)
+    r, u, f = frame if frame is not None else light_frame(light, toward=(lo + hi) / 2)
     frame = View(light.center.copy(), r, u, f, (-1, 1, -1, 1), near_min, 1.0, width, height, ortho)
     z = frame.to_view(pts)[:, 2]
     front = pts[z > near_min] if not ortho else pts

@@ -193,6 +193,16 @@ def render_html(ctx: dict) -> str:
         "<div class='sub'>Visibility V in [0,1]; errors are V - V_ref over surface pixels "
         "(background excluded). Click a column header to sort. Hover a header for its meaning.</div>"
     )
+    ronly = [m["name"] for m in methods if "receivers" in m["metrics"]]
+    if ronly:
+        parts.append(
+            "<div class='note'>"
+            + ", ".join(f"<b>{_e(n)}</b>" for n in ronly)
+            + " shade only receivers by design (no self-shadowing; occluder-only geometry gets V = 1). "
+            "Each such method has two rows: <i>all surfaces</i> (every surface pixel: the method's limit "
+            "included) and <i>receivers only</i> (pixels of faces with role receiver or both: its quality "
+            "where it applies).</div>"
+        )
     header = (
         [("method", "")]
         + [(k, METRIC_HELP.get(k, k)) for k in METRIC_COLS]
@@ -205,12 +215,18 @@ def render_html(ctx: dict) -> str:
     for m in methods:
         mt = m["metrics"]
         name = _e(m["name"])
-        link = f'<a href="#viewer?m={name}" title="show in the viewer">{name}</a>' if ctx.get("viewer") else name
-        rows.append(
-            [(link, name)]
-            + [mt.get(k) for k in METRIC_COLS]
-            + [mt.get("n_shadow"), _ms(m["timings"].get("total", float("nan")) * 1e3)]
-        )
+        labelled = [(m["name"], mt)]
+        if "receivers" in mt:
+            labelled = [(m["name"] + " (all surfaces)", mt), (m["name"] + " (receivers only)", mt["receivers"])]
+        for label, x in labelled:
+            shown = _e(label)
+            if ctx.get("viewer"):
+                shown = f'<a href="#viewer?m={name}" title="show in the viewer">{shown}</a>'
+            rows.append(
+                [(shown, _e(label))]
+                + [x.get(k) for k in METRIC_COLS]
+                + [x.get("n_shadow"), _ms(m["timings"].get("total", float("nan")) * 1e3)]
+            )
     parts.append(_table("metrics", header, rows))
     if methods:
         mt = methods[0]["metrics"]
@@ -306,6 +322,12 @@ def render_html(ctx: dict) -> str:
             if mt
             else "reference"
         )
+        if mt and "receivers" in mt:
+            rc = mt["receivers"]
+            line = (
+                f"all surfaces: {line}<br>receivers only: MAE {rc['mae']:.4f} &middot; ssm {rc['ssm_error']:.4f}"
+                f" &middot; FLIP {rc.get('flip', float('nan')):.4f}"
+            )
         parts.append(
             f"<div class='card'><h3>{_e(m['name'])}</h3><div class='sub'>{_e(m.get('summary', ''))}"
             f"<br><i>{_e(m.get('paper', ''))}</i><br>{line} &middot; "
