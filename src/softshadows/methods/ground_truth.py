@@ -15,7 +15,6 @@ from __future__ import annotations
 from typing import ClassVar
 
 import numpy as np
-from numba import prange
 
 from .._jit import kernel
 from ..shading import exposure
@@ -59,14 +58,35 @@ def _mix64(z):
 
 
 @kernel(inline=True)
-def jitter_pair(seed, pixel, sample):
-    """Two uniforms in [0,1) for (seed, pixel, sample): counter-based, so results do not depend
-    on how pixels are split into chunks or threads."""
-    h = _mix64(np.uint64(seed) * np.uint64(0x9E3779B97F4A7C15) + np.uint64(pixel))
-    h = _mix64(h ^ (np.uint64(sample) * np.uint64(0xD1B54A32D192ED03) + np.uint64(0x632BE59BD9B4E019)))
-    a = (h >> np.uint64(40)) * (1.0 / 16777216.0)
-    b = ((h >> np.uint64(16)) & np.uint64(0xFFFFFF)) * (1.0 / 16777216.0)
-    return a, b
+def point_key(seed, pixel):
+    """The per-pixel half of the jitter hash (computed once per point)."""
+    return _mix64(np.uint64(seed) * np.uint64(0x9E3779B97F4A7C15) + np.uint64(pixel))
+
+
+_M32 = np.uint64(0xFFFFFFFF)
+
+
+@kernel(inline=True)
+def _mix32(x):
+    """A 32-bit integer finalizer (lowbias32) on the low 32 bits of a uint64 (Numba widens uint32
+    products, so the wrap-around is explicit): cheap enough to run once per ray."""
+    x &= _M32
+    x ^= x >> np.uint64(16)
+    x = (x * np.uint64(0x7FEB352D)) & _M32
+    x ^= x >> np.uint64(15)
+    x = (x * np.uint64(0x846CA68B)) & _M32
+    x ^= x >> np.uint64(16)
+    return x
+
+
+@kernel(inline=True)
+def jitter_pair(key, sample):
+    """Two uniforms in [0,1) for (point key, sample): counter-based, so results do not depend
+    on how pixels are split into chunks or threads. ``key`` = :func:`point_key` (seed, pixel)."""
+    s = np.uint64(sample)
+    ha = _mix32((key & _M32) ^ ((s * np.uint64(0x9E3779B9)) & _M32))
+    hb = _mix32((key >> np.uint64(32)) ^ ((s * np.uint64(0x85EBCA6B) + np.uint64(0x632BE59B)) & _M32))
+    return (ha >> np.uint64(8)) * (1.0 / 16777216.0), (hb >> np.uint64(8)) * (1.0 / 16777216.0)
 
 
 #: unit roundoff of float32 (Embree's arithmetic) and float64 (our hit points)
@@ -126,12 +146,12 @@ def hit_points(flat, eye, idx, nrm):
     return p, n, err_point, err_embree, grazing, own_blocks
 
 
-@kernel(parallel=True, nogil=True)
+@kernel(nogil=True)
 def generate_light_rays(
-    pts, nrm, pix, off, grazing, own_blocks, seed, n_side, shape, center, u, v, radius, org, dirs, dist, geo
+    pts, nrm, pix, off, grazing, own_blocks, seed, n_side, shape, center, u, v, radius, org, dirs, dist, geo, need_geo
 ):
     """Fill origins/directions/lengths for len(pts) points x n_side^2 samples (sample s of point k
-    at row k*S+s). geo = cos_p * cos_l / r^2 (for the physical mode). ``pix``: global pixel ids
+    at row k*S+s). geo = cos_p * cos_l / r^2 when ``need_geo`` (the physical mode), else 0. ``pix``: global pixel ids
     seeding the jitter.
 
     Ray origins (pbrt's ``OffsetRayOrigin``): ``p + off[k] n``, n the normal on the side the ray
@@ -141,7 +161,7 @@ def generate_light_rays(
     resolution of that side) is blocked by the surface itself when the surface is an occluder
     (``own_blocks``): it is not traced (length 0) and marked with geo = -1."""
     S = n_side * n_side
-    for k in prange(pts.shape[0]):
+    for k in range(pts.shape[0]):  # serial: trace_in_pipeline runs one chunk per thread
         px, py, pz = pts[k, 0], pts[k, 1], pts[k, 2]
         nx, ny, nz = nrm[k, 0], nrm[k, 1], nrm[k, 2]
         ox = px + off[k] * nx
@@ -184,10 +204,11 @@ def generate_light_rays(
             lnx /= ll
             lny /= ll
             lnz /= ll
+        key = point_key(seed, pix[k])
         for i in range(n_side):
             for j in range(n_side):
                 s = i * n_side + j
-                ja, jb = jitter_pair(seed, pix[k], s)
+                ja, jb = jitter_pair(key, s)
                 a = (i + ja) / n_side
                 b = (j + jb) / n_side
                 if shape == 1:
@@ -217,24 +238,24 @@ def generate_light_rays(
                     continue
                 rx, ry, rz = sx - ox32, sy - oy32, sz - oz32
                 rl = np.sqrt(rx * rx + ry * ry + rz * rz)
-                dirs[q, 0] = rx / rl
-                dirs[q, 1] = ry / rl
-                dirs[q, 2] = rz / rl
+                ri = 1.0 / rl
+                dirs[q, 0] = rx * ri
+                dirs[q, 1] = ry * ri
+                dirs[q, 2] = rz * ri
                 dist[q] = rl * (1.0 - 1e-6)
-                cl = -(lnx * rx + lny * ry + lnz * rz) / rl
-                if cp < 0.0:
-                    cp = 0.0
-                if cl < 0.0:
-                    cl = 0.0
-                geo[q] = cp * cl / (rl * rl)
+                if need_geo:
+                    cl = -(lnx * rx + lny * ry + lnz * rz) * ri
+                    geo[q] = max(cp, 0.0) * max(cl, 0.0) * ri * ri
+                else:
+                    geo[q] = 0.0
 
 
-@kernel(parallel=True, nogil=True)
+@kernel(nogil=True)
 def reduce_visibility(hits, geo, S, vis, irr, offset):
     """vis[k] = unoccluded fraction; irr[k] = sum of geo over unoccluded samples / S (samples with
     geo < 0 are blocked without tracing, see :func:`generate_light_rays`)."""
     n = hits.shape[0] // S
-    for k in prange(n):
+    for k in range(n):
         c = 0
         e = 0.0
         for s in range(S):
@@ -245,22 +266,38 @@ def reduce_visibility(hits, geo, S, vis, irr, offset):
         irr[offset + k] = e / S
 
 
-def trace_in_pipeline(esc, pts, nrm, pix, off, grazing, own_blocks, seed, n_side, light, vis, irr, progress=False):
-    """Generate, trace and reduce rays chunk by chunk. Embree's ``run`` is single-threaded and holds
-    the GIL, so ray generation and reduction (Numba, ``nogil``) run in one worker thread, overlapped
-    with tracing: chunk i+1 is generated while chunk i is traced. Returns (trace, generation,
-    reduction) seconds; the latter two overlap the first."""
+def trace_in_pipeline(
+    esc, pts, nrm, pix, off, grazing, own_blocks, seed, n_side, light, vis, irr, progress=False, physical=False
+):
+    """Generate, trace and reduce rays chunk by chunk on every core: one Python thread per Numba
+    thread (``numba.get_num_threads()``) takes chunks in turn and runs ray generation, Embree's
+    ``run`` and the reduction on each. All three release the GIL (the kernels are serial Numba
+    ``nogil`` kernels, so this is safe under any threading layer; embreex releases it while
+    tracing), so the threads trace in parallel. Each chunk writes its own slice of ``vis``/``irr``
+    and the jitter hashes (seed, pixel, sample), so the output does not depend on the thread count.
+    Returns (trace, generation, reduction) seconds summed over threads, and the wall time."""
+    import threading
     import time
     from concurrent.futures import ThreadPoolExecutor
+
+    import numba
 
     S = n_side * n_side
     K = len(pts)
     shape, center, u, v, radius = light_arrays(light)
-    per_chunk = max(1, CHUNK_RAYS // S)
+    nthreads = max(1, numba.get_num_threads())
+    # chunks of at most CHUNK_RAYS rays, and at least 4 per thread so that threads stay busy to the end
+    per_chunk = max(1, min(CHUNK_RAYS // S, -(-K // (4 * nthreads))))
     starts = list(range(0, K, per_chunk))
-    times = {"gen": 0.0, "red": 0.0}
+    times = {"gen": 0.0, "trace": 0.0, "red": 0.0}
+    lock = threading.Lock()
+    bar = None
+    if progress and K * S > 4_000_000:
+        from tqdm import tqdm
 
-    def gen(start):
+        bar = tqdm(total=K * S, unit="ray", unit_scale=True, desc="ground truth", leave=False)
+
+    def chunk(start):
         t0 = time.perf_counter()
         stop = min(K, start + per_chunk)
         m = stop - start
@@ -286,38 +323,31 @@ def trace_in_pipeline(esc, pts, nrm, pix, off, grazing, own_blocks, seed, n_side
             dirs,
             dist,
             geo,
+            physical,
         )
-        times["gen"] += time.perf_counter() - t0
-        return org, dirs, dist, geo
-
-    def red(hits, geo, start):
-        t0 = time.perf_counter()
+        t1 = time.perf_counter()
+        hits = esc.run(org, dirs, dists=dist, query="OCCLUDED")
+        t2 = time.perf_counter()
         reduce_visibility(hits, geo, S, vis, irr, start)
-        times["red"] += time.perf_counter() - t0
-
-    bar = None
-    if progress and K * S > 4_000_000:
-        from tqdm import tqdm
-
-        bar = tqdm(total=K * S, unit="ray", unit_scale=True, desc="ground truth", leave=False)
-    t_trace = 0.0
-    t_wall = time.perf_counter()
-    with ThreadPoolExecutor(max_workers=1) as pool:
-        fut = pool.submit(gen, starts[0]) if starts else None
-        for i, start in enumerate(starts):
-            org, dirs, dist, geo = fut.result()
-            if i + 1 < len(starts):
-                fut = pool.submit(gen, starts[i + 1])
-            t0 = time.perf_counter()
-            hits = esc.run(org, dirs, dists=dist, query="OCCLUDED")
-            t_trace += time.perf_counter() - t0
-            pool.submit(red, hits, geo, start)
+        t3 = time.perf_counter()
+        with lock:
+            times["gen"] += t1 - t0
+            times["trace"] += t2 - t1
+            times["red"] += t3 - t2
             if bar is not None:
                 bar.update(len(dist))
+
+    t_wall = time.perf_counter()
+    if nthreads == 1 or len(starts) == 1:
+        for start in starts:
+            chunk(start)
+    else:
+        with ThreadPoolExecutor(max_workers=nthreads) as pool:
+            list(pool.map(chunk, starts))
     t_wall = time.perf_counter() - t_wall
     if bar is not None:
         bar.close()
-    return t_trace, times["gen"], times["red"], t_wall
+    return times["trace"], times["gen"], times["red"], t_wall
 
 
 def light_arrays(light):
@@ -373,7 +403,20 @@ class GroundTruth(Method):
         vis = np.zeros(K, np.float32)
         irr = np.zeros(K, np.float64)
         trace_t, gen_t, red_t, wall = trace_in_pipeline(
-            esc, pts, nrm, idx, off, grazing, own_blocks, ctx.seed, n_side, scene.light, vis, irr, progress=ctx.progress
+            esc,
+            pts,
+            nrm,
+            idx,
+            off,
+            grazing,
+            own_blocks,
+            ctx.seed,
+            n_side,
+            scene.light,
+            vis,
+            irr,
+            progress=ctx.progress,
+            physical=physical,
         )
         # generation and reduction overlap tracing: the phase is their wall time; parts go to stats
         ctx.timer.times["rays"] = ctx.timer.times.get("rays", 0.0) + wall
