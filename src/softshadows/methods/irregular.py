@@ -1,0 +1,1226 @@
+"""``irregular``: soft irregular shadow mapping (Johnson et al. 2009), for sphere and rectangle lights.
+
+Every eye sample is stored in a light-view perspective grid (:func:`build_sample_grid`), umbrae are
+an exact point-in-triangle depth-complexity count at the stored samples (:func:`count_umbrae`),
+penumbrae are one exact signed edge integral per (sample, silhouette edge) pair selected by
+penumbra quads (:func:`select_silhouette_edges`, :func:`build_penumbra_quads`,
+:func:`bin_penumbra_quads`, :func:`accumulate_penumbrae`), and V = 1 - (umbra + penumbra),
+clamped (:func:`compose_visibility`, Eq. 4 with C = 0). Steps, bookkeeping, parameters,
+deviations and measured limits: ``docs/methods/irregular.md``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numba import prange
+
+from .._jit import kernel
+from ..geometry.silhouette import build_adjacency, facing, find_silhouette
+from ..raster.view import light_view
+from .base import Method, MethodOutput, Param, register
+
+#: a connected occluder component with at most this fraction of boundary edges is a solid (only its
+#: light-facing triangles are counted); otherwise a sheet (both sides counted)
+SOLID_MAX_BOUNDARY = 0.01
+#: relative slack on every conservative bound (quads, bins, wedge entry), so that a skipped sample
+#: provably has a zero contribution in floating point too
+_SLACK = 1e-6
+
+
+# ---------------------------------------------------------------------------------------------
+# (a) construction: the light-view perspective grid of eye samples
+# ---------------------------------------------------------------------------------------------
+@dataclass
+class SampleGrid:
+    """Eye samples sorted into a light-view 3D perspective grid.
+
+    Cells are (row, column) of a ``gx x gy`` image-plane grid x ``slices`` depth slices (by distance
+    to the light centre, geometric). Cells are numbered bin-major: ``((bin * B*B + local) * S + s)``
+    with ``B`` cells per bin side, so a cell column's slices are contiguous and every screen bin
+    owns one contiguous range. ``start[c]:start[c+1]`` are cell c's samples in the sorted arrays.
+    """
+
+    vp: np.ndarray  # light view params (window (l, r, b, t) at vp[12:16])
+    gx: int
+    gy: int
+    bins: int  # cells per bin side (B)
+    nbx: int
+    nby: int
+    slices: int
+    dlo: float  # slice 0 starts here (distance to the light centre)
+    dhi: float
+    start: np.ndarray  # (nbx*nby*B*B*S + 1,) int64
+    ix: np.ndarray  # (n,) float64 image-plane x/z of the sorted samples
+    iy: np.ndarray
+    pos: np.ndarray  # (n,3) float64 offset sample positions, sorted
+    dist: np.ndarray  # (n,) float64 distance to the light centre
+    order: np.ndarray  # (n,) int64 index into the input samples
+    bin_maxd: np.ndarray  # (nbx*nby,) float64 maximum receiver distance per bin (0 when empty)
+    dmax: float
+
+    @property
+    def n_bins(self) -> int:
+        return self.nbx * self.nby
+
+
+@kernel(inline=True)
+def slice_of(d, dlo, dhi, slices):
+    """Depth slice of distance ``d`` (geometric slicing between dlo and dhi), clamped."""
+    if slices == 1 or d <= dlo:
+        return 0
+    s = int(np.floor(slices * np.log(d / dlo) / np.log(dhi / dlo)))
+    if s < 0:
+        return 0
+    if s >= slices:
+        return slices - 1
+    return s
+
+
+@kernel(parallel=True)
+def _sample_keys(pts, vp, gx, gy, B, nbx, slices, dlo, dhi, near, ix, iy, dist, key):
+    n = pts.shape[0]
+    l, r, b, t = vp[12], vp[13], vp[14], vp[15]
+    for k in prange(n):
+        dx = pts[k, 0] - vp[0]
+        dy = pts[k, 1] - vp[1]
+        dz = pts[k, 2] - vp[2]
+        x = dx * vp[3] + dy * vp[4] + dz * vp[5]
+        y = dx * vp[6] + dy * vp[7] + dz * vp[8]
+        z = dx * vp[9] + dy * vp[10] + dz * vp[11]
+        d = np.sqrt(dx * dx + dy * dy + dz * dz)
+        dist[k] = d
+        if not (z > near):
+            key[k] = -1
+            ix[k] = 0.0
+            iy[k] = 0.0
+            continue
+        xx = x / z
+        yy = y / z
+        ix[k] = xx
+        iy[k] = yy
+        cx = int(min(max(np.floor((xx - l) / (r - l) * gx), 0.0), gx - 1.0))
+        cy = int(min(max(np.floor((t - yy) / (t - b) * gy), 0.0), gy - 1.0))
+        bi = (cy // B) * nbx + cx // B
+        loc = (cy % B) * B + cx % B
+        key[k] = (bi * B * B + loc) * slices + slice_of(d, dlo, dhi, slices)
+
+
+@kernel
+def counting_sort(key, n_keys):
+    """Stable counting sort of non-negative keys (negative keys are dropped): (start (n_keys+1),
+    order). O(n + n_keys)."""
+    cnt = np.zeros(n_keys + 1, np.int64)
+    for k in range(key.shape[0]):
+        if key[k] >= 0:
+            cnt[key[k] + 1] += 1
+    for c in range(n_keys):
+        cnt[c + 1] += cnt[c]
+    order = np.empty(cnt[n_keys], np.int64)
+    fill = cnt[:-1].copy()
+    for k in range(key.shape[0]):
+        c = key[k]
+        if c >= 0:
+            order[fill[c]] = k
+            fill[c] += 1
+    return cnt, order
+
+
+@kernel(parallel=True)
+def _gather_sorted(order, pts, ix, iy, dist, sx, sy, sp, sd):
+    for j in prange(order.shape[0]):
+        k = order[j]
+        sx[j] = ix[k]
+        sy[j] = iy[k]
+        sp[j, 0] = pts[k, 0]
+        sp[j, 1] = pts[k, 1]
+        sp[j, 2] = pts[k, 2]
+        sd[j] = dist[k]
+
+
+@kernel(parallel=True)
+def _bin_max_dist(start, sd, cells_per_bin, n_bins):
+    out = np.zeros(n_bins, np.float64)
+    for bi in prange(n_bins):
+        m = 0.0
+        for j in range(start[bi * cells_per_bin], start[(bi + 1) * cells_per_bin]):
+            if sd[j] > m:
+                m = sd[j]
+        out[bi] = m
+    return out
+
+
+def build_sample_grid(light, pts: np.ndarray, grid: int, bins: int, slices: int) -> SampleGrid:
+    """Step (a): insert every eye sample into the light-view grid by a counting sort (O(n)) and record
+    each screen bin's maximum receiver distance (used by the coarse penumbra step)."""
+    view = light_view(light, pts if len(pts) else np.zeros((1, 3)), grid, grid, margin=1e-3)
+    vp = view.params()
+    n = len(pts)
+    nbx = nby = -(-grid // bins)
+    d_all = np.linalg.norm(pts - light.center, axis=1) if n else np.ones(1)
+    dlo = max(float(d_all.min()) * (1 - 1e-9), 1e-12)
+    dhi = max(float(d_all.max()) * (1 + 1e-9), dlo * (1 + 1e-9))
+    ix = np.empty(n)
+    iy = np.empty(n)
+    dist = np.empty(n)
+    key = np.empty(n, np.int64)
+    near = max(view.near * 1e-3, 1e-9)
+    _sample_keys(pts, vp, grid, grid, bins, nbx, slices, dlo, dhi, near, ix, iy, dist, key)
+    n_keys = nbx * nby * bins * bins * slices
+    start, order = counting_sort(key, n_keys)
+    m = len(order)
+    sx, sy, sd = np.empty(m), np.empty(m), np.empty(m)
+    sp = np.empty((m, 3))
+    _gather_sorted(order, pts, ix, iy, dist, sx, sy, sp, sd)
+    bmax = _bin_max_dist(start, sd, bins * bins * slices, nbx * nby)
+    return SampleGrid(
+        vp,
+        grid,
+        grid,
+        bins,
+        nbx,
+        nby,
+        slices,
+        dlo,
+        dhi,
+        start,
+        sx,
+        sy,
+        sp,
+        sd,
+        order,
+        bmax,
+        float(sd.max()) if m else 0.0,
+    )
+
+
+# ---------------------------------------------------------------------------------------------
+# which occluder triangles are counted
+# ---------------------------------------------------------------------------------------------
+def _topology(flat):
+    """Per scene (cached): occluder faces, their welded adjacency and the per-face 'sheet' flag
+    (connected component with more than SOLID_MAX_BOUNDARY boundary edges)."""
+    hit = flat._cache.get("irregular_topology")
+    if hit is not None:
+        return hit
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    occ = np.ascontiguousarray(flat.faces[flat.occluder])
+    adj = build_adjacency(flat.vertices, occ)
+    F = len(occ)
+    sheet = np.zeros(F, bool)
+    if F:
+        grp_edge = np.repeat(np.arange(adj.n_edges), adj.count)
+        first = adj.edge_faces[adj.offsets[:-1]][grp_edge]
+        g = coo_matrix((np.ones(len(first)), (first, adj.edge_faces)), shape=(F, F))
+        ncomp, comp = connected_components(g, directed=False)
+        ecomp = comp[adj.edge_faces[adj.offsets[:-1]]]
+        n_e = np.bincount(ecomp, minlength=ncomp)
+        n_b = np.bincount(ecomp, weights=(adj.count == 1).astype(float), minlength=ncomp)
+        sheet = (n_b > SOLID_MAX_BOUNDARY * n_e)[comp]
+        # third vertex and orientation of every (edge, face) entry of the CSR
+        f = occ[adj.edge_faces]
+        rf = adj.rep[f]
+        lo = np.repeat(adj.edges[:, 0], adj.count)
+        hi = np.repeat(adj.edges[:, 1], adj.count)
+        third = np.where(
+            (rf[:, 0] != lo) & (rf[:, 0] != hi),
+            f[:, 0],
+            np.where((rf[:, 1] != lo) & (rf[:, 1] != hi), f[:, 1], f[:, 2]),
+        )
+        # +1 when lo -> hi follows the face's winding
+        fw = (
+            ((rf[:, 0] == lo) & (rf[:, 1] == hi))
+            | ((rf[:, 1] == lo) & (rf[:, 2] == hi))
+            | ((rf[:, 2] == lo) & (rf[:, 0] == hi))
+        )
+        orient = np.where(fw, 1, -1)
+    else:
+        third = np.zeros(0, np.int64)
+        orient = np.zeros(0, np.int64)
+    hit = (occ, adj, sheet, third, orient)
+    flat._cache["irregular_topology"] = hit
+    return hit
+
+
+def counted_faces(flat, center) -> tuple[np.ndarray, np.ndarray]:
+    """(occluder faces (F,3), counted (F,) bool): a triangle is counted when it faces the light
+    centre or belongs to a sheet (open component); every count and edge below refers to these."""
+    occ, _adj, sheet, _t, _o = _topology(flat)
+    fr = facing(flat.vertices, occ, center) if len(occ) else np.zeros(0, bool)
+    return occ, fr | sheet
+
+
+# ---------------------------------------------------------------------------------------------
+# (b) umbrae: exact depth complexity between each sample and the light centre
+# ---------------------------------------------------------------------------------------------
+@kernel(inline=True)
+def _project(vp, x, y, z):
+    dx, dy, dz = x - vp[0], y - vp[1], z - vp[2]
+    vx = dx * vp[3] + dy * vp[4] + dz * vp[5]
+    vy = dx * vp[6] + dy * vp[7] + dz * vp[8]
+    vz = dx * vp[9] + dy * vp[10] + dz * vp[11]
+    return vx / vz, vy / vz, vz
+
+
+@kernel(inline=True)
+def _cell_range(x0, x1, y0, y1, vp, gx, gy):
+    """Cells (cx0, cx1, cy0, cy1), inclusive, overlapped by the image-plane box; empty when cx0 > cx1."""
+    l, r, b, t = vp[12], vp[13], vp[14], vp[15]
+    fx0 = np.floor((x0 - l) / (r - l) * gx)
+    fx1 = np.floor((x1 - l) / (r - l) * gx)
+    fy0 = np.floor((t - y1) / (t - b) * gy)
+    fy1 = np.floor((t - y0) / (t - b) * gy)
+    if not (fx1 >= 0.0 and fy1 >= 0.0 and fx0 <= gx - 1.0 and fy0 <= gy - 1.0):
+        return 1, 0, 1, 0
+    return int(max(fx0, 0.0)), int(min(fx1, gx - 1.0)), int(max(fy0, 0.0)), int(min(fy1, gy - 1.0))
+
+
+@kernel(parallel=True)
+def _triangle_setup(verts, faces, counted, vp, center, tri2d, tribox, trid, valid):
+    """Light-view image-plane vertices, box and lower bound of the distance to the light centre
+    (the distance of the triangle's plane) of every counted triangle."""
+    for f in prange(faces.shape[0]):
+        valid[f] = False
+        if not counted[f]:
+            continue
+        ok = True
+        for j in range(3):
+            v = faces[f, j]
+            x, y, z = _project(vp, verts[v, 0], verts[v, 1], verts[v, 2])
+            if not (z > 0.0):
+                ok = False
+            tri2d[f, 2 * j] = x
+            tri2d[f, 2 * j + 1] = y
+        if not ok:
+            continue
+        a, b, c = faces[f, 0], faces[f, 1], faces[f, 2]
+        e1 = verts[b] - verts[a]
+        e2 = verts[c] - verts[a]
+        nx = e1[1] * e2[2] - e1[2] * e2[1]
+        ny = e1[2] * e2[0] - e1[0] * e2[2]
+        nz = e1[0] * e2[1] - e1[1] * e2[0]
+        nn = np.sqrt(nx * nx + ny * ny + nz * nz)
+        if nn == 0.0:
+            continue
+        valid[f] = True
+        trid[f] = (
+            abs(nx * (verts[a, 0] - center[0]) + ny * (verts[a, 1] - center[1]) + nz * (verts[a, 2] - center[2])) / nn
+        )
+        tribox[f, 0] = min(tri2d[f, 0], tri2d[f, 2], tri2d[f, 4])
+        tribox[f, 1] = max(tri2d[f, 0], tri2d[f, 2], tri2d[f, 4])
+        tribox[f, 2] = min(tri2d[f, 1], tri2d[f, 3], tri2d[f, 5])
+        tribox[f, 3] = max(tri2d[f, 1], tri2d[f, 3], tri2d[f, 5])
+
+
+@kernel(parallel=True)
+def _count_tri_bins(tribox, valid, vp, gx, gy, B, counts):
+    for f in prange(tribox.shape[0]):
+        counts[f] = 0
+        if valid[f]:
+            cx0, cx1, cy0, cy1 = _cell_range(tribox[f, 0], tribox[f, 1], tribox[f, 2], tribox[f, 3], vp, gx, gy)
+            if cx0 <= cx1 and cy0 <= cy1:
+                counts[f] = (cx1 // B - cx0 // B + 1) * (cy1 // B - cy0 // B + 1)
+
+
+@kernel(parallel=True)
+def _fill_tri_bins(tribox, valid, vp, gx, gy, B, nbx, offs, pair_bin):
+    for f in prange(tribox.shape[0]):
+        if valid[f]:
+            cx0, cx1, cy0, cy1 = _cell_range(tribox[f, 0], tribox[f, 1], tribox[f, 2], tribox[f, 3], vp, gx, gy)
+            k = offs[f]
+            for by in range(cy0 // B, cy1 // B + 1):
+                for bx in range(cx0 // B, cx1 // B + 1):
+                    if k < offs[f + 1]:
+                        pair_bin[k] = by * nbx + bx
+                        k += 1
+
+
+def _pairs_by_bin(counts, pair_bin, n_bins):
+    """Item-major (item, bin) pairs -> per-bin item lists (items ascending within a bin)."""
+    offs = np.zeros(len(counts) + 1, np.int64)
+    np.cumsum(counts, out=offs[1:])
+    item = np.repeat(np.arange(len(counts), dtype=np.int64), counts)
+    start, order = counting_sort(pair_bin, n_bins)
+    return start, item[order]
+
+
+@kernel(parallel=True)
+def _umbra_kernel(
+    g_start,
+    sx,
+    sy,
+    sp,
+    sd,
+    gx,
+    gy,
+    B,
+    nbx,
+    S,
+    dlo,
+    dhi,
+    vp,
+    center,
+    verts,
+    faces,
+    tri2d,
+    trid,
+    bin_start,
+    bin_items,
+    umbra,
+    tests,
+):
+    nb = bin_start.shape[0] - 1
+    for bi in prange(nb):
+        by = bi // nbx
+        bx = bi % nbx
+        ntest = 0
+        for kk in range(bin_start[bi], bin_start[bi + 1]):
+            f = bin_items[kk]
+            ax, ay, bx2, by2, cx2, cy2 = tri2d[f, 0], tri2d[f, 1], tri2d[f, 2], tri2d[f, 3], tri2d[f, 4], tri2d[f, 5]
+            area = (bx2 - ax) * (cy2 - ay) - (by2 - ay) * (cx2 - ax)
+            if area == 0.0:
+                continue
+            cx0, cx1, cy0, cy1 = _cell_range(
+                min(ax, bx2, cx2), max(ax, bx2, cx2), min(ay, by2, cy2), max(ay, by2, cy2), vp, gx, gy
+            )
+            cx0 = max(cx0, bx * B)
+            cx1 = min(cx1, bx * B + B - 1)
+            cy0 = max(cy0, by * B)
+            cy1 = min(cy1, by * B + B - 1)
+            s0 = slice_of(trid[f], dlo, dhi, S)
+            i0, i1, i2 = faces[f, 0], faces[f, 1], faces[f, 2]
+            nx = (verts[i1, 1] - verts[i0, 1]) * (verts[i2, 2] - verts[i0, 2]) - (verts[i1, 2] - verts[i0, 2]) * (
+                verts[i2, 1] - verts[i0, 1]
+            )
+            ny = (verts[i1, 2] - verts[i0, 2]) * (verts[i2, 0] - verts[i0, 0]) - (verts[i1, 0] - verts[i0, 0]) * (
+                verts[i2, 2] - verts[i0, 2]
+            )
+            nz = (verts[i1, 0] - verts[i0, 0]) * (verts[i2, 1] - verts[i0, 1]) - (verts[i1, 1] - verts[i0, 1]) * (
+                verts[i2, 0] - verts[i0, 0]
+            )
+            num = nx * (verts[i0, 0] - center[0]) + ny * (verts[i0, 1] - center[1]) + nz * (verts[i0, 2] - center[2])
+            sg = 1.0 if area > 0.0 else -1.0
+            for cy in range(cy0, cy1 + 1):
+                for cx in range(cx0, cx1 + 1):
+                    col = (bi * B * B + (cy % B) * B + cx % B) * S
+                    for j in range(g_start[col + s0], g_start[col + S]):
+                        ntest += 1
+                        px, py = sx[j], sy[j]
+                        e0 = sg * ((bx2 - ax) * (py - ay) - (by2 - ay) * (px - ax))
+                        e1 = sg * ((cx2 - bx2) * (py - by2) - (cy2 - by2) * (px - bx2))
+                        e2 = sg * ((ax - cx2) * (py - cy2) - (ay - cy2) * (px - cx2))
+                        if e0 >= 0.0 and e1 >= 0.0 and e2 >= 0.0:
+                            den = (
+                                nx * (sp[j, 0] - center[0]) + ny * (sp[j, 1] - center[1]) + nz * (sp[j, 2] - center[2])
+                            )
+                            if den != 0.0:
+                                th = num / den  # the triangle's plane along centre -> p, 1 at p
+                                if th > 0.0 and th < 1.0:
+                                    umbra[j] += 1
+        tests[bi] = ntest
+
+
+def count_umbrae(grid: SampleGrid, verts, faces, counted, center) -> tuple[np.ndarray, dict]:
+    """Step (b): per sample, the number of counted triangles crossed by the segment sample -> light
+    centre (hard irregular shadow mapping, counting depth complexity): every triangle is projected
+    to the light image plane and tested exactly against the stored coordinates of the samples of
+    the cells its box covers (only slices beyond the triangle's plane distance)."""
+    F = len(faces)
+    tri2d = np.zeros((F, 6))
+    tribox = np.zeros((F, 4))
+    trid = np.zeros(F)
+    valid = np.zeros(F, bool)
+    c = np.asarray(center, np.float64)
+    _triangle_setup(verts, faces, counted, grid.vp, c, tri2d, tribox, trid, valid)
+    counts = np.zeros(F, np.int64)
+    _count_tri_bins(tribox, valid, grid.vp, grid.gx, grid.gy, grid.bins, counts)
+    offs = np.zeros(F + 1, np.int64)
+    np.cumsum(counts, out=offs[1:])
+    pair_bin = np.empty(offs[-1], np.int64)
+    _fill_tri_bins(tribox, valid, grid.vp, grid.gx, grid.gy, grid.bins, grid.nbx, offs, pair_bin)
+    bstart, bitems = _pairs_by_bin(counts, pair_bin, grid.n_bins)
+    umbra = np.zeros(len(grid.order), np.int32)
+    tests = np.zeros(grid.n_bins, np.int64)
+    _umbra_kernel(
+        grid.start,
+        grid.ix,
+        grid.iy,
+        grid.pos,
+        grid.dist,
+        grid.gx,
+        grid.gy,
+        grid.bins,
+        grid.nbx,
+        grid.slices,
+        grid.dlo,
+        grid.dhi,
+        grid.vp,
+        c,
+        verts,
+        faces,
+        tri2d,
+        trid,
+        bstart,
+        bitems,
+        umbra,
+        tests,
+    )
+    return umbra, {
+        "umbra_triangles": int(valid.sum()),
+        "umbra_skipped_triangles": int((counted & ~valid).sum()),
+        "umbra_tri_bin_pairs": int(offs[-1]),
+        "umbra_sample_tests": int(tests.sum()),
+    }
+
+
+# ---------------------------------------------------------------------------------------------
+# silhouettes
+# ---------------------------------------------------------------------------------------------
+@dataclass
+class Edges:
+    """Edges that carry penumbral occlusion: endpoints and, per edge, the third vertices of its
+    counted adjacent triangles (CSR), whose side decides the sign at each sample."""
+
+    a: np.ndarray  # (E,3)
+    b: np.ndarray  # (E,3)
+    tv_start: np.ndarray  # (E+1,)
+    tv: np.ndarray  # (M,3)
+
+    def __len__(self) -> int:
+        return len(self.a)
+
+
+def select_silhouette_edges(flat, center, mode: str) -> tuple[Edges, dict]:
+    """Silhouette edges seen from the light centre. ``adjacency``: the edges of
+    ``geometry/silhouette.py`` (facing mix or boundary, from the welded adjacency) plus non-manifold
+    edges, kept when the counted triangles around them do not cancel (sum of their orientations
+    seen from the centre != 0). ``all-edges``: every edge of every counted triangle, separately
+    (no adjacency: interior edges then cancel in the sum)."""
+    occ, counted = counted_faces(flat, center)
+    V = flat.vertices
+    if mode == "all-edges":
+        f = occ[counted]
+        a = V[f].reshape(-1, 3)
+        b = V[f[:, [1, 2, 0]]].reshape(-1, 3)
+        tv = V[f[:, [2, 0, 1]]].reshape(-1, 3)
+        E = len(a)
+        ed = Edges(
+            np.ascontiguousarray(a), np.ascontiguousarray(b), np.arange(E + 1, dtype=np.int64), np.ascontiguousarray(tv)
+        )
+        return ed, {"silhouette_edges": E, "counted_triangles": int(counted.sum())}
+    _occ, adj, _sheet, third, orient = _topology(flat)
+    sil = find_silhouette(V, occ, center, "adjacency", adjacency=adj)
+    nm = np.flatnonzero(adj.count > 2)
+    key_all = adj.edges[:, 0] * len(V) + adj.edges[:, 1]
+    cand = (
+        np.searchsorted(key_all, sil.edges[:, 0] * len(V) + sil.edges[:, 1]) if sil.n_edges else np.zeros(0, np.int64)
+    )
+    cand = np.unique(np.r_[cand, nm]).astype(np.int64)
+    fr = facing(V, occ, center)
+    c = adj.count[cand]
+    ent = np.repeat(adj.offsets[cand], c) + (np.arange(c.sum()) - np.repeat(np.cumsum(c) - c, c))
+    fa = adj.edge_faces[ent]
+    cnt = counted[fa]
+    sig = np.where(cnt, orient[ent] * np.where(fr[fa], 1, -1), 0)
+    eid = np.repeat(np.arange(len(cand)), c)
+    w = np.bincount(eid, weights=sig, minlength=len(cand))
+    keep = w != 0
+    kept = cand[keep]
+    ent_keep = keep[eid] & cnt
+    tv_cnt = np.bincount(eid[ent_keep], minlength=len(cand))[keep]
+    tv_start = np.zeros(len(kept) + 1, np.int64)
+    np.cumsum(tv_cnt, out=tv_start[1:])
+    tv = V[third[ent[ent_keep]]]
+    ed = Edges(
+        np.ascontiguousarray(V[adj.edges[kept, 0]]),
+        np.ascontiguousarray(V[adj.edges[kept, 1]]),
+        tv_start,
+        np.ascontiguousarray(tv),
+    )
+    return ed, {"silhouette_edges": int(len(kept)), "counted_triangles": int(counted.sum())}
+
+
+# ---------------------------------------------------------------------------------------------
+# (c) coarse penumbra: one light-view quad per silhouette edge, binned, refined per bin
+# ---------------------------------------------------------------------------------------------
+@kernel(parallel=True)
+def _quad_setup(ea, eb, vp, center, radius, corner2, qd):
+    """Per edge: image-plane endpoints, the minimum distance of the edge to the light centre and the
+    stretch factor of the image plane along the footprint (qd[e] = ax ay bx by dmin stretch valid)."""
+    for e in prange(ea.shape[0]):
+        ax, ay, az = _project(vp, ea[e, 0], ea[e, 1], ea[e, 2])
+        bx, by, bz = _project(vp, eb[e, 0], eb[e, 1], eb[e, 2])
+        qd[e, 0] = ax
+        qd[e, 1] = ay
+        qd[e, 2] = bx
+        qd[e, 3] = by
+        # distance from the centre to the segment
+        ux, uy, uz = eb[e, 0] - ea[e, 0], eb[e, 1] - ea[e, 1], eb[e, 2] - ea[e, 2]
+        wx, wy, wz = center[0] - ea[e, 0], center[1] - ea[e, 1], center[2] - ea[e, 2]
+        uu = ux * ux + uy * uy + uz * uz
+        tt = 0.0 if uu == 0.0 else min(max((wx * ux + wy * uy + wz * uz) / uu, 0.0), 1.0)
+        qx, qy, qz = wx - tt * ux, wy - tt * uy, wz - tt * uz
+        qd[e, 4] = np.sqrt(qx * qx + qy * qy + qz * qz)
+        qd[e, 5] = 1.0 + max(corner2, ax * ax + ay * ay, bx * bx + by * by)
+        qd[e, 6] = 1.0 if (az > 0.0 and bz > 0.0 and np.isfinite(ax) and np.isfinite(bx)) else 0.0
+
+
+@kernel(inline=True)
+def quad_half_width(qd, e, radius, dmax):
+    """Half-width R of edge e's penumbra quad (image-plane units) for receivers up to distance
+    ``dmax`` from the light centre: an occluder point at distance d shadows receivers within the
+    angle atan(r (1/(d - r) - 1/D)) of it (r: radius of the light's bounding sphere); x the image
+    plane's stretch. inf when the light's sphere reaches the edge, <= 0 when no receiver can be hit."""
+    dmin = qd[e, 4]
+    if dmin <= radius:
+        return np.inf
+    return qd[e, 5] * radius * (1.0 / (dmin - radius) - 1.0 / dmax) * (1.0 + _SLACK) + 1e-12
+
+
+@kernel(inline=True)
+def quad_overlaps_box(qd, e, R, x0, x1, y0, y1):
+    """Separating-axis test of the quad (segment A'B' grown by R along and across it) against an
+    image-plane box."""
+    if R <= 0.0:
+        return False
+    if not np.isfinite(R):
+        return True
+    ax, ay, bx, by = qd[e, 0], qd[e, 1], qd[e, 2], qd[e, 3]
+    dx, dy = bx - ax, by - ay
+    ln = np.sqrt(dx * dx + dy * dy)
+    if ln > 0.0:
+        ux, uy = dx / ln, dy / ln
+    else:
+        ux, uy = 1.0, 0.0
+    cx, cy = 0.5 * (ax + bx), 0.5 * (ay + by)
+    hl = 0.5 * ln + R
+    hw = R
+    hx, hy = 0.5 * (x1 - x0), 0.5 * (y1 - y0)
+    mx, my = 0.5 * (x0 + x1), 0.5 * (y0 + y1)
+    # box axes
+    if abs(mx - cx) > hx + hl * abs(ux) + hw * abs(uy):
+        return False
+    if abs(my - cy) > hy + hl * abs(uy) + hw * abs(ux):
+        return False
+    # quad axes
+    if abs((mx - cx) * ux + (my - cy) * uy) > hl + hx * abs(ux) + hy * abs(uy):
+        return False
+    return abs(-(mx - cx) * uy + (my - cy) * ux) <= hw + hx * abs(uy) + hy * abs(ux)
+
+
+@kernel(inline=True)
+def _bin_box(vp, gx, gy, B, bx, by):
+    l, r, b, t = vp[12], vp[13], vp[14], vp[15]
+    cw = (r - l) / gx
+    ch = (t - b) / gy
+    x0 = l + bx * B * cw
+    x1 = l + min((bx + 1) * B, gx) * cw
+    y1 = t - by * B * ch
+    y0 = t - min((by + 1) * B, gy) * ch
+    return x0, x1, y0, y1
+
+
+@kernel(parallel=True)
+def _count_quad_bins(qd, radius, dmax, bin_maxd, per_bin, vp, gx, gy, B, nbx, nby, counts):
+    for e in prange(qd.shape[0]):
+        n = 0
+        if qd[e, 6] > 0.0:
+            Rg = quad_half_width(qd, e, radius, dmax)
+            if Rg > 0.0:
+                if np.isfinite(Rg):
+                    x0 = min(qd[e, 0], qd[e, 2]) - Rg
+                    x1 = max(qd[e, 0], qd[e, 2]) + Rg
+                    y0 = min(qd[e, 1], qd[e, 3]) - Rg
+                    y1 = max(qd[e, 1], qd[e, 3]) + Rg
+                    cx0, cx1, cy0, cy1 = _cell_range(x0, x1, y0, y1, vp, gx, gy)
+                else:
+                    cx0, cx1, cy0, cy1 = 0, gx - 1, 0, gy - 1
+                if cx0 <= cx1 and cy0 <= cy1:
+                    for by in range(cy0 // B, cy1 // B + 1):
+                        for bx in range(cx0 // B, cx1 // B + 1):
+                            bi = by * nbx + bx
+                            if bin_maxd[bi] <= 0.0:
+                                continue
+                            R = quad_half_width(qd, e, radius, bin_maxd[bi]) if per_bin else Rg
+                            bx0, bx1, by0, by1 = _bin_box(vp, gx, gy, B, bx, by)
+                            if quad_overlaps_box(qd, e, R, bx0, bx1, by0, by1):
+                                n += 1
+        counts[e] = n
+
+
+@kernel(parallel=True)
+def _fill_quad_bins(qd, radius, dmax, bin_maxd, per_bin, vp, gx, gy, B, nbx, nby, offs, pair_bin):
+    for e in prange(qd.shape[0]):
+        k = offs[e]
+        if k == offs[e + 1]:
+            continue
+        Rg = quad_half_width(qd, e, radius, dmax)
+        if np.isfinite(Rg):
+            x0 = min(qd[e, 0], qd[e, 2]) - Rg
+            x1 = max(qd[e, 0], qd[e, 2]) + Rg
+            y0 = min(qd[e, 1], qd[e, 3]) - Rg
+            y1 = max(qd[e, 1], qd[e, 3]) + Rg
+            cx0, cx1, cy0, cy1 = _cell_range(x0, x1, y0, y1, vp, gx, gy)
+        else:
+            cx0, cx1, cy0, cy1 = 0, gx - 1, 0, gy - 1
+        for by in range(cy0 // B, cy1 // B + 1):
+            for bx in range(cx0 // B, cx1 // B + 1):
+                bi = by * nbx + bx
+                if bin_maxd[bi] <= 0.0:
+                    continue
+                R = quad_half_width(qd, e, radius, bin_maxd[bi]) if per_bin else Rg
+                bx0, bx1, by0, by1 = _bin_box(vp, gx, gy, B, bx, by)
+                if quad_overlaps_box(qd, e, R, bx0, bx1, by0, by1) and k < offs[e + 1]:
+                    pair_bin[k] = bi
+                    k += 1
+
+
+def build_penumbra_quads(grid: SampleGrid, edges: Edges, light_radius: float) -> np.ndarray:
+    """Step (c), setup: one light-view penumbra quad per silhouette edge (its image-plane segment,
+    minimum distance to the light centre and stretch; the half-width follows from the receiver
+    distance, :func:`quad_half_width`)."""
+    qd = np.zeros((len(edges), 7))
+    l, r, b, t = grid.vp[12:16]
+    corner2 = max(l * l, r * r) + max(b * b, t * t)
+    _quad_setup(edges.a, edges.b, grid.vp, grid.vp[0:3].copy(), light_radius, corner2, qd)
+    return qd
+
+
+def bin_penumbra_quads(grid: SampleGrid, qd: np.ndarray, light_radius: float, per_bin: bool):
+    """Step (c), sort-middle binning: each quad goes to the screen bins it overlaps; with
+    ``per_bin`` (the first overdraw optimisation) its half-width is recomputed with each bin's
+    maximum receiver distance and it is dropped from bins it then misses."""
+    E = len(qd)
+    counts = np.zeros(E, np.int64)
+    args = (
+        qd,
+        light_radius,
+        grid.dmax,
+        grid.bin_maxd,
+        per_bin,
+        grid.vp,
+        grid.gx,
+        grid.gy,
+        grid.bins,
+        grid.nbx,
+        grid.nby,
+    )
+    _count_quad_bins(*args, counts)
+    offs = np.zeros(E + 1, np.int64)
+    np.cumsum(counts, out=offs[1:])
+    pair_bin = np.empty(offs[-1], np.int64)
+    _fill_quad_bins(*args, offs, pair_bin)
+    return _pairs_by_bin(counts, pair_bin, grid.n_bins)
+
+
+# ---------------------------------------------------------------------------------------------
+# (d) final penumbra: exact signed edge integrals
+# ---------------------------------------------------------------------------------------------
+@kernel(inline=True)
+def segment_area(d, w0, w1):
+    """Eq. 3: normalised area between a chord segment and the arc of the unit circle, inside the angle
+    the segment [w0, w1] (positions along the chord line, at distance d >= 0 from the centre,
+    already clipped to the circle) subtends at the centre: (theta - d (w1 - w0)) / (2 pi)."""
+    den = np.sqrt((d * d + w0 * w0) * (d * d + w1 * w1))
+    if den == 0.0:
+        return 0.0
+    c = (d * d + w0 * w1) / den
+    c = min(max(c, -1.0), 1.0)
+    theta = np.arccos(c)
+    return (theta - d * (w1 - w0)) / (2.0 * np.pi)
+
+
+@kernel(inline=True)
+def _clip_poly(px, py, n, a, b, c, qx, qy):
+    """Clip polygon (px, py)[:n] to a*x + b*y + c >= 0 into (qx, qy); returns the new count."""
+    m = 0
+    for i in range(n):
+        j = (i + 1) % n
+        fi = a * px[i] + b * py[i] + c
+        fj = a * px[j] + b * py[j] + c
+        if fi >= 0.0:
+            qx[m] = px[i]
+            qy[m] = py[i]
+            m += 1
+        if (fi >= 0.0) != (fj >= 0.0):
+            t = fi / (fi - fj)
+            qx[m] = px[i] + t * (px[j] - px[i])
+            qy[m] = py[i] + t * (py[j] - py[i])
+            m += 1
+    return m
+
+
+@kernel(inline=True)
+def edge_occlusion(shape, lp, radius, hu, hv, p0, p1, p2, ax, ay, az, bx, by, bz, buf):
+    """Signed-by-geometry edge term at one sample. Returns (sO, V~): sO = sign of n.(c - p) (the side
+    of the light centre relative to the plane through p and the edge, n = (a-p) x (b-p)) and V~ = the
+    normalised area of the light's projection (from p, onto its plane) inside the angle the edge
+    subtends at the centre and beyond the edge (Fig. 4; Eq. 3 for the disk, polygon clipping for the
+    rectangle). Edge parts at or behind p's plane parallel to the light project to infinity.
+
+    lp: per-sample light frame: [0:3] w (unit, p -> light plane), [3] L (distance to the plane),
+    [4:7] c - p, [7:10] u, [10:13] v (rect axes)."""
+    rax, ray, raz = ax - p0, ay - p1, az - p2
+    rbx, rby, rbz = bx - p0, by - p1, bz - p2
+    nx = ray * rbz - raz * rby
+    ny = raz * rbx - rax * rbz
+    nz = rax * rby - ray * rbx
+    wx, wy, wz, L = lp[0], lp[1], lp[2], lp[3]
+    nw = nx * wx + ny * wy + nz * wz
+    nc = nx * lp[4] + ny * lp[5] + nz * lp[6]  # n . (c - p)
+    if nc == 0.0:
+        return 0.0, 0.0
+    ha = rax * wx + ray * wy + raz * wz
+    hb = rbx * wx + rby * wy + rbz * wz
+    if ha <= 0.0 and hb <= 0.0:
+        return 0.0, 0.0  # the footprint radius at the edge is <= 0: the edge is behind p
+    so = 1.0 if nc > 0.0 else -1.0
+    if shape == 1:
+        # disk of radius r facing p: line = trace of the plane (p, edge) in the disk plane
+        m2 = nx * nx + ny * ny + nz * nz - nw * nw
+        if m2 <= 0.0:
+            return 0.0, 0.0
+        m = np.sqrt(m2)
+        d = abs(nc) / m / radius
+        if d >= 1.0:
+            return so, 0.0
+        # tangent T = w x n / m (in the disk plane, along the line)
+        tx = (wy * nz - wz * ny) / m
+        ty = (wz * nx - wx * nz) / m
+        tz = (wx * ny - wy * nx) / m
+        sa = 0.0
+        sb = 0.0
+        if ha > 0.0:
+            sa = (rax * tx + ray * ty + raz * tz) * L / ha / radius
+        if hb > 0.0:
+            sb = (rbx * tx + rby * ty + rbz * tz) * L / hb / radius
+        if ha <= 0.0 or hb <= 0.0:
+            # one endpoint behind p: that end of the projected edge runs to infinity
+            t0 = ha / (ha - hb)
+            ox = rax + t0 * (rbx - rax)
+            oy = ray + t0 * (rby - ray)
+            oz = raz + t0 * (rbz - raz)
+            inf = np.inf if (ox * tx + oy * ty + oz * tz) >= 0.0 else -np.inf
+            if ha <= 0.0:
+                sa = inf
+            else:
+                sb = inf
+        h = np.sqrt(1.0 - d * d)
+        w0 = max(min(sa, sb), -h)
+        w1 = min(max(sa, sb), h)
+        if not (w1 > w0):
+            return so, 0.0
+        return so, segment_area(d, w0, w1)
+    # rectangle: 2D light-plane coordinates (u, v) around the centre
+    ux, uy, uz, vx, vy, vz = lp[7], lp[8], lp[9], lp[10], lp[11], lp[12]
+    nu = nx * ux + ny * uy + nz * uz
+    nv = nx * vx + ny * vy + nz * vz
+    nn = np.sqrt(nu * nu + nv * nv)
+    if nn == 0.0 or abs(nc) / nn >= np.sqrt(hu * hu + hv * hv):
+        return so, 0.0
+    # directions (from the centre) of the projected endpoints
+    cpx, cpy, cpz = -lp[4], -lp[5], -lp[6]  # p - c
+    dax = day = dbx = dby = 0.0
+    if ha > 0.0:
+        k = L / ha
+        dax = (cpx + rax * k) * ux + (cpy + ray * k) * uy + (cpz + raz * k) * uz
+        day = (cpx + rax * k) * vx + (cpy + ray * k) * vy + (cpz + raz * k) * vz
+    if hb > 0.0:
+        k = L / hb
+        dbx = (cpx + rbx * k) * ux + (cpy + rby * k) * uy + (cpz + rbz * k) * uz
+        dby = (cpx + rbx * k) * vx + (cpy + rby * k) * vy + (cpz + rbz * k) * vz
+    if ha <= 0.0 or hb <= 0.0:
+        t0 = ha / (ha - hb)
+        ox = rax + t0 * (rbx - rax)
+        oy = ray + t0 * (rby - ray)
+        oz = raz + t0 * (rbz - raz)
+        ix = ox * ux + oy * uy + oz * uz
+        iy = ox * vx + oy * vy + oz * vz
+        if ha <= 0.0:
+            dax, day = ix, iy
+        else:
+            dbx, dby = ix, iy
+    cr = dax * dby - day * dbx
+    if cr == 0.0:
+        return so, 0.0
+    sw = 1.0 if cr > 0.0 else -1.0
+    px, py, qx, qy = buf[0], buf[1], buf[2], buf[3]
+    px[0], py[0] = -hu, -hv
+    px[1], py[1] = hu, -hv
+    px[2], py[2] = hu, hv
+    px[3], py[3] = -hu, hv
+    n = 4
+    # beyond the line: n.(c - p) + nu U + nv V has the sign opposite to n.(c - p)
+    n = _clip_poly(px, py, n, -so * nu, -so * nv, -so * nc, qx, qy)
+    if n < 3:
+        return so, 0.0
+    # inside the angle: sw * cross(da, X) >= 0 and sw * cross(X, db) >= 0
+    n = _clip_poly(qx, qy, n, -sw * day, sw * dax, 0.0, px, py)
+    if n < 3:
+        return so, 0.0
+    n = _clip_poly(px, py, n, sw * dby, -sw * dbx, 0.0, qx, qy)
+    if n < 3:
+        return so, 0.0
+    area = 0.0
+    for i in range(n):
+        j = (i + 1) % n
+        area += qx[i] * qy[j] - qx[j] * qy[i]
+    return so, abs(area) * 0.5 / (4.0 * hu * hv)
+
+
+@kernel(inline=True)
+def _sample_light_frame(shape, center, nrm_l, p0, p1, p2, u, v, lp):
+    cx, cy, cz = center[0] - p0, center[1] - p1, center[2] - p2
+    lp[4] = cx
+    lp[5] = cy
+    lp[6] = cz
+    if shape == 1:
+        L = np.sqrt(cx * cx + cy * cy + cz * cz)
+        lp[0] = cx / L
+        lp[1] = cy / L
+        lp[2] = cz / L
+        lp[3] = L
+    else:
+        L = cx * nrm_l[0] + cy * nrm_l[1] + cz * nrm_l[2]
+        s = 1.0 if L >= 0.0 else -1.0
+        lp[0] = s * nrm_l[0]
+        lp[1] = s * nrm_l[1]
+        lp[2] = s * nrm_l[2]
+        lp[3] = abs(L)
+        lp[7], lp[8], lp[9] = u[0], u[1], u[2]
+        lp[10], lp[11], lp[12] = v[0], v[1], v[2]
+
+
+@kernel(inline=True)
+def sample_edge_term(shape, lp, radius, hu, hv, p0, p1, p2, e, ea, eb, tv_start, tv, buf):
+    """Signed penumbral occlusion of edge e at one sample: sum over the edge's counted triangles of
+    (+V~ when the light centre is outside the triangle's side of the edge, -V~ inside)."""
+    so, vt = edge_occlusion(
+        shape, lp, radius, hu, hv, p0, p1, p2, ea[e, 0], ea[e, 1], ea[e, 2], eb[e, 0], eb[e, 1], eb[e, 2], buf
+    )
+    if vt == 0.0:
+        return 0.0
+    rax, ray, raz = ea[e, 0] - p0, ea[e, 1] - p1, ea[e, 2] - p2
+    rbx, rby, rbz = eb[e, 0] - p0, eb[e, 1] - p1, eb[e, 2] - p2
+    nx = ray * rbz - raz * rby
+    ny = raz * rbx - rax * rbz
+    nz = rax * rby - ray * rbx
+    wsum = 0.0
+    for k in range(tv_start[e], tv_start[e + 1]):
+        s = nx * (tv[k, 0] - p0) + ny * (tv[k, 1] - p1) + nz * (tv[k, 2] - p2)
+        if s > 0.0:
+            wsum += 1.0
+        elif s < 0.0:
+            wsum -= 1.0
+    return -so * wsum * vt
+
+
+@kernel(inline=True)
+def _seg_box_dist(ax, ay, bx, by, x0, x1, y0, y1):
+    """Lower bound of the distance between segment AB and a box: distance to the box centre minus
+    its half diagonal (>= 0)."""
+    mx, my = 0.5 * (x0 + x1), 0.5 * (y0 + y1)
+    dx, dy = bx - ax, by - ay
+    uu = dx * dx + dy * dy
+    t = 0.0 if uu == 0.0 else min(max(((mx - ax) * dx + (my - ay) * dy) / uu, 0.0), 1.0)
+    qx, qy = ax + t * dx - mx, ay + t * dy - my
+    hd = 0.5 * np.sqrt((x1 - x0) ** 2 + (y1 - y0) ** 2)
+    return max(np.sqrt(qx * qx + qy * qy) - hd, 0.0)
+
+
+@kernel(parallel=True)
+def _penumbra_kernel(
+    g_start,
+    sp,
+    gx,
+    gy,
+    B,
+    nbx,
+    S,
+    dlo,
+    dhi,
+    dmax,
+    bin_maxd,
+    vp,
+    shape,
+    center,
+    nrm_l,
+    u,
+    v,
+    radius,
+    hu,
+    hv,
+    qd,
+    ea,
+    eb,
+    tv_start,
+    tv,
+    bin_start,
+    bin_items,
+    per_bin,
+    wedge,
+    count_only,
+    pen,
+    frags,
+    tests,
+    hits,
+):
+    nb = bin_start.shape[0] - 1
+    l, r, b, t = vp[12], vp[13], vp[14], vp[15]
+    cw = (r - l) / gx
+    ch = (t - b) / gy
+    for bi in prange(nb):
+        by = bi // nbx
+        bx = bi % nbx
+        lp = np.zeros(13)
+        buf = np.zeros((4, 8))
+        nf = 0
+        nt = 0
+        nh = 0
+        for kk in range(bin_start[bi], bin_start[bi + 1]):
+            e = bin_items[kk]
+            R = quad_half_width(qd, e, radius, bin_maxd[bi] if per_bin else dmax)
+            dmin = qd[e, 4]
+            for cy in range(by * B, min(by * B + B, gy)):
+                y1 = t - cy * ch
+                y0 = y1 - ch
+                for cx in range(bx * B, min(bx * B + B, gx)):
+                    x0 = l + cx * cw
+                    x1 = x0 + cw
+                    if not quad_overlaps_box(qd, e, R, x0, x1, y0, y1):
+                        continue
+                    col = (bi * B * B + (cy % B) * B + cx % B) * S
+                    if g_start[col] == g_start[col + S]:
+                        continue
+                    nf += 1
+                    s0 = 0
+                    if wedge and dmin > radius:
+                        # the wedge enters this column at the distance where its angular radius
+                        # reaches the column: r (1/(dmin - r) - 1/D) * stretch >= dist(cell, edge)
+                        dc = _seg_box_dist(qd[e, 0], qd[e, 1], qd[e, 2], qd[e, 3], x0, x1, y0, y1)
+                        inv = 1.0 / (dmin - radius) - dc / (qd[e, 5] * radius) / (1.0 + _SLACK)
+                        if inv <= 0.0:
+                            continue
+                        s0 = slice_of((1.0 / inv) * (1.0 - _SLACK), dlo, dhi, S)
+                    for j in range(g_start[col + s0], g_start[col + S]):
+                        nt += 1
+                        if count_only:
+                            continue
+                        _sample_light_frame(shape, center, nrm_l, sp[j, 0], sp[j, 1], sp[j, 2], u, v, lp)
+                        c = sample_edge_term(
+                            shape, lp, radius, hu, hv, sp[j, 0], sp[j, 1], sp[j, 2], e, ea, eb, tv_start, tv, buf
+                        )
+                        if c != 0.0:
+                            nh += 1
+                            pen[j] += c
+        frags[bi] = nf
+        tests[bi] = nt
+        hits[bi] = nh
+
+
+def _light_params(light):
+    if light.shape == "sphere":
+        z = np.zeros(3)
+        return 1, float(light.radius), float(light.radius), 0.0, 0.0, z, z, z
+    u = light.u / np.linalg.norm(light.u)
+    v = light.v - np.dot(light.v, u) * u
+    v = v / np.linalg.norm(v)
+    hu = 0.5 * float(np.linalg.norm(light.u))
+    hv = 0.5 * float(abs(np.dot(light.v, v)))
+    return 0, float(np.hypot(hu, hv)), 0.0, hu, hv, np.asarray(light.normal, float), u, v
+
+
+def accumulate_penumbrae(
+    grid: SampleGrid, edges: Edges, qd, bins, light, per_bin: bool, wedge: bool, count_only: bool = False
+):
+    """Step (d): for every bin, every quad in its list, every cell of the bin the quad covers (a
+    fragment) and every sample of that cell column at or beyond the wedge's entry slice (the second
+    overdraw optimisation, ``wedge``): add the edge's signed exact occlusion (Eq. 3 for the disk,
+    the clipped rectangle for the rectangle light). One thread per bin, no atomics."""
+    shape, bound_r, radius, hu, hv, nrm_l, u, v = _light_params(light)
+    n = len(grid.order)
+    pen = np.zeros(n)
+    nb = grid.n_bins
+    frags, tests, hits = np.zeros(nb, np.int64), np.zeros(nb, np.int64), np.zeros(nb, np.int64)
+    rad = radius if shape == 1 else bound_r
+    _penumbra_kernel(
+        grid.start,
+        grid.pos,
+        grid.gx,
+        grid.gy,
+        grid.bins,
+        grid.nbx,
+        grid.slices,
+        grid.dlo,
+        grid.dhi,
+        grid.dmax,
+        grid.bin_maxd,
+        grid.vp,
+        shape,
+        np.asarray(light.center, float),
+        nrm_l,
+        u,
+        v,
+        rad,
+        hu,
+        hv,
+        qd,
+        edges.a,
+        edges.b,
+        edges.tv_start,
+        edges.tv,
+        bins[0],
+        bins[1],
+        per_bin,
+        wedge,
+        count_only,
+        pen,
+        frags,
+        tests,
+        hits,
+    )
+    return pen, {"fragments": int(frags.sum()), "sample_tests": int(tests.sum()), "nonzero_terms": int(hits.sum())}
+
+
+# ---------------------------------------------------------------------------------------------
+# composition
+# ---------------------------------------------------------------------------------------------
+@kernel(parallel=True)
+def _compose(order, umbra, pen, n_all, out):
+    for k in prange(n_all):
+        out[k] = 1.0
+    for j in prange(order.shape[0]):
+        x = 1.0 - (umbra[j] + pen[j])
+        out[order[j]] = min(max(x, 0.0), 1.0)
+
+
+def compose_visibility(grid: SampleGrid, umbra, pen, n_all: int) -> np.ndarray:
+    """Eq. 4 with C = 0: V = 1 - (umbral count + summed signed penumbral occlusion), clamped to
+    [0, 1]; samples outside the grid (behind the light's view) are lit."""
+    out = np.empty(n_all, np.float32)
+    _compose(grid.order, umbra, pen, n_all, out)
+    return out
+
+
+def offset_points(pts, nrm, eps):
+    return np.ascontiguousarray(pts + eps * nrm, dtype=np.float64)
+
+
+def irregular_visibility(
+    scene,
+    pts,
+    nrm,
+    *,
+    grid=128,
+    bins=8,
+    slices=16,
+    per_bin=True,
+    wedge=True,
+    silhouettes="adjacency",
+    offset=1e-4,
+    overdraw_stats=False,
+    timer=None,
+):
+    """V at eye samples (K,) float32 and stats; the steps of Figure 2 in order."""
+    import contextlib
+
+    def phase(name):
+        return timer.phase(name) if timer is not None else contextlib.nullcontext()
+
+    light = scene.light
+    flat = scene.flat
+    lo, hi = scene.bounds()
+    eps = offset * float(np.linalg.norm(hi - lo))
+    stats = {}
+    with phase("construction"):
+        p = offset_points(pts, nrm, eps)
+        g = build_sample_grid(light, p, grid, bins, slices)
+    with phase("hard_kernel"):
+        occ, counted = counted_faces(flat, light.center)
+        umbra, st_u = count_umbrae(g, flat.vertices, np.ascontiguousarray(occ), counted, light.center)
+    with phase("soft_kernel"):
+        edges, st_s = select_silhouette_edges(flat, light.center, silhouettes)
+        bound_r = _light_params(light)[1]
+        qd = build_penumbra_quads(g, edges, bound_r)
+        bl = bin_penumbra_quads(g, qd, bound_r, per_bin)
+        pen, st_p = accumulate_penumbrae(g, edges, qd, bl, light, per_bin, wedge)
+        v = compose_visibility(g, umbra, pen, len(pts))
+    cells = np.diff(g.start)
+    ne = cells[cells > 0]
+    stats.update(
+        samples=int(len(pts)),
+        grid_samples=int(len(g.order)),
+        grid=f"{g.gx}x{g.gy}x{g.slices}",
+        nonempty_cells=int(len(ne)),
+        mean_samples_per_cell=float(ne.mean()) if len(ne) else 0.0,
+        max_samples_per_cell=int(ne.max()) if len(ne) else 0,
+        quads=int(len(edges)),
+        quad_bin_pairs=int(len(bl[1])),
+        quad_fragments=st_p["fragments"],
+        penumbra_sample_tests=st_p["sample_tests"],
+        penumbra_nonzero_terms=st_p["nonzero_terms"],
+        eps=eps,
+        **st_u,
+        **st_s,
+    )
+    if overdraw_stats:
+        for pb in (False, True):
+            blx = bin_penumbra_quads(g, qd, bound_r, pb)
+            for wd in (False, True):
+                _p, st = accumulate_penumbrae(g, edges, qd, blx, light, pb, wd, count_only=True)
+                tag = f"bins_{'on' if pb else 'off'}_wedge_{'on' if wd else 'off'}"
+                stats[f"overdraw_{tag}"] = {
+                    "quad_bin_pairs": int(len(blx[1])),
+                    **{k: st[k] for k in ("fragments", "sample_tests")},
+                }
+    return v, stats
+
+
+@register
+class Irregular(Method):
+    name = "irregular"
+    light_shapes = ("rect", "sphere")
+    summary = "soft irregular shadow mapping: exact umbra count + exact per-edge penumbra at every eye sample"
+    paper = "Johnson et al. 2009"
+    params = (
+        Param("grid", 128, "light-view grid cells per side (image plane)", min=1, max=4096),
+        Param("slices", 16, "depth slices of the perspective grid", min=1, max=1024),
+        Param(
+            "bins",
+            8,
+            "grid cells per screen-bin side (the unit of parallel work and of quad refinement)",
+            min=1,
+            max=4096,
+        ),
+        Param("per_bin", True, "overdraw optimisation 1: refine each quad's width with each bin's max receiver depth"),
+        Param("wedge", True, "overdraw optimisation 2: per fragment, test only samples beyond the wedge's entry slice"),
+        Param(
+            "silhouettes",
+            "adjacency",
+            "silhouette edges from mesh adjacency, or every edge of every counted triangle",
+            choices=("adjacency", "all-edges"),
+        ),
+        Param("offset", 1e-4, "sample offset along the normal, x scene diagonal (as ground-truth)", min=0.0),
+        Param("overdraw_stats", False, "also count fragments/tests with each optimisation off (extra passes)"),
+    )
+
+    def run(self, ctx, grid, slices, bins, per_bin, wedge, silhouettes, offset, overdraw_stats):
+        pts, nrm, idx = ctx.points()
+        v, stats = irregular_visibility(
+            ctx.scene,
+            pts,
+            nrm,
+            grid=grid,
+            bins=bins,
+            slices=slices,
+            per_bin=per_bin,
+            wedge=wedge,
+            silhouettes=silhouettes,
+            offset=offset,
+            overdraw_stats=overdraw_stats,
+            timer=ctx.timer,
+        )
+        return MethodOutput(ctx.scatter(v, idx), stats)
