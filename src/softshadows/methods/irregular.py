@@ -18,7 +18,7 @@ from numba import prange
 
 from .._jit import kernel
 from ..geometry.silhouette import build_adjacency, facing, find_silhouette
-from ..raster.view import light_view
+from ..raster.view import View, light_frame, light_view
 from .base import Method, MethodOutput, Param, register
 
 #: a connected occluder component with at most this fraction of boundary edges is a solid (only its
@@ -59,6 +59,7 @@ class SampleGrid:
     order: np.ndarray  # (n,) int64 index into the input samples
     bin_maxd: np.ndarray  # (nbx*nby,) float64 maximum receiver distance per bin (0 when empty)
     dmax: float
+    col_box: np.ndarray  # (n_columns, 6) 3D box (min xyz, max xyz) of each cell column's samples
 
     @property
     def n_bins(self) -> int:
@@ -140,32 +141,87 @@ def _gather_sorted(order, pts, ix, iy, dist, sx, sy, sp, sd):
 
 
 @kernel(parallel=True)
-def _bin_max_dist(start, sd, cells_per_bin, n_bins):
-    out = np.zeros(n_bins, np.float64)
-    for bi in prange(n_bins):
+def _column_boxes(start, sp, sd, S):
+    """Per cell column: 3D box of its samples and their maximum distance to the light centre."""
+    nc = (start.shape[0] - 1) // S
+    box = np.empty((nc, 6))
+    dmax = np.zeros(nc)
+    for c in prange(nc):
         m = 0.0
-        for j in range(start[bi * cells_per_bin], start[(bi + 1) * cells_per_bin]):
-            if sd[j] > m:
-                m = sd[j]
-        out[bi] = m
-    return out
+        for j in range(start[c * S], start[c * S + S]):
+            m = max(m, sd[j])
+        dmax[c] = m
+        for k in range(3):
+            box[c, k] = np.inf
+            box[c, 3 + k] = -np.inf
+        for j in range(start[c * S], start[c * S + S]):
+            for k in range(3):
+                box[c, k] = min(box[c, k], sp[j, k])
+                box[c, 3 + k] = max(box[c, 3 + k], sp[j, k])
+    return box, dmax
+
+
+@kernel
+def _extent(pts, c):
+    lo = np.full(3, np.inf)
+    hi = np.full(3, -np.inf)
+    d0, d1 = np.inf, 0.0
+    for k in range(pts.shape[0]):
+        for i in range(3):
+            lo[i] = min(lo[i], pts[k, i])
+            hi[i] = max(hi[i], pts[k, i])
+        dx, dy, dz = pts[k, 0] - c[0], pts[k, 1] - c[1], pts[k, 2] - c[2]
+        d = np.sqrt(dx * dx + dy * dy + dz * dz)
+        d0, d1 = min(d0, d), max(d1, d)
+    if pts.shape[0] == 0:
+        d0, d1 = 1.0, 1.0
+    return lo, hi, d0, d1
+
+
+@kernel
+def _window_of(pts, o, r, u, f, near):
+    x0, x1, y0, y1, z0, z1 = np.inf, -np.inf, np.inf, -np.inf, np.inf, -np.inf
+    for k in range(pts.shape[0]):
+        dx, dy, dz = pts[k, 0] - o[0], pts[k, 1] - o[1], pts[k, 2] - o[2]
+        z = dx * f[0] + dy * f[1] + dz * f[2]
+        if z > near:
+            x = (dx * r[0] + dy * r[1] + dz * r[2]) / z
+            y = (dx * u[0] + dy * u[1] + dz * u[2]) / z
+            x0, x1, y0, y1 = min(x0, x), max(x1, x), min(y0, y), max(y1, y)
+            z0, z1 = min(z0, z), max(z1, z)
+    return x0, x1, y0, y1, z0, z1
+
+
+def fit_grid_view(light, pts: np.ndarray, grid: int, lo, hi) -> View:
+    """The light view of the grid: from the light centre (``light_frame``: along the rectangle's
+    normal, toward the samples' box centre for the sphere), its window fitted to the samples in
+    front of it (one pass, no temporary arrays)."""
+    if len(pts) == 0:
+        return light_view(light, np.zeros((1, 3)), grid, grid)
+    r, u, f = light_frame(light, toward=(lo + hi) / 2)
+    near = 1e-6 * max(float(np.linalg.norm(hi - lo)), 1e-12)
+    x0, x1, y0, y1, _z0, z1 = _window_of(pts, light.center, r, u, f, near)
+    if not np.isfinite(x0):
+        return light_view(light, pts, grid, grid)
+    mx, my = 1e-3 * (x1 - x0) + 1e-12, 1e-3 * (y1 - y0) + 1e-12
+    return View(light.center.copy(), r, u, f, (x0 - mx, x1 + mx, y0 - my, y1 + my), near, z1 * 1.02, grid, grid)
 
 
 def build_sample_grid(light, pts: np.ndarray, grid: int, bins: int, slices: int) -> SampleGrid:
     """Step (a): insert every eye sample into the light-view grid by a counting sort (O(n)) and record
     each screen bin's maximum receiver distance (used by the coarse penumbra step)."""
-    view = light_view(light, pts if len(pts) else np.zeros((1, 3)), grid, grid, margin=1e-3)
-    vp = view.params()
     n = len(pts)
+    lo, hi, d0, d1 = _extent(pts, np.asarray(light.center, np.float64))
+    view = fit_grid_view(light, pts, grid, lo, hi)
+    vp = view.params()
     nbx = nby = -(-grid // bins)
-    d_all = np.linalg.norm(pts - light.center, axis=1) if n else np.ones(1)
-    dlo = max(float(d_all.min()) * (1 - 1e-9), 1e-12)
-    dhi = max(float(d_all.max()) * (1 + 1e-9), dlo * (1 + 1e-9))
+    dlo = max(d0 * (1 - 1e-9), 1e-12)
+    dhi = max(d1 * (1 + 1e-9), dlo * (1 + 1e-9))
     ix = np.empty(n)
     iy = np.empty(n)
     dist = np.empty(n)
     key = np.empty(n, np.int64)
-    near = max(view.near * 1e-3, 1e-9)
+    near = view.near
     _sample_keys(pts, vp, grid, grid, bins, nbx, slices, dlo, dhi, near, ix, iy, dist, key)
     n_keys = nbx * nby * bins * bins * slices
     start, order = counting_sort(key, n_keys)
@@ -173,7 +229,8 @@ def build_sample_grid(light, pts: np.ndarray, grid: int, bins: int, slices: int)
     sx, sy, sd = np.empty(m), np.empty(m), np.empty(m)
     sp = np.empty((m, 3))
     _gather_sorted(order, pts, ix, iy, dist, sx, sy, sp, sd)
-    bmax = _bin_max_dist(start, sd, bins * bins * slices, nbx * nby)
+    cbox, cmax = _column_boxes(start, sp, sd, slices)
+    bmax = cmax.reshape(nbx * nby, bins * bins).max(axis=1)
     return SampleGrid(
         vp,
         grid,
@@ -192,6 +249,7 @@ def build_sample_grid(light, pts: np.ndarray, grid: int, bins: int, slices: int)
         order,
         bmax,
         float(sd.max()) if m else 0.0,
+        cbox,
     )
 
 
@@ -493,12 +551,41 @@ class Edges:
         return len(self.a)
 
 
-def select_silhouette_edges(flat, center, mode: str) -> tuple[Edges, dict]:
-    """Silhouette edges seen from the light centre. ``adjacency``: the edges of
-    ``geometry/silhouette.py`` (facing mix or boundary, from the welded adjacency) plus non-manifold
-    edges, kept when the counted triangles around them do not cancel (sum of their orientations
-    seen from the centre != 0). ``all-edges``: every edge of every counted triangle, separately
-    (no adjacency: interior edges then cancel in the sum)."""
+def fold_candidates(flat, counted, lo, hi) -> np.ndarray:
+    """(E,) bool over the adjacency's edges: manifold edges whose two adjacent triangles are both
+    counted and that are a fold (one triangle facing, the other not) as seen from some point of the
+    receivers' box [lo, hi]: there the two triangles' terms do not cancel. Elsewhere they cancel
+    exactly (equal and opposite signs at every sample), so dropping them changes no bit."""
+    _occ, adj, _sheet, _t, _o = _topology(flat)
+    two = np.flatnonzero(adj.count == 2)
+    f0 = adj.edge_faces[adj.offsets[two]]
+    f1 = adj.edge_faces[adj.offsets[two] + 1]
+    both = counted[f0] & counted[f1]
+    two, f0, f1 = two[both], f0[both], f1[both]
+    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+
+    def side(f):
+        s = (
+            np.einsum("fk,ck->fc", adj.normals[f], corners)
+            - np.einsum("fk,fk->f", adj.normals[f], adj.anchors[f])[:, None]
+        )
+        pos, neg = (s > 0).all(1), (s < 0).all(1)
+        return np.where(pos, 1, np.where(neg, -1, 0))
+
+    s0, s1 = side(f0), side(f1)
+    out = np.zeros(adj.n_edges, bool)
+    out[two[(s0 == 0) | (s1 == 0) | (s0 != s1)]] = True
+    return out
+
+
+def select_silhouette_edges(flat, center, mode: str, folds: bool = True, box=None) -> tuple[Edges, dict]:
+    """Edges that carry penumbral occlusion. ``adjacency``: the silhouette edges seen from the light
+    centre (``geometry/silhouette.py``: facing mix or boundary, from the welded adjacency), plus
+    non-manifold edges, kept when the counted triangles around them do not cancel (sum of their
+    orientations seen from the centre != 0); with ``folds``, also the edges between two counted
+    triangles that fold as seen from some receiver (:func:`fold_candidates`, ``box`` = the
+    receivers' bounding box), so that the sum over edges equals the sum over counted triangles at
+    every sample. ``all-edges``: every edge of every counted triangle, separately (no adjacency)."""
     occ, counted = counted_faces(flat, center)
     V = flat.vertices
     if mode == "all-edges":
@@ -510,7 +597,7 @@ def select_silhouette_edges(flat, center, mode: str) -> tuple[Edges, dict]:
         ed = Edges(
             np.ascontiguousarray(a), np.ascontiguousarray(b), np.arange(E + 1, dtype=np.int64), np.ascontiguousarray(tv)
         )
-        return ed, {"silhouette_edges": E, "counted_triangles": int(counted.sum())}
+        return ed, {"silhouette_edges": E, "fold_edges": 0, "counted_triangles": int(counted.sum())}
     _occ, adj, _sheet, third, orient = _topology(flat)
     sil = find_silhouette(V, occ, center, "adjacency", adjacency=adj)
     nm = np.flatnonzero(adj.count > 2)
@@ -518,7 +605,8 @@ def select_silhouette_edges(flat, center, mode: str) -> tuple[Edges, dict]:
     cand = (
         np.searchsorted(key_all, sil.edges[:, 0] * len(V) + sil.edges[:, 1]) if sil.n_edges else np.zeros(0, np.int64)
     )
-    cand = np.unique(np.r_[cand, nm]).astype(np.int64)
+    fold = fold_candidates(flat, counted, box[0], box[1]) if folds and box is not None else np.zeros(adj.n_edges, bool)
+    cand = np.unique(np.r_[cand, nm, np.flatnonzero(fold)]).astype(np.int64)
     fr = facing(V, occ, center)
     c = adj.count[cand]
     ent = np.repeat(adj.offsets[cand], c) + (np.arange(c.sum()) - np.repeat(np.cumsum(c) - c, c))
@@ -527,7 +615,7 @@ def select_silhouette_edges(flat, center, mode: str) -> tuple[Edges, dict]:
     sig = np.where(cnt, orient[ent] * np.where(fr[fa], 1, -1), 0)
     eid = np.repeat(np.arange(len(cand)), c)
     w = np.bincount(eid, weights=sig, minlength=len(cand))
-    keep = w != 0
+    keep = (w != 0) | fold[cand]
     kept = cand[keep]
     ent_keep = keep[eid] & cnt
     tv_cnt = np.bincount(eid[ent_keep], minlength=len(cand))[keep]
@@ -540,14 +628,19 @@ def select_silhouette_edges(flat, center, mode: str) -> tuple[Edges, dict]:
         tv_start,
         np.ascontiguousarray(tv),
     )
-    return ed, {"silhouette_edges": int(len(kept)), "counted_triangles": int(counted.sum())}
+    n_fold = int((fold[kept] & (w[keep] == 0)).sum())
+    return ed, {
+        "silhouette_edges": int(len(kept)) - n_fold,
+        "fold_edges": n_fold,
+        "counted_triangles": int(counted.sum()),
+    }
 
 
 # ---------------------------------------------------------------------------------------------
 # (c) coarse penumbra: one light-view quad per silhouette edge, binned, refined per bin
 # ---------------------------------------------------------------------------------------------
 @kernel(parallel=True)
-def _quad_setup(ea, eb, vp, center, radius, corner2, qd):
+def _quad_setup(ea, eb, vp, center, radius, shape, nrm_l, dmax, qd):
     """Per edge: image-plane endpoints, the minimum distance of the edge to the light centre and the
     stretch factor of the image plane along the footprint (qd[e] = ax ay bx by dmin stretch valid)."""
     for e in prange(ea.shape[0]):
@@ -563,21 +656,42 @@ def _quad_setup(ea, eb, vp, center, radius, corner2, qd):
         uu = ux * ux + uy * uy + uz * uz
         tt = 0.0 if uu == 0.0 else min(max((wx * ux + wy * uy + wz * uz) / uu, 0.0), 1.0)
         qx, qy, qz = wx - tt * ux, wy - tt * uy, wz - tt * uz
-        qd[e, 4] = np.sqrt(qx * qx + qy * qy + qz * qz)
-        qd[e, 5] = 1.0 + max(corner2, ax * ax + ay * ay, bx * bx + by * by)
+        dmin = np.sqrt(qx * qx + qy * qy + qz * qz)
+        # kappa bounds |x . o^| / r over light points x and occluder directions o^ that matter: the
+        # sphere's disk is perpendicular to the direction c -> p, within the footprint angle of o^;
+        # the rectangle lies in its plane (largest sine of an endpoint direction to its normal)
+        kappa = 1.0
+        if shape == 1:
+            if dmin > radius:
+                kappa = min(1.0, np.sin(np.arctan(radius * (1.0 / (dmin - radius) - 1.0 / dmax))) * (1.0 + _SLACK))
+        else:
+            kappa = 0.0
+            for px, py, pz in ((ea[e, 0], ea[e, 1], ea[e, 2]), (eb[e, 0], eb[e, 1], eb[e, 2])):
+                dx, dy, dz = px - center[0], py - center[1], pz - center[2]
+                dn = np.sqrt(dx * dx + dy * dy + dz * dz)
+                cs = abs(dx * nrm_l[0] + dy * nrm_l[1] + dz * nrm_l[2]) / dn
+                kappa = max(kappa, np.sqrt(max(1.0 - cs * cs, 0.0)))
+            kappa = min(1.0, kappa * (1.0 + _SLACK) + 1e-9)
+        # stored as an effective distance: dmin - kappa r + r, so that quad_half_width's (d - r) is
+        # (dmin - kappa r)
+        qd[e, 4] = dmin - kappa * radius + radius
+        qd[e, 5] = max(ax * ax + ay * ay, bx * bx + by * by)
         qd[e, 6] = 1.0 if (az > 0.0 and bz > 0.0 and np.isfinite(ax) and np.isfinite(bx)) else 0.0
 
 
 @kernel(inline=True)
-def quad_half_width(qd, e, radius, dmax):
+def quad_half_width(qd, e, radius, dmax, corner2):
     """Half-width R of edge e's penumbra quad (image-plane units) for receivers up to distance
     ``dmax`` from the light centre: an occluder point at distance d shadows receivers within the
-    angle atan(r (1/(d - r) - 1/D)) of it (r: radius of the light's bounding sphere); x the image
-    plane's stretch. inf when the light's sphere reaches the edge, <= 0 when no receiver can be hit."""
+    angle atan(r (1/(d - kappa r) - 1/D)) of it (r: radius of the light's bounding sphere, kappa: see
+    _quad_setup; qd stores d - kappa r + r); x the image
+    plane's stretch 1/cos^2 of the largest angle off the view axis among the edge's endpoints and the
+    box the receivers lie in (``corner2``: its largest squared image-plane radius). inf when the
+    light's sphere reaches the edge, <= 0 when no receiver can be hit."""
     dmin = qd[e, 4]
     if dmin <= radius:
         return np.inf
-    return qd[e, 5] * radius * (1.0 / (dmin - radius) - 1.0 / dmax) * (1.0 + _SLACK) + 1e-12
+    return (1.0 + max(qd[e, 5], corner2)) * radius * (1.0 / (dmin - radius) - 1.0 / dmax) * (1.0 + _SLACK) + 1e-12
 
 
 @kernel(inline=True)
@@ -612,6 +726,11 @@ def quad_overlaps_box(qd, e, R, x0, x1, y0, y1):
 
 
 @kernel(inline=True)
+def box_corner2(x0, x1, y0, y1):
+    return max(x0 * x0, x1 * x1) + max(y0 * y0, y1 * y1)
+
+
+@kernel(inline=True)
 def _bin_box(vp, gx, gy, B, bx, by):
     l, r, b, t = vp[12], vp[13], vp[14], vp[15]
     cw = (r - l) / gx
@@ -624,11 +743,11 @@ def _bin_box(vp, gx, gy, B, bx, by):
 
 
 @kernel(parallel=True)
-def _count_quad_bins(qd, radius, dmax, bin_maxd, per_bin, vp, gx, gy, B, nbx, nby, counts):
+def _count_quad_bins(qd, radius, dmax, corner2, bin_maxd, per_bin, vp, gx, gy, B, nbx, nby, counts):
     for e in prange(qd.shape[0]):
         n = 0
         if qd[e, 6] > 0.0:
-            Rg = quad_half_width(qd, e, radius, dmax)
+            Rg = quad_half_width(qd, e, radius, dmax, corner2)
             if Rg > 0.0:
                 if np.isfinite(Rg):
                     x0 = min(qd[e, 0], qd[e, 2]) - Rg
@@ -644,20 +763,22 @@ def _count_quad_bins(qd, radius, dmax, bin_maxd, per_bin, vp, gx, gy, B, nbx, nb
                             bi = by * nbx + bx
                             if bin_maxd[bi] <= 0.0:
                                 continue
-                            R = quad_half_width(qd, e, radius, bin_maxd[bi]) if per_bin else Rg
                             bx0, bx1, by0, by1 = _bin_box(vp, gx, gy, B, bx, by)
+                            R = Rg
+                            if per_bin:
+                                R = quad_half_width(qd, e, radius, bin_maxd[bi], box_corner2(bx0, bx1, by0, by1))
                             if quad_overlaps_box(qd, e, R, bx0, bx1, by0, by1):
                                 n += 1
         counts[e] = n
 
 
 @kernel(parallel=True)
-def _fill_quad_bins(qd, radius, dmax, bin_maxd, per_bin, vp, gx, gy, B, nbx, nby, offs, pair_bin):
+def _fill_quad_bins(qd, radius, dmax, corner2, bin_maxd, per_bin, vp, gx, gy, B, nbx, nby, offs, pair_bin):
     for e in prange(qd.shape[0]):
         k = offs[e]
         if k == offs[e + 1]:
             continue
-        Rg = quad_half_width(qd, e, radius, dmax)
+        Rg = quad_half_width(qd, e, radius, dmax, corner2)
         if np.isfinite(Rg):
             x0 = min(qd[e, 0], qd[e, 2]) - Rg
             x1 = max(qd[e, 0], qd[e, 2]) + Rg
@@ -671,21 +792,27 @@ def _fill_quad_bins(qd, radius, dmax, bin_maxd, per_bin, vp, gx, gy, B, nbx, nby
                 bi = by * nbx + bx
                 if bin_maxd[bi] <= 0.0:
                     continue
-                R = quad_half_width(qd, e, radius, bin_maxd[bi]) if per_bin else Rg
                 bx0, bx1, by0, by1 = _bin_box(vp, gx, gy, B, bx, by)
+                R = Rg
+                if per_bin:
+                    R = quad_half_width(qd, e, radius, bin_maxd[bi], box_corner2(bx0, bx1, by0, by1))
                 if quad_overlaps_box(qd, e, R, bx0, bx1, by0, by1) and k < offs[e + 1]:
                     pair_bin[k] = bi
                     k += 1
 
 
-def build_penumbra_quads(grid: SampleGrid, edges: Edges, light_radius: float) -> np.ndarray:
+def window_corner2(vp) -> float:
+    l, r, b, t = vp[12:16]
+    return float(max(l * l, r * r) + max(b * b, t * t))
+
+
+def build_penumbra_quads(grid: SampleGrid, edges: Edges, light, light_radius: float) -> np.ndarray:
     """Step (c), setup: one light-view penumbra quad per silhouette edge (its image-plane segment,
     minimum distance to the light centre and stretch; the half-width follows from the receiver
     distance, :func:`quad_half_width`)."""
+    shape, _b, _r, _hu, _hv, nrm_l, _u, _v = _light_params(light)
     qd = np.zeros((len(edges), 7))
-    l, r, b, t = grid.vp[12:16]
-    corner2 = max(l * l, r * r) + max(b * b, t * t)
-    _quad_setup(edges.a, edges.b, grid.vp, grid.vp[0:3].copy(), light_radius, corner2, qd)
+    _quad_setup(edges.a, edges.b, grid.vp, grid.vp[0:3].copy(), light_radius, shape, nrm_l, grid.dmax, qd)
     return qd
 
 
@@ -699,6 +826,7 @@ def bin_penumbra_quads(grid: SampleGrid, qd: np.ndarray, light_radius: float, pe
         qd,
         light_radius,
         grid.dmax,
+        window_corner2(grid.vp),
         grid.bin_maxd,
         per_bin,
         grid.vp,
@@ -754,7 +882,7 @@ def _clip_poly(px, py, n, a, b, c, qx, qy):
 
 
 @kernel(inline=True)
-def edge_occlusion(shape, lp, radius, hu, hv, p0, p1, p2, ax, ay, az, bx, by, bz, buf):
+def edge_occlusion(shape, lp, lu, lv, radius, hu, hv, p0, p1, p2, ax, ay, az, bx, by, bz, buf):
     """Signed-by-geometry edge term at one sample. Returns (sO, V~): sO = sign of n.(c - p) (the side
     of the light centre relative to the plane through p and the edge, n = (a-p) x (b-p)) and V~ = the
     normalised area of the light's projection (from p, onto its plane) inside the angle the edge
@@ -762,7 +890,7 @@ def edge_occlusion(shape, lp, radius, hu, hv, p0, p1, p2, ax, ay, az, bx, by, bz
     rectangle). Edge parts at or behind p's plane parallel to the light project to infinity.
 
     lp: per-sample light frame: [0:3] w (unit, p -> light plane), [3] L (distance to the plane),
-    [4:7] c - p, [7:10] u, [10:13] v (rect axes)."""
+    [4:7] c - p; lu, lv: the rectangle's unit axes."""
     rax, ray, raz = ax - p0, ay - p1, az - p2
     rbx, rby, rbz = bx - p0, by - p1, bz - p2
     nx = ray * rbz - raz * rby
@@ -815,7 +943,7 @@ def edge_occlusion(shape, lp, radius, hu, hv, p0, p1, p2, ax, ay, az, bx, by, bz
             return so, 0.0
         return so, segment_area(d, w0, w1)
     # rectangle: 2D light-plane coordinates (u, v) around the centre
-    ux, uy, uz, vx, vy, vz = lp[7], lp[8], lp[9], lp[10], lp[11], lp[12]
+    ux, uy, uz, vx, vy, vz = lu[0], lu[1], lu[2], lv[0], lv[1], lv[2]
     nu = nx * ux + ny * uy + nz * uz
     nv = nx * vx + ny * vy + nz * vz
     nn = np.sqrt(nu * nu + nv * nv)
@@ -871,38 +999,37 @@ def edge_occlusion(shape, lp, radius, hu, hv, p0, p1, p2, ax, ay, az, bx, by, bz
     return so, abs(area) * 0.5 / (4.0 * hu * hv)
 
 
-@kernel(inline=True)
-def _sample_light_frame(shape, center, nrm_l, p0, p1, p2, u, v, lp):
-    cx, cy, cz = center[0] - p0, center[1] - p1, center[2] - p2
-    lp[4] = cx
-    lp[5] = cy
-    lp[6] = cz
-    if shape == 1:
-        L = np.sqrt(cx * cx + cy * cy + cz * cz)
-        lp[0] = cx / L
-        lp[1] = cy / L
-        lp[2] = cz / L
-        lp[3] = L
-    else:
-        L = cx * nrm_l[0] + cy * nrm_l[1] + cz * nrm_l[2]
-        s = 1.0 if L >= 0.0 else -1.0
-        lp[0] = s * nrm_l[0]
-        lp[1] = s * nrm_l[1]
-        lp[2] = s * nrm_l[2]
-        lp[3] = abs(L)
-        lp[7], lp[8], lp[9] = u[0], u[1], u[2]
-        lp[10], lp[11], lp[12] = v[0], v[1], v[2]
+@kernel(parallel=True)
+def sample_light_frames(shape, center, nrm_l, sp):
+    """Per sample: [0:3] w (unit, from p toward the light's plane: the facing disk's normal for the
+    sphere, the rectangle's normal for the rectangle), [3] L (distance to that plane), [4:7] c - p."""
+    n = sp.shape[0]
+    lp = np.empty((n, 7))
+    for j in prange(n):
+        cx, cy, cz = center[0] - sp[j, 0], center[1] - sp[j, 1], center[2] - sp[j, 2]
+        lp[j, 4] = cx
+        lp[j, 5] = cy
+        lp[j, 6] = cz
+        if shape == 1:
+            L = np.sqrt(cx * cx + cy * cy + cz * cz)
+            lp[j, 0] = cx / L
+            lp[j, 1] = cy / L
+            lp[j, 2] = cz / L
+            lp[j, 3] = L
+        else:
+            L = cx * nrm_l[0] + cy * nrm_l[1] + cz * nrm_l[2]
+            s = 1.0 if L >= 0.0 else -1.0
+            lp[j, 0] = s * nrm_l[0]
+            lp[j, 1] = s * nrm_l[1]
+            lp[j, 2] = s * nrm_l[2]
+            lp[j, 3] = abs(L)
+    return lp
 
 
 @kernel(inline=True)
-def sample_edge_term(shape, lp, radius, hu, hv, p0, p1, p2, e, ea, eb, tv_start, tv, buf):
+def sample_edge_term(shape, lp, lu, lv, radius, hu, hv, p0, p1, p2, e, ea, eb, tv_start, tv, buf):
     """Signed penumbral occlusion of edge e at one sample: sum over the edge's counted triangles of
     (+V~ when the light centre is outside the triangle's side of the edge, -V~ inside)."""
-    so, vt = edge_occlusion(
-        shape, lp, radius, hu, hv, p0, p1, p2, ea[e, 0], ea[e, 1], ea[e, 2], eb[e, 0], eb[e, 1], eb[e, 2], buf
-    )
-    if vt == 0.0:
-        return 0.0
     rax, ray, raz = ea[e, 0] - p0, ea[e, 1] - p1, ea[e, 2] - p2
     rbx, rby, rbz = eb[e, 0] - p0, eb[e, 1] - p1, eb[e, 2] - p2
     nx = ray * rbz - raz * rby
@@ -915,7 +1042,40 @@ def sample_edge_term(shape, lp, radius, hu, hv, p0, p1, p2, e, ea, eb, tv_start,
             wsum += 1.0
         elif s < 0.0:
             wsum -= 1.0
+    if wsum == 0.0:
+        return 0.0  # the counted triangles at this edge cancel as seen from p
+    so, vt = edge_occlusion(
+        shape, lp, lu, lv, radius, hu, hv, p0, p1, p2, ea[e, 0], ea[e, 1], ea[e, 2], eb[e, 0], eb[e, 1], eb[e, 2], buf
+    )
+    if vt == 0.0:
+        return 0.0
     return -so * wsum * vt
+
+
+@kernel(inline=True)
+def cancels_in_box(e, ea, eb, tv_start, tv, box, c):
+    """True when edge e's counted triangles cancel at every point of 3D box ``c``: the sign of a
+    sample's term for triangle (a, b, v) is -sign(((b - a) x (v - a)) . (p - a)); when every such
+    sign is constant on the box and they sum to zero, every sample in it gets an exact 0."""
+    if tv_start[e + 1] - tv_start[e] < 2:
+        return False
+    ux, uy, uz = eb[e, 0] - ea[e, 0], eb[e, 1] - ea[e, 1], eb[e, 2] - ea[e, 2]
+    mx = 0.5 * (box[c, 0] + box[c, 3]) - ea[e, 0]
+    my = 0.5 * (box[c, 1] + box[c, 4]) - ea[e, 1]
+    mz = 0.5 * (box[c, 2] + box[c, 5]) - ea[e, 2]
+    hx, hy, hz = 0.5 * (box[c, 3] - box[c, 0]), 0.5 * (box[c, 4] - box[c, 1]), 0.5 * (box[c, 5] - box[c, 2])
+    total = 0
+    for k in range(tv_start[e], tv_start[e + 1]):
+        vx, vy, vz = tv[k, 0] - ea[e, 0], tv[k, 1] - ea[e, 1], tv[k, 2] - ea[e, 2]
+        nx = uy * vz - uz * vy
+        ny = uz * vx - ux * vz
+        nz = ux * vy - uy * vx
+        val = nx * mx + ny * my + nz * mz
+        ext = (abs(nx) * hx + abs(ny) * hy + abs(nz) * hz) * (1.0 + _SLACK) + 1e-300
+        if abs(val) <= ext:
+            return False
+        total += 1 if val > 0.0 else -1
+    return total == 0
 
 
 @kernel(inline=True)
@@ -933,6 +1093,8 @@ def _seg_box_dist(ax, ay, bx, by, x0, x1, y0, y1):
 
 @kernel(parallel=True)
 def _penumbra_kernel(
+    wc2,
+    col_box,
     g_start,
     sp,
     gx,
@@ -946,8 +1108,7 @@ def _penumbra_kernel(
     bin_maxd,
     vp,
     shape,
-    center,
-    nrm_l,
+    lpa,
     u,
     v,
     radius,
@@ -975,14 +1136,19 @@ def _penumbra_kernel(
     for bi in prange(nb):
         by = bi // nbx
         bx = bi % nbx
-        lp = np.zeros(13)
         buf = np.zeros((4, 8))
+        bx0, bx1, by0, by1 = _bin_box(vp, gx, gy, B, bx, by)
+        bc2 = box_corner2(bx0, bx1, by0, by1)
         nf = 0
         nt = 0
         nh = 0
         for kk in range(bin_start[bi], bin_start[bi + 1]):
             e = bin_items[kk]
-            R = quad_half_width(qd, e, radius, bin_maxd[bi] if per_bin else dmax)
+            R = (
+                quad_half_width(qd, e, radius, bin_maxd[bi], bc2)
+                if per_bin
+                else quad_half_width(qd, e, radius, dmax, wc2)
+            )
             dmin = qd[e, 4]
             for cy in range(by * B, min(by * B + B, gy)):
                 y1 = t - cy * ch
@@ -995,13 +1161,15 @@ def _penumbra_kernel(
                     col = (bi * B * B + (cy % B) * B + cx % B) * S
                     if g_start[col] == g_start[col + S]:
                         continue
+                    if cancels_in_box(e, ea, eb, tv_start, tv, col_box, col // S):
+                        continue
                     nf += 1
                     s0 = 0
                     if wedge and dmin > radius:
                         # the wedge enters this column at the distance where its angular radius
                         # reaches the column: r (1/(dmin - r) - 1/D) * stretch >= dist(cell, edge)
                         dc = _seg_box_dist(qd[e, 0], qd[e, 1], qd[e, 2], qd[e, 3], x0, x1, y0, y1)
-                        inv = 1.0 / (dmin - radius) - dc / (qd[e, 5] * radius) / (1.0 + _SLACK)
+                        inv = 1.0 / (dmin - radius) - dc / ((1.0 + max(qd[e, 5], bc2)) * radius) / (1.0 + _SLACK)
                         if inv <= 0.0:
                             continue
                         s0 = slice_of((1.0 / inv) * (1.0 - _SLACK), dlo, dhi, S)
@@ -1009,9 +1177,23 @@ def _penumbra_kernel(
                         nt += 1
                         if count_only:
                             continue
-                        _sample_light_frame(shape, center, nrm_l, sp[j, 0], sp[j, 1], sp[j, 2], u, v, lp)
                         c = sample_edge_term(
-                            shape, lp, radius, hu, hv, sp[j, 0], sp[j, 1], sp[j, 2], e, ea, eb, tv_start, tv, buf
+                            shape,
+                            lpa[j],
+                            u,
+                            v,
+                            radius,
+                            hu,
+                            hv,
+                            sp[j, 0],
+                            sp[j, 1],
+                            sp[j, 2],
+                            e,
+                            ea,
+                            eb,
+                            tv_start,
+                            tv,
+                            buf,
                         )
                         if c != 0.0:
                             nh += 1
@@ -1046,7 +1228,10 @@ def accumulate_penumbrae(
     nb = grid.n_bins
     frags, tests, hits = np.zeros(nb, np.int64), np.zeros(nb, np.int64), np.zeros(nb, np.int64)
     rad = radius if shape == 1 else bound_r
+    lpa = sample_light_frames(shape, np.asarray(light.center, float), nrm_l, grid.pos)
     _penumbra_kernel(
+        window_corner2(grid.vp),
+        grid.col_box,
         grid.start,
         grid.pos,
         grid.gx,
@@ -1060,8 +1245,7 @@ def accumulate_penumbrae(
         grid.bin_maxd,
         grid.vp,
         shape,
-        np.asarray(light.center, float),
-        nrm_l,
+        lpa,
         u,
         v,
         rad,
@@ -1120,11 +1304,14 @@ def irregular_visibility(
     per_bin=True,
     wedge=True,
     silhouettes="adjacency",
+    folds=True,
     offset=1e-4,
     overdraw_stats=False,
     timer=None,
+    raw=False,
 ):
-    """V at eye samples (K,) float32 and stats; the steps of Figure 2 in order."""
+    """V at eye samples (K,) float32 and stats; the steps of Figure 2 in order. With ``raw``, also
+    (umbral count, penumbral sum) per input sample (NaN for samples outside the grid)."""
     import contextlib
 
     def phase(name):
@@ -1142,9 +1329,10 @@ def irregular_visibility(
         occ, counted = counted_faces(flat, light.center)
         umbra, st_u = count_umbrae(g, flat.vertices, np.ascontiguousarray(occ), counted, light.center)
     with phase("soft_kernel"):
-        edges, st_s = select_silhouette_edges(flat, light.center, silhouettes)
+        box = (g.col_box[:, :3].min(axis=0), g.col_box[:, 3:].max(axis=0)) if len(g.order) else None
+        edges, st_s = select_silhouette_edges(flat, light.center, silhouettes, folds, box)
         bound_r = _light_params(light)[1]
-        qd = build_penumbra_quads(g, edges, bound_r)
+        qd = build_penumbra_quads(g, edges, light, bound_r)
         bl = bin_penumbra_quads(g, qd, bound_r, per_bin)
         pen, st_p = accumulate_penumbrae(g, edges, qd, bl, light, per_bin, wedge)
         v = compose_visibility(g, umbra, pen, len(pts))
@@ -1176,6 +1364,12 @@ def irregular_visibility(
                     "quad_bin_pairs": int(len(blx[1])),
                     **{k: st[k] for k in ("fragments", "sample_tests")},
                 }
+    if raw:
+        um = np.full(len(pts), np.nan)
+        pe = np.full(len(pts), np.nan)
+        um[g.order] = umbra
+        pe[g.order] = pen
+        return v, stats, um, pe
     return v, stats
 
 
@@ -1203,11 +1397,17 @@ class Irregular(Method):
             "silhouette edges from mesh adjacency, or every edge of every counted triangle",
             choices=("adjacency", "all-edges"),
         ),
+        Param(
+            "folds",
+            True,
+            "with adjacency, also edges that fold as seen from some receiver (off: silhouettes from the light "
+            "centre only, as the paper)",
+        ),
         Param("offset", 1e-4, "sample offset along the normal, x scene diagonal (as ground-truth)", min=0.0),
         Param("overdraw_stats", False, "also count fragments/tests with each optimisation off (extra passes)"),
     )
 
-    def run(self, ctx, grid, slices, bins, per_bin, wedge, silhouettes, offset, overdraw_stats):
+    def run(self, ctx, grid, slices, bins, per_bin, wedge, silhouettes, folds, offset, overdraw_stats):
         pts, nrm, idx = ctx.points()
         v, stats = irregular_visibility(
             ctx.scene,
@@ -1219,6 +1419,7 @@ class Irregular(Method):
             per_bin=per_bin,
             wedge=wedge,
             silhouettes=silhouettes,
+            folds=folds,
             offset=offset,
             overdraw_stats=overdraw_stats,
             timer=ctx.timer,
