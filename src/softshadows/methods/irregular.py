@@ -551,17 +551,39 @@ class Edges:
         return len(self.a)
 
 
-def fold_candidates(flat, counted, lo, hi) -> np.ndarray:
+def fold_candidates(flat, counted, lo, hi, center, radius) -> np.ndarray:
     """(E,) bool over the adjacency's edges: manifold edges whose two adjacent triangles are both
-    counted and that are a fold (one triangle facing, the other not) as seen from some point of the
-    receivers' box [lo, hi]: there the two triangles' terms do not cancel. Elsewhere they cancel
-    exactly (equal and opposite signs at every sample), so dropping them changes no bit."""
+    counted and that can be a fold (one triangle facing p, the other not) for a receiver p in the
+    edge's shadow; elsewhere the two triangles' terms are equal and opposite at every sample (they
+    cancel exactly), so dropping the edge changes no bit. An edge is kept when both hold:
+
+    * some corner configuration of the receivers' box [lo, hi] is not on one common side of both
+      planes (else no receiver sees a fold), and
+    * one of the triangles is within the light's angular radius of grazing as seen from the edge:
+      a receiver shadowed through o sees o along a direction within asin(r / |o - c|) of (o - c),
+      so a plane at distance h from the centre can separate two such receivers' views only if
+      h / max(|a - c|, |b - c|) <= r / dmin (dmin: distance from the centre to the edge).
+    """
     _occ, adj, _sheet, _t, _o = _topology(flat)
     two = np.flatnonzero(adj.count == 2)
     f0 = adj.edge_faces[adj.offsets[two]]
     f1 = adj.edge_faces[adj.offsets[two] + 1]
     both = counted[f0] & counted[f1]
     two, f0, f1 = two[both], f0[both], f1[both]
+    V = flat.vertices
+    c = np.asarray(center, np.float64)
+    a, b = V[adj.edges[two, 0]], V[adj.edges[two, 1]]
+    u = b - a
+    t = np.clip(np.einsum("ek,ek->e", c - a, u) / np.maximum(np.einsum("ek,ek->e", u, u), 1e-300), 0.0, 1.0)
+    dmin = np.linalg.norm(a + t[:, None] * u - c, axis=1)
+    dfar = np.maximum(np.linalg.norm(a - c, axis=1), np.linalg.norm(b - c, axis=1))
+
+    def plane_h(f):
+        n = adj.normals[f]
+        return np.abs(np.einsum("ek,ek->e", n, adj.anchors[f] - c)) / np.maximum(np.linalg.norm(n, axis=1), 1e-300)
+
+    h = np.minimum(plane_h(f0), plane_h(f1))
+    grazing = (dmin <= radius) | (h * dmin <= radius * dfar * (1.0 + 1e-6) + 1e-12)
     corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
 
     def side(f):
@@ -574,11 +596,13 @@ def fold_candidates(flat, counted, lo, hi) -> np.ndarray:
 
     s0, s1 = side(f0), side(f1)
     out = np.zeros(adj.n_edges, bool)
-    out[two[(s0 == 0) | (s1 == 0) | (s0 != s1)]] = True
+    out[two[grazing & ((s0 == 0) | (s1 == 0) | (s0 != s1))]] = True
     return out
 
 
-def select_silhouette_edges(flat, center, mode: str, folds: bool = True, box=None) -> tuple[Edges, dict]:
+def select_silhouette_edges(
+    flat, center, mode: str, folds: bool = True, box=None, radius: float = 0.0
+) -> tuple[Edges, dict]:
     """Edges that carry penumbral occlusion. ``adjacency``: the silhouette edges seen from the light
     centre (``geometry/silhouette.py``: facing mix or boundary, from the welded adjacency), plus
     non-manifold edges, kept when the counted triangles around them do not cancel (sum of their
@@ -605,7 +629,11 @@ def select_silhouette_edges(flat, center, mode: str, folds: bool = True, box=Non
     cand = (
         np.searchsorted(key_all, sil.edges[:, 0] * len(V) + sil.edges[:, 1]) if sil.n_edges else np.zeros(0, np.int64)
     )
-    fold = fold_candidates(flat, counted, box[0], box[1]) if folds and box is not None else np.zeros(adj.n_edges, bool)
+    fold = (
+        fold_candidates(flat, counted, box[0], box[1], center, radius)
+        if folds and box is not None
+        else np.zeros(adj.n_edges, bool)
+    )
     cand = np.unique(np.r_[cand, nm, np.flatnonzero(fold)]).astype(np.int64)
     fr = facing(V, occ, center)
     c = adj.count[cand]
@@ -1330,8 +1358,8 @@ def irregular_visibility(
         umbra, st_u = count_umbrae(g, flat.vertices, np.ascontiguousarray(occ), counted, light.center)
     with phase("soft_kernel"):
         box = (g.col_box[:, :3].min(axis=0), g.col_box[:, 3:].max(axis=0)) if len(g.order) else None
-        edges, st_s = select_silhouette_edges(flat, light.center, silhouettes, folds, box)
         bound_r = _light_params(light)[1]
+        edges, st_s = select_silhouette_edges(flat, light.center, silhouettes, folds, box, bound_r)
         qd = build_penumbra_quads(g, edges, light, bound_r)
         bl = bin_penumbra_quads(g, qd, bound_r, per_bin)
         pen, st_p = accumulate_penumbrae(g, edges, qd, bl, light, per_bin, wedge)
