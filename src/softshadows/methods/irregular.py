@@ -405,6 +405,11 @@ def _pairs_by_bin(counts, pair_bin, n_bins):
     return start, item[order]
 
 
+@kernel(inline=True)
+def _tie(dx, dy):
+    return dy > 0.0 or (dy == 0.0 and dx > 0.0)
+
+
 @kernel(parallel=True)
 def _umbra_kernel(
     g_start,
@@ -461,6 +466,12 @@ def _umbra_kernel(
             )
             num = nx * (verts[i0, 0] - center[0]) + ny * (verts[i0, 1] - center[1]) + nz * (verts[i0, 2] - center[2])
             sg = 1.0 if area > 0.0 else -1.0
+            # tie rule: a point on an edge belongs to the triangle that traverses the edge (in its
+            # counter-clockwise orientation) upward, or rightward when horizontal; two triangles
+            # sharing the edge traverse it in opposite directions, so exactly one counts the point
+            t0 = _tie(sg * (bx2 - ax), sg * (by2 - ay))
+            t1 = _tie(sg * (cx2 - bx2), sg * (cy2 - by2))
+            t2 = _tie(sg * (ax - cx2), sg * (ay - cy2))
             for cy in range(cy0, cy1 + 1):
                 for cx in range(cx0, cx1 + 1):
                     col = (bi * B * B + (cy % B) * B + cx % B) * S
@@ -470,7 +481,11 @@ def _umbra_kernel(
                         e0 = sg * ((bx2 - ax) * (py - ay) - (by2 - ay) * (px - ax))
                         e1 = sg * ((cx2 - bx2) * (py - by2) - (cy2 - by2) * (px - bx2))
                         e2 = sg * ((ax - cx2) * (py - cy2) - (ay - cy2) * (px - cx2))
-                        if e0 >= 0.0 and e1 >= 0.0 and e2 >= 0.0:
+                        if (
+                            (e0 > 0.0 or (e0 == 0.0 and t0))
+                            and (e1 > 0.0 or (e1 == 0.0 and t1))
+                            and (e2 > 0.0 or (e2 == 0.0 and t2))
+                        ):
                             den = (
                                 nx * (sp[j, 0] - center[0]) + ny * (sp[j, 1] - center[1]) + nz * (sp[j, 2] - center[2])
                             )
