@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 from numba import prange
 
@@ -434,66 +435,79 @@ def _umbra_kernel(
     bin_items,
     umbra,
     tests,
+    nslot,
 ):
     nb = bin_start.shape[0] - 1
-    for bi in prange(nb):
-        by = bi // nbx
-        bx = bi % nbx
-        ntest = 0
-        for kk in range(bin_start[bi], bin_start[bi + 1]):
-            f = bin_items[kk]
-            ax, ay, bx2, by2, cx2, cy2 = tri2d[f, 0], tri2d[f, 1], tri2d[f, 2], tri2d[f, 3], tri2d[f, 4], tri2d[f, 5]
-            area = (bx2 - ax) * (cy2 - ay) - (by2 - ay) * (cx2 - ax)
-            if area == 0.0:
-                continue
-            cx0, cx1, cy0, cy1 = _cell_range(
-                min(ax, bx2, cx2), max(ax, bx2, cx2), min(ay, by2, cy2), max(ay, by2, cy2), vp, gx, gy
-            )
-            cx0 = max(cx0, bx * B)
-            cx1 = min(cx1, bx * B + B - 1)
-            cy0 = max(cy0, by * B)
-            cy1 = min(cy1, by * B + B - 1)
-            s0 = slice_of(trid[f], dlo, dhi, S)
-            i0, i1, i2 = faces[f, 0], faces[f, 1], faces[f, 2]
-            nx = (verts[i1, 1] - verts[i0, 1]) * (verts[i2, 2] - verts[i0, 2]) - (verts[i1, 2] - verts[i0, 2]) * (
-                verts[i2, 1] - verts[i0, 1]
-            )
-            ny = (verts[i1, 2] - verts[i0, 2]) * (verts[i2, 0] - verts[i0, 0]) - (verts[i1, 0] - verts[i0, 0]) * (
-                verts[i2, 2] - verts[i0, 2]
-            )
-            nz = (verts[i1, 0] - verts[i0, 0]) * (verts[i2, 1] - verts[i0, 1]) - (verts[i1, 1] - verts[i0, 1]) * (
-                verts[i2, 0] - verts[i0, 0]
-            )
-            num = nx * (verts[i0, 0] - center[0]) + ny * (verts[i0, 1] - center[1]) + nz * (verts[i0, 2] - center[2])
-            sg = 1.0 if area > 0.0 else -1.0
-            # tie rule: a point on an edge belongs to the triangle that traverses the edge (in its
-            # counter-clockwise orientation) upward, or rightward when horizontal; two triangles
-            # sharing the edge traverse it in opposite directions, so exactly one counts the point
-            t0 = _tie(sg * (bx2 - ax), sg * (by2 - ay))
-            t1 = _tie(sg * (cx2 - bx2), sg * (cy2 - by2))
-            t2 = _tie(sg * (ax - cx2), sg * (ay - cy2))
-            for cy in range(cy0, cy1 + 1):
-                for cx in range(cx0, cx1 + 1):
-                    col = (bi * B * B + (cy % B) * B + cx % B) * S
-                    for j in range(g_start[col + s0], g_start[col + S]):
-                        ntest += 1
-                        px, py = sx[j], sy[j]
-                        e0 = sg * ((bx2 - ax) * (py - ay) - (by2 - ay) * (px - ax))
-                        e1 = sg * ((cx2 - bx2) * (py - by2) - (cy2 - by2) * (px - bx2))
-                        e2 = sg * ((ax - cx2) * (py - cy2) - (ay - cy2) * (px - cx2))
-                        if (
-                            (e0 > 0.0 or (e0 == 0.0 and t0))
-                            and (e1 > 0.0 or (e1 == 0.0 and t1))
-                            and (e2 > 0.0 or (e2 == 0.0 and t2))
-                        ):
-                            den = (
-                                nx * (sp[j, 0] - center[0]) + ny * (sp[j, 1] - center[1]) + nz * (sp[j, 2] - center[2])
-                            )
-                            if den != 0.0:
-                                th = num / den  # the triangle's plane along centre -> p, 1 at p
-                                if th > 0.0 and th < 1.0:
-                                    umbra[j] += 1
-        tests[bi] = ntest
+    for slot in prange(nslot):  # bins dealt round-robin: shadowed bins are clustered
+        for bi in range(slot, nb, nslot):
+            by = bi // nbx
+            bx = bi % nbx
+            ntest = 0
+            for kk in range(bin_start[bi], bin_start[bi + 1]):
+                f = bin_items[kk]
+                ax, ay, bx2, by2, cx2, cy2 = (
+                    tri2d[f, 0],
+                    tri2d[f, 1],
+                    tri2d[f, 2],
+                    tri2d[f, 3],
+                    tri2d[f, 4],
+                    tri2d[f, 5],
+                )
+                area = (bx2 - ax) * (cy2 - ay) - (by2 - ay) * (cx2 - ax)
+                if area == 0.0:
+                    continue
+                cx0, cx1, cy0, cy1 = _cell_range(
+                    min(ax, bx2, cx2), max(ax, bx2, cx2), min(ay, by2, cy2), max(ay, by2, cy2), vp, gx, gy
+                )
+                cx0 = max(cx0, bx * B)
+                cx1 = min(cx1, bx * B + B - 1)
+                cy0 = max(cy0, by * B)
+                cy1 = min(cy1, by * B + B - 1)
+                s0 = slice_of(trid[f], dlo, dhi, S)
+                i0, i1, i2 = faces[f, 0], faces[f, 1], faces[f, 2]
+                nx = (verts[i1, 1] - verts[i0, 1]) * (verts[i2, 2] - verts[i0, 2]) - (verts[i1, 2] - verts[i0, 2]) * (
+                    verts[i2, 1] - verts[i0, 1]
+                )
+                ny = (verts[i1, 2] - verts[i0, 2]) * (verts[i2, 0] - verts[i0, 0]) - (verts[i1, 0] - verts[i0, 0]) * (
+                    verts[i2, 2] - verts[i0, 2]
+                )
+                nz = (verts[i1, 0] - verts[i0, 0]) * (verts[i2, 1] - verts[i0, 1]) - (verts[i1, 1] - verts[i0, 1]) * (
+                    verts[i2, 0] - verts[i0, 0]
+                )
+                num = (
+                    nx * (verts[i0, 0] - center[0]) + ny * (verts[i0, 1] - center[1]) + nz * (verts[i0, 2] - center[2])
+                )
+                sg = 1.0 if area > 0.0 else -1.0
+                # tie rule: a point on an edge belongs to the triangle that traverses the edge (in its
+                # counter-clockwise orientation) upward, or rightward when horizontal; two triangles
+                # sharing the edge traverse it in opposite directions, so exactly one counts the point
+                t0 = _tie(sg * (bx2 - ax), sg * (by2 - ay))
+                t1 = _tie(sg * (cx2 - bx2), sg * (cy2 - by2))
+                t2 = _tie(sg * (ax - cx2), sg * (ay - cy2))
+                for cy in range(cy0, cy1 + 1):
+                    for cx in range(cx0, cx1 + 1):
+                        col = (bi * B * B + (cy % B) * B + cx % B) * S
+                        for j in range(g_start[col + s0], g_start[col + S]):
+                            ntest += 1
+                            px, py = sx[j], sy[j]
+                            e0 = sg * ((bx2 - ax) * (py - ay) - (by2 - ay) * (px - ax))
+                            e1 = sg * ((cx2 - bx2) * (py - by2) - (cy2 - by2) * (px - bx2))
+                            e2 = sg * ((ax - cx2) * (py - cy2) - (ay - cy2) * (px - cx2))
+                            if (
+                                (e0 > 0.0 or (e0 == 0.0 and t0))
+                                and (e1 > 0.0 or (e1 == 0.0 and t1))
+                                and (e2 > 0.0 or (e2 == 0.0 and t2))
+                            ):
+                                den = (
+                                    nx * (sp[j, 0] - center[0])
+                                    + ny * (sp[j, 1] - center[1])
+                                    + nz * (sp[j, 2] - center[2])
+                                )
+                                if den != 0.0:
+                                    th = num / den  # the triangle's plane along centre -> p, 1 at p
+                                    if th > 0.0 and th < 1.0:
+                                        umbra[j] += 1
+            tests[bi] = ntest
 
 
 def count_umbrae(grid: SampleGrid, verts, faces, counted, center) -> tuple[np.ndarray, dict]:
@@ -540,6 +554,7 @@ def count_umbrae(grid: SampleGrid, verts, faces, counted, center) -> tuple[np.nd
         bitems,
         umbra,
         tests,
+        numba.get_num_threads(),
     )
     return umbra, {
         "umbra_triangles": int(valid.sum()),
@@ -1171,79 +1186,81 @@ def _penumbra_kernel(
     frags,
     tests,
     hits,
+    nslot,
 ):
     nb = bin_start.shape[0] - 1
     l, r, b, t = vp[12], vp[13], vp[14], vp[15]
     cw = (r - l) / gx
     ch = (t - b) / gy
-    for bi in prange(nb):
-        by = bi // nbx
-        bx = bi % nbx
-        buf = np.zeros((4, 8))
-        bx0, bx1, by0, by1 = _bin_box(vp, gx, gy, B, bx, by)
-        bc2 = box_corner2(bx0, bx1, by0, by1)
-        nf = 0
-        nt = 0
-        nh = 0
-        for kk in range(bin_start[bi], bin_start[bi + 1]):
-            e = bin_items[kk]
-            R = (
-                quad_half_width(qd, e, radius, bin_maxd[bi], bc2)
-                if per_bin
-                else quad_half_width(qd, e, radius, dmax, wc2)
-            )
-            dmin = qd[e, 4]
-            for cy in range(by * B, min(by * B + B, gy)):
-                y1 = t - cy * ch
-                y0 = y1 - ch
-                for cx in range(bx * B, min(bx * B + B, gx)):
-                    x0 = l + cx * cw
-                    x1 = x0 + cw
-                    if not quad_overlaps_box(qd, e, R, x0, x1, y0, y1):
-                        continue
-                    col = (bi * B * B + (cy % B) * B + cx % B) * S
-                    if g_start[col] == g_start[col + S]:
-                        continue
-                    if cancels_in_box(e, ea, eb, tv_start, tv, col_box, col // S):
-                        continue
-                    nf += 1
-                    s0 = 0
-                    if wedge and dmin > radius:
-                        # the wedge enters this column at the distance where its angular radius
-                        # reaches the column: r (1/(dmin - r) - 1/D) * stretch >= dist(cell, edge)
-                        dc = _seg_box_dist(qd[e, 0], qd[e, 1], qd[e, 2], qd[e, 3], x0, x1, y0, y1)
-                        inv = 1.0 / (dmin - radius) - dc / ((1.0 + max(qd[e, 5], bc2)) * radius) / (1.0 + _SLACK)
-                        if inv <= 0.0:
+    for slot in prange(nslot):  # bins dealt round-robin: shadowed bins are clustered
+        for bi in range(slot, nb, nslot):
+            by = bi // nbx
+            bx = bi % nbx
+            buf = np.zeros((4, 8))
+            bx0, bx1, by0, by1 = _bin_box(vp, gx, gy, B, bx, by)
+            bc2 = box_corner2(bx0, bx1, by0, by1)
+            nf = 0
+            nt = 0
+            nh = 0
+            for kk in range(bin_start[bi], bin_start[bi + 1]):
+                e = bin_items[kk]
+                R = (
+                    quad_half_width(qd, e, radius, bin_maxd[bi], bc2)
+                    if per_bin
+                    else quad_half_width(qd, e, radius, dmax, wc2)
+                )
+                dmin = qd[e, 4]
+                for cy in range(by * B, min(by * B + B, gy)):
+                    y1 = t - cy * ch
+                    y0 = y1 - ch
+                    for cx in range(bx * B, min(bx * B + B, gx)):
+                        x0 = l + cx * cw
+                        x1 = x0 + cw
+                        if not quad_overlaps_box(qd, e, R, x0, x1, y0, y1):
                             continue
-                        s0 = slice_of((1.0 / inv) * (1.0 - _SLACK), dlo, dhi, S)
-                    for j in range(g_start[col + s0], g_start[col + S]):
-                        nt += 1
-                        if count_only:
+                        col = (bi * B * B + (cy % B) * B + cx % B) * S
+                        if g_start[col] == g_start[col + S]:
                             continue
-                        c = sample_edge_term(
-                            shape,
-                            lpa[j],
-                            u,
-                            v,
-                            radius,
-                            hu,
-                            hv,
-                            sp[j, 0],
-                            sp[j, 1],
-                            sp[j, 2],
-                            e,
-                            ea,
-                            eb,
-                            tv_start,
-                            tv,
-                            buf,
-                        )
-                        if c != 0.0:
-                            nh += 1
-                            pen[j] += c
-        frags[bi] = nf
-        tests[bi] = nt
-        hits[bi] = nh
+                        if cancels_in_box(e, ea, eb, tv_start, tv, col_box, col // S):
+                            continue
+                        nf += 1
+                        s0 = 0
+                        if wedge and dmin > radius:
+                            # the wedge enters this column at the distance where its angular radius
+                            # reaches the column: r (1/(dmin - r) - 1/D) * stretch >= dist(cell, edge)
+                            dc = _seg_box_dist(qd[e, 0], qd[e, 1], qd[e, 2], qd[e, 3], x0, x1, y0, y1)
+                            inv = 1.0 / (dmin - radius) - dc / ((1.0 + max(qd[e, 5], bc2)) * radius) / (1.0 + _SLACK)
+                            if inv <= 0.0:
+                                continue
+                            s0 = slice_of((1.0 / inv) * (1.0 - _SLACK), dlo, dhi, S)
+                        for j in range(g_start[col + s0], g_start[col + S]):
+                            nt += 1
+                            if count_only:
+                                continue
+                            c = sample_edge_term(
+                                shape,
+                                lpa[j],
+                                u,
+                                v,
+                                radius,
+                                hu,
+                                hv,
+                                sp[j, 0],
+                                sp[j, 1],
+                                sp[j, 2],
+                                e,
+                                ea,
+                                eb,
+                                tv_start,
+                                tv,
+                                buf,
+                            )
+                            if c != 0.0:
+                                nh += 1
+                                pen[j] += c
+            frags[bi] = nf
+            tests[bi] = nt
+            hits[bi] = nh
 
 
 def _light_params(light):
@@ -1308,6 +1325,7 @@ def accumulate_penumbrae(
         frags,
         tests,
         hits,
+        numba.get_num_threads(),
     )
     return pen, {"fragments": int(frags.sum()), "sample_tests": int(tests.sum()), "nonzero_terms": int(hits.sum())}
 
