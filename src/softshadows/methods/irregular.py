@@ -304,12 +304,18 @@ def _topology(flat):
     return hit
 
 
+def facing_and_counted(flat, center) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(occluder faces (F,3), facing the light centre (F,), counted (F,))."""
+    occ, _adj, sheet, _t, _o = _topology(flat)
+    fr = facing(flat.vertices, occ, center) if len(occ) else np.zeros(0, bool)
+    return occ, fr, fr | sheet
+
+
 def counted_faces(flat, center) -> tuple[np.ndarray, np.ndarray]:
     """(occluder faces (F,3), counted (F,) bool): a triangle is counted when it faces the light
     centre or belongs to a sheet (open component); every count and edge below refers to these."""
-    occ, _adj, sheet, _t, _o = _topology(flat)
-    fr = facing(flat.vertices, occ, center) if len(occ) else np.zeros(0, bool)
-    return occ, fr | sheet
+    occ, _fr, counted = facing_and_counted(flat, center)
+    return occ, counted
 
 
 # ---------------------------------------------------------------------------------------------
@@ -337,11 +343,11 @@ def _cell_range(x0, x1, y0, y1, vp, gx, gy):
     return int(max(fx0, 0.0)), int(min(fx1, gx - 1.0)), int(max(fy0, 0.0)), int(min(fy1, gy - 1.0))
 
 
-@kernel(parallel=True)
+@kernel
 def _triangle_setup(verts, faces, counted, vp, center, tri2d, tribox, trid, valid):
     """Light-view image-plane vertices, box and lower bound of the distance to the light centre
     (the distance of the triangle's plane) of every counted triangle."""
-    for f in prange(faces.shape[0]):
+    for f in range(faces.shape[0]):
         valid[f] = False
         if not counted[f]:
             continue
@@ -374,9 +380,9 @@ def _triangle_setup(verts, faces, counted, vp, center, tri2d, tribox, trid, vali
         tribox[f, 3] = max(tri2d[f, 1], tri2d[f, 3], tri2d[f, 5])
 
 
-@kernel(parallel=True)
+@kernel
 def _count_tri_bins(tribox, valid, vp, gx, gy, B, counts):
-    for f in prange(tribox.shape[0]):
+    for f in range(tribox.shape[0]):
         counts[f] = 0
         if valid[f]:
             cx0, cx1, cy0, cy1 = _cell_range(tribox[f, 0], tribox[f, 1], tribox[f, 2], tribox[f, 3], vp, gx, gy)
@@ -384,9 +390,9 @@ def _count_tri_bins(tribox, valid, vp, gx, gy, B, counts):
                 counts[f] = (cx1 // B - cx0 // B + 1) * (cy1 // B - cy0 // B + 1)
 
 
-@kernel(parallel=True)
+@kernel
 def _fill_tri_bins(tribox, valid, vp, gx, gy, B, nbx, offs, pair_bin):
-    for f in prange(tribox.shape[0]):
+    for f in range(tribox.shape[0]):
         if valid[f]:
             cx0, cx1, cy0, cy1 = _cell_range(tribox[f, 0], tribox[f, 1], tribox[f, 2], tribox[f, 3], vp, gx, gy)
             k = offs[f]
@@ -631,7 +637,7 @@ def fold_candidates(flat, counted, lo, hi, center, radius) -> np.ndarray:
 
 
 def select_silhouette_edges(
-    flat, center, mode: str, folds: bool = True, box=None, radius: float = 0.0
+    flat, center, mode: str, folds: bool = True, box=None, radius: float = 0.0, fc=None
 ) -> tuple[Edges, dict]:
     """Edges that carry penumbral occlusion. ``adjacency``: the silhouette edges seen from the light
     centre (``geometry/silhouette.py``: facing mix or boundary, from the welded adjacency), plus
@@ -640,7 +646,7 @@ def select_silhouette_edges(
     triangles that fold as seen from some receiver (:func:`fold_candidates`, ``box`` = the
     receivers' bounding box), so that the sum over edges equals the sum over counted triangles at
     every sample. ``all-edges``: every edge of every counted triangle, separately (no adjacency)."""
-    occ, counted = counted_faces(flat, center)
+    occ, fr, counted = facing_and_counted(flat, center) if fc is None else fc
     V = flat.vertices
     if mode == "all-edges":
         f = occ[counted]
@@ -665,7 +671,6 @@ def select_silhouette_edges(
         else np.zeros(adj.n_edges, bool)
     )
     cand = np.unique(np.r_[cand, nm, np.flatnonzero(fold)]).astype(np.int64)
-    fr = facing(V, occ, center)
     c = adj.count[cand]
     ent = np.repeat(adj.offsets[cand], c) + (np.arange(c.sum()) - np.repeat(np.cumsum(c) - c, c))
     fa = adj.edge_faces[ent]
@@ -697,11 +702,11 @@ def select_silhouette_edges(
 # ---------------------------------------------------------------------------------------------
 # (c) coarse penumbra: one light-view quad per silhouette edge, binned, refined per bin
 # ---------------------------------------------------------------------------------------------
-@kernel(parallel=True)
+@kernel
 def _quad_setup(ea, eb, vp, center, radius, shape, nrm_l, dmax, qd):
     """Per edge: image-plane endpoints, the minimum distance of the edge to the light centre and the
     stretch factor of the image plane along the footprint (qd[e] = ax ay bx by dmin stretch valid)."""
-    for e in prange(ea.shape[0]):
+    for e in range(ea.shape[0]):
         ax, ay, az = _project(vp, ea[e, 0], ea[e, 1], ea[e, 2])
         bx, by, bz = _project(vp, eb[e, 0], eb[e, 1], eb[e, 2])
         qd[e, 0] = ax
@@ -800,9 +805,9 @@ def _bin_box(vp, gx, gy, B, bx, by):
     return x0, x1, y0, y1
 
 
-@kernel(parallel=True)
+@kernel
 def _count_quad_bins(qd, radius, dmax, corner2, bin_maxd, per_bin, vp, gx, gy, B, nbx, nby, counts):
-    for e in prange(qd.shape[0]):
+    for e in range(qd.shape[0]):
         n = 0
         if qd[e, 6] > 0.0:
             Rg = quad_half_width(qd, e, radius, dmax, corner2)
@@ -830,9 +835,9 @@ def _count_quad_bins(qd, radius, dmax, corner2, bin_maxd, per_bin, vp, gx, gy, B
         counts[e] = n
 
 
-@kernel(parallel=True)
+@kernel
 def _fill_quad_bins(qd, radius, dmax, corner2, bin_maxd, per_bin, vp, gx, gy, B, nbx, nby, offs, pair_bin):
-    for e in prange(qd.shape[0]):
+    for e in range(qd.shape[0]):
         k = offs[e]
         if k == offs[e + 1]:
             continue
@@ -1387,12 +1392,13 @@ def irregular_visibility(
         p = offset_points(pts, nrm, eps)
         g = build_sample_grid(light, p, grid, bins, slices)
     with phase("hard_kernel"):
-        occ, counted = counted_faces(flat, light.center)
+        fc = facing_and_counted(flat, light.center)
+        occ, counted = fc[0], fc[2]
         umbra, st_u = count_umbrae(g, flat.vertices, np.ascontiguousarray(occ), counted, light.center)
     with phase("soft_kernel"):
         box = (g.col_box[:, :3].min(axis=0), g.col_box[:, 3:].max(axis=0)) if len(g.order) else None
         bound_r = _light_params(light)[1]
-        edges, st_s = select_silhouette_edges(flat, light.center, silhouettes, folds, box, bound_r)
+        edges, st_s = select_silhouette_edges(flat, light.center, silhouettes, folds, box, bound_r, fc)
         qd = build_penumbra_quads(g, edges, light, bound_r)
         bl = bin_penumbra_quads(g, qd, bound_r, per_bin)
         pen, st_p = accumulate_penumbrae(g, edges, qd, bl, light, per_bin, wedge)
