@@ -1142,6 +1142,15 @@ def cancels_in_box(e, ea, eb, tv_start, tv, box, c):
 
 
 @kernel(inline=True)
+def _point_seg_dist2(px, py, ax, ay, bx, by):
+    dx, dy = bx - ax, by - ay
+    uu = dx * dx + dy * dy
+    t = 0.0 if uu == 0.0 else min(max(((px - ax) * dx + (py - ay) * dy) / uu, 0.0), 1.0)
+    qx, qy = ax + t * dx - px, ay + t * dy - py
+    return qx * qx + qy * qy
+
+
+@kernel(inline=True)
 def _seg_box_dist(ax, ay, bx, by, x0, x1, y0, y1):
     """Lower bound of the distance between segment AB and a box: distance to the box centre minus
     its half diagonal (>= 0)."""
@@ -1191,7 +1200,11 @@ def _penumbra_kernel(
     frags,
     tests,
     hits,
+    evals,
     nslot,
+    six,
+    siy,
+    sdist,
 ):
     nb = bin_start.shape[0] - 1
     l, r, b, t = vp[12], vp[13], vp[14], vp[15]
@@ -1207,6 +1220,7 @@ def _penumbra_kernel(
             nf = 0
             nt = 0
             nh = 0
+            nev = 0
             for kk in range(bin_start[bi], bin_start[bi + 1]):
                 e = bin_items[kk]
                 R = (
@@ -1230,6 +1244,8 @@ def _penumbra_kernel(
                             continue
                         nf += 1
                         s0 = 0
+                        stretch = 1.0 + max(qd[e, 5], bc2)
+                        dr = dmin - radius if dmin > radius else 0.0
                         if wedge and dmin > radius:
                             # the wedge enters this column at the distance where its angular radius
                             # reaches the column: r (1/(dmin - r) - 1/D) * stretch >= dist(cell, edge)
@@ -1242,6 +1258,19 @@ def _penumbra_kernel(
                             nt += 1
                             if count_only:
                                 continue
+                            # the same bound at the sample itself: its image-plane distance to the
+                            # edge's image against the angular radius at its own distance
+                            rs = (
+                                np.inf
+                                if dr <= 0.0
+                                else stretch * radius * (1.0 / dr - 1.0 / sdist[j]) * (1.0 + _SLACK) + 1e-12
+                            )
+                            if (
+                                rs < 0.0
+                                or _point_seg_dist2(six[j], siy[j], qd[e, 0], qd[e, 1], qd[e, 2], qd[e, 3]) > rs * rs
+                            ):
+                                continue
+                            nev += 1
                             c = sample_edge_term(
                                 shape,
                                 lpa[j],
@@ -1266,6 +1295,7 @@ def _penumbra_kernel(
             frags[bi] = nf
             tests[bi] = nt
             hits[bi] = nh
+            evals[bi] = nev
 
 
 def _light_params(light):
@@ -1292,6 +1322,7 @@ def accumulate_penumbrae(
     pen = np.zeros(n)
     nb = grid.n_bins
     frags, tests, hits = np.zeros(nb, np.int64), np.zeros(nb, np.int64), np.zeros(nb, np.int64)
+    evals = np.zeros(nb, np.int64)
     rad = radius if shape == 1 else bound_r
     lpa = sample_light_frames(shape, np.asarray(light.center, float), nrm_l, grid.pos)
     _penumbra_kernel(
@@ -1330,9 +1361,18 @@ def accumulate_penumbrae(
         frags,
         tests,
         hits,
+        evals,
         numba.get_num_threads(),
+        grid.ix,
+        grid.iy,
+        grid.dist,
     )
-    return pen, {"fragments": int(frags.sum()), "sample_tests": int(tests.sum()), "nonzero_terms": int(hits.sum())}
+    return pen, {
+        "fragments": int(frags.sum()),
+        "sample_tests": int(tests.sum()),
+        "evaluated_terms": int(evals.sum()),
+        "nonzero_terms": int(hits.sum()),
+    }
 
 
 # ---------------------------------------------------------------------------------------------
@@ -1416,6 +1456,7 @@ def irregular_visibility(
         quad_bin_pairs=int(len(bl[1])),
         quad_fragments=st_p["fragments"],
         penumbra_sample_tests=st_p["sample_tests"],
+        penumbra_evaluated_terms=st_p["evaluated_terms"],
         penumbra_nonzero_terms=st_p["nonzero_terms"],
         eps=eps,
         **st_u,
