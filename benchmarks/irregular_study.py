@@ -1,6 +1,6 @@
 """Study of ``irregular`` (soft irregular shadow mapping, Johnson et al. 2009): docs/results/irregular.md.
 
-    PYTHONPATH=src python benchmarks/irregular_study.py [--repeats 5] [--quick] [--out docs]
+    PYTHONPATH=src python benchmarks/irregular_study.py [--repeats 5] [--quick] [--out docs] [--frame-only]
 
 1. Frame time at 512x512 on ``bunny`` (sphere light) against ``hard``, one process, the two methods
    interleaved after warm-up (median of ``repeats``), with the phase split of the paper's Table 2.
@@ -100,6 +100,7 @@ def main():
     ap.add_argument("--quick", action="store_true", help="fewer points per curve")
     ap.add_argument("--out", default="docs")
     ap.add_argument("--samples", type=int, default=400)
+    ap.add_argument("--frame-only", action="store_true", help="only section 1 (the ratio to hard), printed")
     a = ap.parse_args()
     res = {
         "machine": f"{platform.machine()}, {os.cpu_count()} cores",
@@ -108,6 +109,8 @@ def main():
 
     res["frame"] = frame_ratio(a.repeats)
     print("frame", json.dumps({k: v for k, v in res["frame"].items() if k != "stats"}), flush=True)
+    if a.frame_only:
+        return
 
     bunny = builtin.build("bunny", "sphere")
     sizes = [128, 256, 384, 512] if not a.quick else [128, 256, 512]

@@ -925,43 +925,45 @@ def segment_area(d, w0, w1):
 
 
 @kernel(inline=True)
-def _clip_poly(px, py, n, a, b, c, qx, qy):
-    """Clip polygon (px, py)[:n] to a*x + b*y + c >= 0 into (qx, qy); returns the new count."""
+def _clip_poly(buf, src, n, a, b, c, dst):
+    """Clip the polygon in rows (2 src, 2 src + 1) of ``buf`` (x, y; n vertices) to
+    a*x + b*y + c >= 0 into rows (2 dst, 2 dst + 1); returns the new count."""
+    sx, sy, dx, dy = 2 * src, 2 * src + 1, 2 * dst, 2 * dst + 1
     m = 0
     for i in range(n):
         j = (i + 1) % n
-        fi = a * px[i] + b * py[i] + c
-        fj = a * px[j] + b * py[j] + c
+        fi = a * buf[sx, i] + b * buf[sy, i] + c
+        fj = a * buf[sx, j] + b * buf[sy, j] + c
         if fi >= 0.0:
-            qx[m] = px[i]
-            qy[m] = py[i]
+            buf[dx, m] = buf[sx, i]
+            buf[dy, m] = buf[sy, i]
             m += 1
         if (fi >= 0.0) != (fj >= 0.0):
             t = fi / (fi - fj)
-            qx[m] = px[i] + t * (px[j] - px[i])
-            qy[m] = py[i] + t * (py[j] - py[i])
+            buf[dx, m] = buf[sx, i] + t * (buf[sx, j] - buf[sx, i])
+            buf[dy, m] = buf[sy, i] + t * (buf[sy, j] - buf[sy, i])
             m += 1
     return m
 
 
 @kernel(inline=True)
-def edge_occlusion(shape, lp, lu, lv, radius, hu, hv, p0, p1, p2, ax, ay, az, bx, by, bz, buf):
+def edge_occlusion(shape, lp, j, lu, lv, radius, hu, hv, p0, p1, p2, ax, ay, az, bx, by, bz, buf):
     """Signed-by-geometry edge term at one sample. Returns (sO, V~): sO = sign of n.(c - p) (the side
     of the light centre relative to the plane through p and the edge, n = (a-p) x (b-p)) and V~ = the
     normalised area of the light's projection (from p, onto its plane) inside the angle the edge
     subtends at the centre and beyond the edge (Fig. 4; Eq. 3 for the disk, polygon clipping for the
     rectangle). Edge parts at or behind p's plane parallel to the light project to infinity.
 
-    lp: per-sample light frame: [0:3] w (unit, p -> light plane), [3] L (distance to the plane),
+    lp[j]: sample j's light frame: [0:3] w (unit, p -> light plane), [3] L (distance to the plane),
     [4:7] c - p; lu, lv: the rectangle's unit axes."""
     rax, ray, raz = ax - p0, ay - p1, az - p2
     rbx, rby, rbz = bx - p0, by - p1, bz - p2
     nx = ray * rbz - raz * rby
     ny = raz * rbx - rax * rbz
     nz = rax * rby - ray * rbx
-    wx, wy, wz, L = lp[0], lp[1], lp[2], lp[3]
+    wx, wy, wz, L = lp[j, 0], lp[j, 1], lp[j, 2], lp[j, 3]
     nw = nx * wx + ny * wy + nz * wz
-    nc = nx * lp[4] + ny * lp[5] + nz * lp[6]  # n . (c - p)
+    nc = nx * lp[j, 4] + ny * lp[j, 5] + nz * lp[j, 6]  # n . (c - p)
     if nc == 0.0:
         return 0.0, 0.0
     ha = rax * wx + ray * wy + raz * wz
@@ -1013,7 +1015,7 @@ def edge_occlusion(shape, lp, lu, lv, radius, hu, hv, p0, p1, p2, ax, ay, az, bx
     if nn == 0.0 or abs(nc) / nn >= np.sqrt(hu * hu + hv * hv):
         return so, 0.0
     # directions (from the centre) of the projected endpoints
-    cpx, cpy, cpz = -lp[4], -lp[5], -lp[6]  # p - c
+    cpx, cpy, cpz = -lp[j, 4], -lp[j, 5], -lp[j, 6]  # p - c
     dax = day = dbx = dby = 0.0
     if ha > 0.0:
         k = L / ha
@@ -1038,27 +1040,26 @@ def edge_occlusion(shape, lp, lu, lv, radius, hu, hv, p0, p1, p2, ax, ay, az, bx
     if cr == 0.0:
         return so, 0.0
     sw = 1.0 if cr > 0.0 else -1.0
-    px, py, qx, qy = buf[0], buf[1], buf[2], buf[3]
-    px[0], py[0] = -hu, -hv
-    px[1], py[1] = hu, -hv
-    px[2], py[2] = hu, hv
-    px[3], py[3] = -hu, hv
+    buf[0, 0], buf[1, 0] = -hu, -hv
+    buf[0, 1], buf[1, 1] = hu, -hv
+    buf[0, 2], buf[1, 2] = hu, hv
+    buf[0, 3], buf[1, 3] = -hu, hv
     n = 4
     # beyond the line: n.(c - p) + nu U + nv V has the sign opposite to n.(c - p)
-    n = _clip_poly(px, py, n, -so * nu, -so * nv, -so * nc, qx, qy)
+    n = _clip_poly(buf, 0, n, -so * nu, -so * nv, -so * nc, 1)
     if n < 3:
         return so, 0.0
     # inside the angle: sw * cross(da, X) >= 0 and sw * cross(X, db) >= 0
-    n = _clip_poly(qx, qy, n, -sw * day, sw * dax, 0.0, px, py)
+    n = _clip_poly(buf, 1, n, -sw * day, sw * dax, 0.0, 0)
     if n < 3:
         return so, 0.0
-    n = _clip_poly(px, py, n, sw * dby, -sw * dbx, 0.0, qx, qy)
+    n = _clip_poly(buf, 0, n, sw * dby, -sw * dbx, 0.0, 1)
     if n < 3:
         return so, 0.0
     area = 0.0
     for i in range(n):
-        j = (i + 1) % n
-        area += qx[i] * qy[j] - qx[j] * qy[i]
+        k = (i + 1) % n
+        area += buf[2, i] * buf[3, k] - buf[2, k] * buf[3, i]
     return so, abs(area) * 0.5 / (4.0 * hu * hv)
 
 
@@ -1090,7 +1091,7 @@ def sample_light_frames(shape, center, nrm_l, sp):
 
 
 @kernel(inline=True)
-def sample_edge_term(shape, lp, lu, lv, radius, hu, hv, p0, p1, p2, e, ea, eb, tv_start, tv, buf):
+def sample_edge_term(shape, lp, j, lu, lv, radius, hu, hv, p0, p1, p2, e, ea, eb, tv_start, tv, buf):
     """Signed penumbral occlusion of edge e at one sample: sum over the edge's counted triangles of
     (+V~ when the light centre is outside the triangle's side of the edge, -V~ inside)."""
     rax, ray, raz = ea[e, 0] - p0, ea[e, 1] - p1, ea[e, 2] - p2
@@ -1108,7 +1109,24 @@ def sample_edge_term(shape, lp, lu, lv, radius, hu, hv, p0, p1, p2, e, ea, eb, t
     if wsum == 0.0:
         return 0.0  # the counted triangles at this edge cancel as seen from p
     so, vt = edge_occlusion(
-        shape, lp, lu, lv, radius, hu, hv, p0, p1, p2, ea[e, 0], ea[e, 1], ea[e, 2], eb[e, 0], eb[e, 1], eb[e, 2], buf
+        shape,
+        lp,
+        j,
+        lu,
+        lv,
+        radius,
+        hu,
+        hv,
+        p0,
+        p1,
+        p2,
+        ea[e, 0],
+        ea[e, 1],
+        ea[e, 2],
+        eb[e, 0],
+        eb[e, 1],
+        eb[e, 2],
+        buf,
     )
     if vt == 0.0:
         return 0.0
@@ -1273,7 +1291,8 @@ def _penumbra_kernel(
                             nev += 1
                             c = sample_edge_term(
                                 shape,
-                                lpa[j],
+                                lpa,
+                                j,
                                 u,
                                 v,
                                 radius,
