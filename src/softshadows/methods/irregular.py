@@ -1262,7 +1262,6 @@ def _penumbra_kernel(
                             continue
                         nf += 1
                         s0 = 0
-                        stretch = 1.0 + max(qd[e, 5], bc2)
                         dr = dmin - radius if dmin > radius else 0.0
                         if wedge and dmin > radius:
                             # the wedge enters this column at the distance where its angular radius
@@ -1278,10 +1277,12 @@ def _penumbra_kernel(
                                 continue
                             # the same bound at the sample itself: its image-plane distance to the
                             # edge's image against the angular radius at its own distance
+                            # (stretch from the sample's own off-axis angle and the edge's endpoints)
+                            sj = 1.0 + max(qd[e, 5], six[j] * six[j] + siy[j] * siy[j])
                             rs = (
                                 np.inf
                                 if dr <= 0.0
-                                else stretch * radius * (1.0 / dr - 1.0 / sdist[j]) * (1.0 + _SLACK) + 1e-12
+                                else sj * radius * (1.0 / dr - 1.0 / sdist[j]) * (1.0 + _SLACK) + 1e-12
                             )
                             if (
                                 rs < 0.0
