@@ -15,6 +15,9 @@ from softshadows.scene.builtin import builtin_scenes
 
 
 def main():
+    from softshadows import tune_malloc
+
+    tune_malloc()  # a benchmark owns its process: the CLI's allocator setting (softshadows._malloc)
     ap = argparse.ArgumentParser()
     ap.add_argument("--size", default="256x192")
     ap.add_argument("--samples", type=int, default=256)

@@ -95,6 +95,9 @@ def errors(scene, w, h, samples, **kw):
 
 
 def main():
+    from softshadows import tune_malloc
+
+    tune_malloc()  # a benchmark owns its process: the CLI's allocator setting (softshadows._malloc)
     ap = argparse.ArgumentParser()
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--quick", action="store_true", help="fewer points per curve")

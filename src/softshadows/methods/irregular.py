@@ -362,11 +362,11 @@ def _triangle_setup(verts, faces, counted, vp, center, tri2d, tribox, trid, vali
         if not ok:
             continue
         a, b, c = faces[f, 0], faces[f, 1], faces[f, 2]
-        e1 = verts[b] - verts[a]
-        e2 = verts[c] - verts[a]
-        nx = e1[1] * e2[2] - e1[2] * e2[1]
-        ny = e1[2] * e2[0] - e1[0] * e2[2]
-        nz = e1[0] * e2[1] - e1[1] * e2[0]
+        e1x, e1y, e1z = verts[b, 0] - verts[a, 0], verts[b, 1] - verts[a, 1], verts[b, 2] - verts[a, 2]
+        e2x, e2y, e2z = verts[c, 0] - verts[a, 0], verts[c, 1] - verts[a, 1], verts[c, 2] - verts[a, 2]
+        nx = e1y * e2z - e1z * e2y
+        ny = e1z * e2x - e1x * e2z
+        nz = e1x * e2y - e1y * e2x
         nn = np.sqrt(nx * nx + ny * ny + nz * nz)
         if nn == 0.0:
             continue
