@@ -1091,6 +1091,20 @@ def sample_light_frames(shape, center, nrm_l, sp):
 
 
 @kernel(inline=True)
+def _side_sum(nx, ny, nz, p0, p1, p2, e, tv_start, tv):
+    """Sum over the edge's counted triangles of the side of their third vertex relative to the plane
+    through p and the edge (normal n): +1 / -1, 0 when in the plane."""
+    wsum = 0.0
+    for k in range(tv_start[e], tv_start[e + 1]):
+        s = nx * (tv[k, 0] - p0) + ny * (tv[k, 1] - p1) + nz * (tv[k, 2] - p2)
+        if s > 0.0:
+            wsum += 1.0
+        elif s < 0.0:
+            wsum -= 1.0
+    return wsum
+
+
+@kernel(inline=True)
 def sample_edge_term(shape, lp, j, lu, lv, radius, hu, hv, p0, p1, p2, e, ea, eb, tv_start, tv, buf):
     """Signed penumbral occlusion of edge e at one sample: sum over the edge's counted triangles of
     (+V~ when the light centre is outside the triangle's side of the edge, -V~ inside)."""
@@ -1099,8 +1113,16 @@ def sample_edge_term(shape, lp, j, lu, lv, radius, hu, hv, p0, p1, p2, e, ea, eb
     nx = ray * rbz - raz * rby
     ny = raz * rbx - rax * rbz
     nz = rax * rby - ray * rbx
-    # cheap exits first, with edge_occlusion's own arithmetic (so the result is the same): the
-    # edge's line misses the light's footprint
+    # cheap exits first (each gives the exact 0 the full term would): for fold candidates (two or
+    # more counted triangles) the triangles usually cancel as seen from p, so test that first; for
+    # silhouettes first whether the edge's line misses the light's footprint, with edge_occlusion's
+    # own arithmetic (so the outcome is the same)
+    many = tv_start[e + 1] - tv_start[e] >= 2
+    wsum = 0.0
+    if many:
+        wsum = _side_sum(nx, ny, nz, p0, p1, p2, e, tv_start, tv)
+        if wsum == 0.0:
+            return 0.0
     nc = nx * lp[j, 4] + ny * lp[j, 5] + nz * lp[j, 6]
     if nc == 0.0:
         return 0.0
@@ -1115,15 +1137,10 @@ def sample_edge_term(shape, lp, j, lu, lv, radius, hu, hv, p0, p1, p2, e, ea, eb
         nn = np.sqrt(nu * nu + nv * nv)
         if nn == 0.0 or abs(nc) / nn >= np.sqrt(hu * hu + hv * hv):
             return 0.0
-    wsum = 0.0
-    for k in range(tv_start[e], tv_start[e + 1]):
-        s = nx * (tv[k, 0] - p0) + ny * (tv[k, 1] - p1) + nz * (tv[k, 2] - p2)
-        if s > 0.0:
-            wsum += 1.0
-        elif s < 0.0:
-            wsum -= 1.0
-    if wsum == 0.0:
-        return 0.0  # the counted triangles at this edge cancel as seen from p
+    if not many:
+        wsum = _side_sum(nx, ny, nz, p0, p1, p2, e, tv_start, tv)
+        if wsum == 0.0:
+            return 0.0  # the counted triangles at this edge cancel as seen from p
     so, vt = edge_occlusion(
         shape,
         lp,
