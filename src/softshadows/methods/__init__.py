@@ -15,6 +15,7 @@ _MODULES = [
     "penumbra_map",
     "soft_shadow_map",
     "occlusion_textures",
+    "irregular",
     "layered_attenuation",
 ]
 _loaded = False

@@ -1,0 +1,1588 @@
+"""``irregular``: soft irregular shadow mapping (Johnson et al. 2009), for sphere and rectangle lights.
+
+Every eye sample is stored in a light-view perspective grid (:func:`build_sample_grid`), umbrae are
+an exact point-in-triangle depth-complexity count at the stored samples (:func:`count_umbrae`),
+penumbrae are one exact signed edge integral per (sample, silhouette edge) pair selected by
+penumbra quads (:func:`select_silhouette_edges`, :func:`build_penumbra_quads`,
+:func:`bin_penumbra_quads`, :func:`accumulate_penumbrae`), and V = 1 - (umbra + penumbra),
+clamped (:func:`compose_visibility`, Eq. 4 with C = 0). Steps, bookkeeping, parameters,
+deviations and measured limits: ``docs/methods/irregular.md``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+from numba import prange
+
+from .._jit import kernel
+from ..geometry.silhouette import build_adjacency, facing, find_silhouette
+from ..raster.view import View, light_frame, light_view
+from .base import Method, MethodOutput, Param, register
+
+#: a connected occluder component with at most this fraction of boundary edges is a solid (only its
+#: light-facing triangles are counted); otherwise a sheet (both sides counted)
+SOLID_MAX_BOUNDARY = 0.01
+#: relative slack on every conservative bound (quads, bins, wedge entry), so that a skipped sample
+#: provably has a zero contribution in floating point too
+_SLACK = 1e-6
+
+
+# ---------------------------------------------------------------------------------------------
+# (a) construction: the light-view perspective grid of eye samples
+# ---------------------------------------------------------------------------------------------
+@dataclass
+class SampleGrid:
+    """Eye samples sorted into a light-view 3D perspective grid.
+
+    Cells are (row, column) of a ``gx x gy`` image-plane grid x ``slices`` depth slices (by distance
+    to the light centre, geometric). Cells are numbered bin-major: ``((bin * B*B + local) * S + s)``
+    with ``B`` cells per bin side, so a cell column's slices are contiguous and every screen bin
+    owns one contiguous range. ``start[c]:start[c+1]`` are cell c's samples in the sorted arrays.
+    """
+
+    vp: np.ndarray  # light view params (window (l, r, b, t) at vp[12:16])
+    gx: int
+    gy: int
+    bins: int  # cells per bin side (B)
+    nbx: int
+    nby: int
+    slices: int
+    dlo: float  # slice 0 starts here (distance to the light centre)
+    dhi: float
+    start: np.ndarray  # (nbx*nby*B*B*S + 1,) int64
+    ix: np.ndarray  # (n,) float64 image-plane x/z of the sorted samples
+    iy: np.ndarray
+    pos: np.ndarray  # (n,3) float64 offset sample positions, sorted
+    dist: np.ndarray  # (n,) float64 distance to the light centre
+    order: np.ndarray  # (n,) int64 index into the input samples
+    bin_maxd: np.ndarray  # (nbx*nby,) float64 maximum receiver distance per bin (0 when empty)
+    dmax: float
+    col_box: np.ndarray  # (n_columns, 6) 3D box (min xyz, max xyz) of each cell column's samples
+
+    @property
+    def n_bins(self) -> int:
+        return self.nbx * self.nby
+
+
+@kernel(inline=True)
+def slice_of(d, dlo, dhi, slices):
+    """Depth slice of distance ``d`` (geometric slicing between dlo and dhi), clamped."""
+    if slices == 1 or d <= dlo:
+        return 0
+    s = int(np.floor(slices * np.log(d / dlo) / np.log(dhi / dlo)))
+    if s < 0:
+        return 0
+    if s >= slices:
+        return slices - 1
+    return s
+
+
+@kernel(parallel=True)
+def _sample_keys(pts, vp, gx, gy, B, nbx, slices, dlo, dhi, near, ix, iy, dist, key):
+    n = pts.shape[0]
+    l, r, b, t = vp[12], vp[13], vp[14], vp[15]
+    for k in prange(n):
+        dx = pts[k, 0] - vp[0]
+        dy = pts[k, 1] - vp[1]
+        dz = pts[k, 2] - vp[2]
+        x = dx * vp[3] + dy * vp[4] + dz * vp[5]
+        y = dx * vp[6] + dy * vp[7] + dz * vp[8]
+        z = dx * vp[9] + dy * vp[10] + dz * vp[11]
+        d = np.sqrt(dx * dx + dy * dy + dz * dz)
+        dist[k] = d
+        if not (z > near):
+            key[k] = -1
+            ix[k] = 0.0
+            iy[k] = 0.0
+            continue
+        xx = x / z
+        yy = y / z
+        ix[k] = xx
+        iy[k] = yy
+        cx = int(min(max(np.floor((xx - l) / (r - l) * gx), 0.0), gx - 1.0))
+        cy = int(min(max(np.floor((t - yy) / (t - b) * gy), 0.0), gy - 1.0))
+        bi = (cy // B) * nbx + cx // B
+        loc = (cy % B) * B + cx % B
+        key[k] = (bi * B * B + loc) * slices + slice_of(d, dlo, dhi, slices)
+
+
+@kernel
+def counting_sort(key, n_keys):
+    """Stable counting sort of non-negative keys (negative keys are dropped): (start (n_keys+1),
+    order). O(n + n_keys)."""
+    cnt = np.zeros(n_keys + 1, np.int64)
+    for k in range(key.shape[0]):
+        if key[k] >= 0:
+            cnt[key[k] + 1] += 1
+    for c in range(n_keys):
+        cnt[c + 1] += cnt[c]
+    order = np.empty(cnt[n_keys], np.int64)
+    fill = cnt[:-1].copy()
+    for k in range(key.shape[0]):
+        c = key[k]
+        if c >= 0:
+            order[fill[c]] = k
+            fill[c] += 1
+    return cnt, order
+
+
+@kernel(parallel=True)
+def _gather_sorted(order, pts, ix, iy, dist, sx, sy, sp, sd):
+    for j in prange(order.shape[0]):
+        k = order[j]
+        sx[j] = ix[k]
+        sy[j] = iy[k]
+        sp[j, 0] = pts[k, 0]
+        sp[j, 1] = pts[k, 1]
+        sp[j, 2] = pts[k, 2]
+        sd[j] = dist[k]
+
+
+@kernel(parallel=True)
+def _column_boxes(start, sp, sd, S):
+    """Per cell column: 3D box of its samples and their maximum distance to the light centre."""
+    nc = (start.shape[0] - 1) // S
+    box = np.empty((nc, 6))
+    dmax = np.zeros(nc)
+    for c in prange(nc):
+        m = 0.0
+        for j in range(start[c * S], start[c * S + S]):
+            m = max(m, sd[j])
+        dmax[c] = m
+        for k in range(3):
+            box[c, k] = np.inf
+            box[c, 3 + k] = -np.inf
+        for j in range(start[c * S], start[c * S + S]):
+            for k in range(3):
+                box[c, k] = min(box[c, k], sp[j, k])
+                box[c, 3 + k] = max(box[c, 3 + k], sp[j, k])
+    return box, dmax
+
+
+@kernel
+def _extent(pts, c):
+    lo = np.full(3, np.inf)
+    hi = np.full(3, -np.inf)
+    d0, d1 = np.inf, 0.0
+    for k in range(pts.shape[0]):
+        for i in range(3):
+            lo[i] = min(lo[i], pts[k, i])
+            hi[i] = max(hi[i], pts[k, i])
+        dx, dy, dz = pts[k, 0] - c[0], pts[k, 1] - c[1], pts[k, 2] - c[2]
+        d = np.sqrt(dx * dx + dy * dy + dz * dz)
+        d0, d1 = min(d0, d), max(d1, d)
+    if pts.shape[0] == 0:
+        d0, d1 = 1.0, 1.0
+    return lo, hi, d0, d1
+
+
+@kernel
+def _window_of(pts, o, r, u, f, near):
+    x0, x1, y0, y1, z0, z1 = np.inf, -np.inf, np.inf, -np.inf, np.inf, -np.inf
+    for k in range(pts.shape[0]):
+        dx, dy, dz = pts[k, 0] - o[0], pts[k, 1] - o[1], pts[k, 2] - o[2]
+        z = dx * f[0] + dy * f[1] + dz * f[2]
+        if z > near:
+            x = (dx * r[0] + dy * r[1] + dz * r[2]) / z
+            y = (dx * u[0] + dy * u[1] + dz * u[2]) / z
+            x0, x1, y0, y1 = min(x0, x), max(x1, x), min(y0, y), max(y1, y)
+            z0, z1 = min(z0, z), max(z1, z)
+    return x0, x1, y0, y1, z0, z1
+
+
+def fit_grid_view(light, pts: np.ndarray, grid: int, lo, hi) -> View:
+    """The light view of the grid: from the light centre (``light_frame``: along the rectangle's
+    normal, toward the samples' box centre for the sphere), its window fitted to the samples in
+    front of it (one pass, no temporary arrays)."""
+    if len(pts) == 0:
+        return light_view(light, np.zeros((1, 3)), grid, grid)
+    r, u, f = light_frame(light, toward=(lo + hi) / 2)
+    near = 1e-6 * max(float(np.linalg.norm(hi - lo)), 1e-12)
+    x0, x1, y0, y1, _z0, z1 = _window_of(pts, light.center, r, u, f, near)
+    if not np.isfinite(x0):
+        return light_view(light, pts, grid, grid)
+    mx, my = 1e-3 * (x1 - x0) + 1e-12, 1e-3 * (y1 - y0) + 1e-12
+    return View(light.center.copy(), r, u, f, (x0 - mx, x1 + mx, y0 - my, y1 + my), near, z1 * 1.02, grid, grid)
+
+
+def build_sample_grid(light, pts: np.ndarray, grid: int, bins: int, slices: int) -> SampleGrid:
+    """Step (a): insert every eye sample into the light-view grid by a counting sort (O(n)) and record
+    each screen bin's maximum receiver distance (used by the coarse penumbra step)."""
+    n = len(pts)
+    lo, hi, d0, d1 = _extent(pts, np.asarray(light.center, np.float64))
+    view = fit_grid_view(light, pts, grid, lo, hi)
+    vp = view.params()
+    nbx = nby = -(-grid // bins)
+    dlo = max(d0 * (1 - 1e-9), 1e-12)
+    dhi = max(d1 * (1 + 1e-9), dlo * (1 + 1e-9))
+    ix = np.empty(n)
+    iy = np.empty(n)
+    dist = np.empty(n)
+    key = np.empty(n, np.int64)
+    near = view.near
+    _sample_keys(pts, vp, grid, grid, bins, nbx, slices, dlo, dhi, near, ix, iy, dist, key)
+    n_keys = nbx * nby * bins * bins * slices
+    start, order = counting_sort(key, n_keys)
+    m = len(order)
+    sx, sy, sd = np.empty(m), np.empty(m), np.empty(m)
+    sp = np.empty((m, 3))
+    _gather_sorted(order, pts, ix, iy, dist, sx, sy, sp, sd)
+    cbox, cmax = _column_boxes(start, sp, sd, slices)
+    bmax = cmax.reshape(nbx * nby, bins * bins).max(axis=1)
+    return SampleGrid(
+        vp,
+        grid,
+        grid,
+        bins,
+        nbx,
+        nby,
+        slices,
+        dlo,
+        dhi,
+        start,
+        sx,
+        sy,
+        sp,
+        sd,
+        order,
+        bmax,
+        float(sd.max()) if m else 0.0,
+        cbox,
+    )
+
+
+# ---------------------------------------------------------------------------------------------
+# which occluder triangles are counted
+# ---------------------------------------------------------------------------------------------
+def _topology(flat):
+    """Per scene (cached): occluder faces, their welded adjacency and the per-face 'sheet' flag
+    (connected component with more than SOLID_MAX_BOUNDARY boundary edges)."""
+    hit = flat._cache.get("irregular_topology")
+    if hit is not None:
+        return hit
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    occ = np.ascontiguousarray(flat.faces[flat.occluder])
+    adj = build_adjacency(flat.vertices, occ)
+    F = len(occ)
+    sheet = np.zeros(F, bool)
+    if F:
+        grp_edge = np.repeat(np.arange(adj.n_edges), adj.count)
+        first = adj.edge_faces[adj.offsets[:-1]][grp_edge]
+        g = coo_matrix((np.ones(len(first)), (first, adj.edge_faces)), shape=(F, F))
+        ncomp, comp = connected_components(g, directed=False)
+        ecomp = comp[adj.edge_faces[adj.offsets[:-1]]]
+        n_e = np.bincount(ecomp, minlength=ncomp)
+        n_b = np.bincount(ecomp, weights=(adj.count == 1).astype(float), minlength=ncomp)
+        sheet = (n_b > SOLID_MAX_BOUNDARY * n_e)[comp]
+        # third vertex and orientation of every (edge, face) entry of the CSR
+        f = occ[adj.edge_faces]
+        rf = adj.rep[f]
+        lo = np.repeat(adj.edges[:, 0], adj.count)
+        hi = np.repeat(adj.edges[:, 1], adj.count)
+        third = np.where(
+            (rf[:, 0] != lo) & (rf[:, 0] != hi),
+            f[:, 0],
+            np.where((rf[:, 1] != lo) & (rf[:, 1] != hi), f[:, 1], f[:, 2]),
+        )
+        # +1 when lo -> hi follows the face's winding
+        fw = (
+            ((rf[:, 0] == lo) & (rf[:, 1] == hi))
+            | ((rf[:, 1] == lo) & (rf[:, 2] == hi))
+            | ((rf[:, 2] == lo) & (rf[:, 0] == hi))
+        )
+        orient = np.where(fw, 1, -1)
+    else:
+        third = np.zeros(0, np.int64)
+        orient = np.zeros(0, np.int64)
+    hit = (occ, adj, sheet, third, orient)
+    flat._cache["irregular_topology"] = hit
+    return hit
+
+
+def facing_and_counted(flat, center) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(occluder faces (F,3), facing the light centre (F,), counted (F,))."""
+    occ, _adj, sheet, _t, _o = _topology(flat)
+    fr = facing(flat.vertices, occ, center) if len(occ) else np.zeros(0, bool)
+    return occ, fr, fr | sheet
+
+
+def counted_faces(flat, center) -> tuple[np.ndarray, np.ndarray]:
+    """(occluder faces (F,3), counted (F,) bool): a triangle is counted when it faces the light
+    centre or belongs to a sheet (open component); every count and edge below refers to these."""
+    occ, _fr, counted = facing_and_counted(flat, center)
+    return occ, counted
+
+
+# ---------------------------------------------------------------------------------------------
+# (b) umbrae: exact depth complexity between each sample and the light centre
+# ---------------------------------------------------------------------------------------------
+@kernel(inline=True)
+def _project(vp, x, y, z):
+    dx, dy, dz = x - vp[0], y - vp[1], z - vp[2]
+    vx = dx * vp[3] + dy * vp[4] + dz * vp[5]
+    vy = dx * vp[6] + dy * vp[7] + dz * vp[8]
+    vz = dx * vp[9] + dy * vp[10] + dz * vp[11]
+    return vx / vz, vy / vz, vz
+
+
+@kernel(inline=True)
+def _cell_range(x0, x1, y0, y1, vp, gx, gy):
+    """Cells (cx0, cx1, cy0, cy1), inclusive, overlapped by the image-plane box; empty when cx0 > cx1."""
+    l, r, b, t = vp[12], vp[13], vp[14], vp[15]
+    fx0 = np.floor((x0 - l) / (r - l) * gx)
+    fx1 = np.floor((x1 - l) / (r - l) * gx)
+    fy0 = np.floor((t - y1) / (t - b) * gy)
+    fy1 = np.floor((t - y0) / (t - b) * gy)
+    if not (fx1 >= 0.0 and fy1 >= 0.0 and fx0 <= gx - 1.0 and fy0 <= gy - 1.0):
+        return 1, 0, 1, 0
+    return int(max(fx0, 0.0)), int(min(fx1, gx - 1.0)), int(max(fy0, 0.0)), int(min(fy1, gy - 1.0))
+
+
+@kernel
+def _triangle_setup(verts, faces, counted, vp, center, tri2d, tribox, trid, valid):
+    """Light-view image-plane vertices, box and lower bound of the distance to the light centre
+    (the distance of the triangle's plane) of every counted triangle."""
+    for f in range(faces.shape[0]):
+        valid[f] = False
+        if not counted[f]:
+            continue
+        ok = True
+        for j in range(3):
+            v = faces[f, j]
+            x, y, z = _project(vp, verts[v, 0], verts[v, 1], verts[v, 2])
+            if not (z > 0.0):
+                ok = False
+            tri2d[f, 2 * j] = x
+            tri2d[f, 2 * j + 1] = y
+        if not ok:
+            continue
+        a, b, c = faces[f, 0], faces[f, 1], faces[f, 2]
+        e1x, e1y, e1z = verts[b, 0] - verts[a, 0], verts[b, 1] - verts[a, 1], verts[b, 2] - verts[a, 2]
+        e2x, e2y, e2z = verts[c, 0] - verts[a, 0], verts[c, 1] - verts[a, 1], verts[c, 2] - verts[a, 2]
+        nx = e1y * e2z - e1z * e2y
+        ny = e1z * e2x - e1x * e2z
+        nz = e1x * e2y - e1y * e2x
+        nn = np.sqrt(nx * nx + ny * ny + nz * nz)
+        if nn == 0.0:
+            continue
+        valid[f] = True
+        trid[f] = (
+            abs(nx * (verts[a, 0] - center[0]) + ny * (verts[a, 1] - center[1]) + nz * (verts[a, 2] - center[2])) / nn
+        )
+        tribox[f, 0] = min(tri2d[f, 0], tri2d[f, 2], tri2d[f, 4])
+        tribox[f, 1] = max(tri2d[f, 0], tri2d[f, 2], tri2d[f, 4])
+        tribox[f, 2] = min(tri2d[f, 1], tri2d[f, 3], tri2d[f, 5])
+        tribox[f, 3] = max(tri2d[f, 1], tri2d[f, 3], tri2d[f, 5])
+
+
+@kernel
+def _count_tri_bins(tribox, valid, vp, gx, gy, B, counts):
+    for f in range(tribox.shape[0]):
+        counts[f] = 0
+        if valid[f]:
+            cx0, cx1, cy0, cy1 = _cell_range(tribox[f, 0], tribox[f, 1], tribox[f, 2], tribox[f, 3], vp, gx, gy)
+            if cx0 <= cx1 and cy0 <= cy1:
+                counts[f] = (cx1 // B - cx0 // B + 1) * (cy1 // B - cy0 // B + 1)
+
+
+@kernel
+def _fill_tri_bins(tribox, valid, vp, gx, gy, B, nbx, offs, pair_bin):
+    for f in range(tribox.shape[0]):
+        if valid[f]:
+            cx0, cx1, cy0, cy1 = _cell_range(tribox[f, 0], tribox[f, 1], tribox[f, 2], tribox[f, 3], vp, gx, gy)
+            k = offs[f]
+            for by in range(cy0 // B, cy1 // B + 1):
+                for bx in range(cx0 // B, cx1 // B + 1):
+                    if k < offs[f + 1]:
+                        pair_bin[k] = by * nbx + bx
+                        k += 1
+
+
+def _pairs_by_bin(counts, pair_bin, n_bins):
+    """Item-major (item, bin) pairs -> per-bin item lists (items ascending within a bin)."""
+    offs = np.zeros(len(counts) + 1, np.int64)
+    np.cumsum(counts, out=offs[1:])
+    item = np.repeat(np.arange(len(counts), dtype=np.int64), counts)
+    start, order = counting_sort(pair_bin, n_bins)
+    return start, item[order]
+
+
+@kernel(inline=True)
+def _tie(dx, dy):
+    return dy > 0.0 or (dy == 0.0 and dx > 0.0)
+
+
+@kernel(parallel=True)
+def _umbra_kernel(
+    g_start,
+    sx,
+    sy,
+    sp,
+    sd,
+    gx,
+    gy,
+    B,
+    nbx,
+    S,
+    dlo,
+    dhi,
+    vp,
+    center,
+    verts,
+    faces,
+    tri2d,
+    trid,
+    bin_start,
+    bin_items,
+    umbra,
+    tests,
+    nslot,
+):
+    nb = bin_start.shape[0] - 1
+    for slot in prange(nslot):  # bins dealt round-robin: shadowed bins are clustered
+        for bi in range(slot, nb, nslot):
+            by = bi // nbx
+            bx = bi % nbx
+            ntest = 0
+            for kk in range(bin_start[bi], bin_start[bi + 1]):
+                f = bin_items[kk]
+                ax, ay, bx2, by2, cx2, cy2 = (
+                    tri2d[f, 0],
+                    tri2d[f, 1],
+                    tri2d[f, 2],
+                    tri2d[f, 3],
+                    tri2d[f, 4],
+                    tri2d[f, 5],
+                )
+                area = (bx2 - ax) * (cy2 - ay) - (by2 - ay) * (cx2 - ax)
+                if area == 0.0:
+                    continue
+                cx0, cx1, cy0, cy1 = _cell_range(
+                    min(ax, bx2, cx2), max(ax, bx2, cx2), min(ay, by2, cy2), max(ay, by2, cy2), vp, gx, gy
+                )
+                cx0 = max(cx0, bx * B)
+                cx1 = min(cx1, bx * B + B - 1)
+                cy0 = max(cy0, by * B)
+                cy1 = min(cy1, by * B + B - 1)
+                s0 = slice_of(trid[f], dlo, dhi, S)
+                i0, i1, i2 = faces[f, 0], faces[f, 1], faces[f, 2]
+                nx = (verts[i1, 1] - verts[i0, 1]) * (verts[i2, 2] - verts[i0, 2]) - (verts[i1, 2] - verts[i0, 2]) * (
+                    verts[i2, 1] - verts[i0, 1]
+                )
+                ny = (verts[i1, 2] - verts[i0, 2]) * (verts[i2, 0] - verts[i0, 0]) - (verts[i1, 0] - verts[i0, 0]) * (
+                    verts[i2, 2] - verts[i0, 2]
+                )
+                nz = (verts[i1, 0] - verts[i0, 0]) * (verts[i2, 1] - verts[i0, 1]) - (verts[i1, 1] - verts[i0, 1]) * (
+                    verts[i2, 0] - verts[i0, 0]
+                )
+                num = (
+                    nx * (verts[i0, 0] - center[0]) + ny * (verts[i0, 1] - center[1]) + nz * (verts[i0, 2] - center[2])
+                )
+                sg = 1.0 if area > 0.0 else -1.0
+                # tie rule: a point on an edge belongs to the triangle that traverses the edge (in its
+                # counter-clockwise orientation) upward, or rightward when horizontal; two triangles
+                # sharing the edge traverse it in opposite directions, so exactly one counts the point
+                t0 = _tie(sg * (bx2 - ax), sg * (by2 - ay))
+                t1 = _tie(sg * (cx2 - bx2), sg * (cy2 - by2))
+                t2 = _tie(sg * (ax - cx2), sg * (ay - cy2))
+                for cy in range(cy0, cy1 + 1):
+                    for cx in range(cx0, cx1 + 1):
+                        col = (bi * B * B + (cy % B) * B + cx % B) * S
+                        for j in range(g_start[col + s0], g_start[col + S]):
+                            ntest += 1
+                            px, py = sx[j], sy[j]
+                            e0 = sg * ((bx2 - ax) * (py - ay) - (by2 - ay) * (px - ax))
+                            e1 = sg * ((cx2 - bx2) * (py - by2) - (cy2 - by2) * (px - bx2))
+                            e2 = sg * ((ax - cx2) * (py - cy2) - (ay - cy2) * (px - cx2))
+                            if (
+                                (e0 > 0.0 or (e0 == 0.0 and t0))
+                                and (e1 > 0.0 or (e1 == 0.0 and t1))
+                                and (e2 > 0.0 or (e2 == 0.0 and t2))
+                            ):
+                                den = (
+                                    nx * (sp[j, 0] - center[0])
+                                    + ny * (sp[j, 1] - center[1])
+                                    + nz * (sp[j, 2] - center[2])
+                                )
+                                if den != 0.0:
+                                    th = num / den  # the triangle's plane along centre -> p, 1 at p
+                                    if th > 0.0 and th < 1.0:
+                                        umbra[j] += 1
+            tests[bi] = ntest
+
+
+def count_umbrae(grid: SampleGrid, verts, faces, counted, center) -> tuple[np.ndarray, dict]:
+    """Step (b): per sample, the number of counted triangles crossed by the segment sample -> light
+    centre (hard irregular shadow mapping, counting depth complexity): every triangle is projected
+    to the light image plane and tested exactly against the stored coordinates of the samples of
+    the cells its box covers (only slices beyond the triangle's plane distance)."""
+    F = len(faces)
+    tri2d = np.zeros((F, 6))
+    tribox = np.zeros((F, 4))
+    trid = np.zeros(F)
+    valid = np.zeros(F, bool)
+    c = np.asarray(center, np.float64)
+    _triangle_setup(verts, faces, counted, grid.vp, c, tri2d, tribox, trid, valid)
+    counts = np.zeros(F, np.int64)
+    _count_tri_bins(tribox, valid, grid.vp, grid.gx, grid.gy, grid.bins, counts)
+    offs = np.zeros(F + 1, np.int64)
+    np.cumsum(counts, out=offs[1:])
+    pair_bin = np.empty(offs[-1], np.int64)
+    _fill_tri_bins(tribox, valid, grid.vp, grid.gx, grid.gy, grid.bins, grid.nbx, offs, pair_bin)
+    bstart, bitems = _pairs_by_bin(counts, pair_bin, grid.n_bins)
+    umbra = np.zeros(len(grid.order), np.int32)
+    tests = np.zeros(grid.n_bins, np.int64)
+    _umbra_kernel(
+        grid.start,
+        grid.ix,
+        grid.iy,
+        grid.pos,
+        grid.dist,
+        grid.gx,
+        grid.gy,
+        grid.bins,
+        grid.nbx,
+        grid.slices,
+        grid.dlo,
+        grid.dhi,
+        grid.vp,
+        c,
+        verts,
+        faces,
+        tri2d,
+        trid,
+        bstart,
+        bitems,
+        umbra,
+        tests,
+        numba.get_num_threads(),
+    )
+    return umbra, {
+        "umbra_triangles": int(valid.sum()),
+        "umbra_skipped_triangles": int((counted & ~valid).sum()),
+        "umbra_tri_bin_pairs": int(offs[-1]),
+        "umbra_sample_tests": int(tests.sum()),
+    }
+
+
+# ---------------------------------------------------------------------------------------------
+# silhouettes
+# ---------------------------------------------------------------------------------------------
+@dataclass
+class Edges:
+    """Edges that carry penumbral occlusion: endpoints and, per edge, the third vertices of its
+    counted adjacent triangles (CSR), whose side decides the sign at each sample."""
+
+    a: np.ndarray  # (E,3)
+    b: np.ndarray  # (E,3)
+    tv_start: np.ndarray  # (E+1,)
+    tv: np.ndarray  # (M,3)
+
+    def __len__(self) -> int:
+        return len(self.a)
+
+
+def fold_candidates(flat, counted, lo, hi, center, radius) -> np.ndarray:
+    """(E,) bool over the adjacency's edges: manifold edges whose two adjacent triangles are both
+    counted and that can be a fold (one triangle facing p, the other not) for a receiver p in the
+    edge's shadow; elsewhere the two triangles' terms are equal and opposite at every sample (they
+    cancel exactly), so dropping the edge changes no bit. An edge is kept when both hold:
+
+    * some corner configuration of the receivers' box [lo, hi] is not on one common side of both
+      planes (else no receiver sees a fold), and
+    * one of the triangles is within the light's angular radius of grazing as seen from the edge:
+      a receiver shadowed through o sees o along a direction within asin(r / |o - c|) of (o - c),
+      so a plane at distance h from the centre can separate two such receivers' views only if
+      h / max(|a - c|, |b - c|) <= r / dmin (dmin: distance from the centre to the edge).
+    """
+    _occ, adj, _sheet, _t, _o = _topology(flat)
+    two = np.flatnonzero(adj.count == 2)
+    f0 = adj.edge_faces[adj.offsets[two]]
+    f1 = adj.edge_faces[adj.offsets[two] + 1]
+    both = counted[f0] & counted[f1]
+    two, f0, f1 = two[both], f0[both], f1[both]
+    V = flat.vertices
+    c = np.asarray(center, np.float64)
+    a, b = V[adj.edges[two, 0]], V[adj.edges[two, 1]]
+    u = b - a
+    t = np.clip(np.einsum("ek,ek->e", c - a, u) / np.maximum(np.einsum("ek,ek->e", u, u), 1e-300), 0.0, 1.0)
+    dmin = np.linalg.norm(a + t[:, None] * u - c, axis=1)
+    dfar = np.maximum(np.linalg.norm(a - c, axis=1), np.linalg.norm(b - c, axis=1))
+
+    def plane_h(f):
+        n = adj.normals[f]
+        return np.abs(np.einsum("ek,ek->e", n, adj.anchors[f] - c)) / np.maximum(np.linalg.norm(n, axis=1), 1e-300)
+
+    h = np.minimum(plane_h(f0), plane_h(f1))
+    grazing = (dmin <= radius) | (h * dmin <= radius * dfar * (1.0 + 1e-6) + 1e-12)
+    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+
+    def side(f):
+        s = (
+            np.einsum("fk,ck->fc", adj.normals[f], corners)
+            - np.einsum("fk,fk->f", adj.normals[f], adj.anchors[f])[:, None]
+        )
+        pos, neg = (s > 0).all(1), (s < 0).all(1)
+        return np.where(pos, 1, np.where(neg, -1, 0))
+
+    s0, s1 = side(f0), side(f1)
+    out = np.zeros(adj.n_edges, bool)
+    out[two[grazing & ((s0 == 0) | (s1 == 0) | (s0 != s1))]] = True
+    return out
+
+
+def select_silhouette_edges(
+    flat, center, mode: str, folds: bool = True, box=None, radius: float = 0.0, fc=None
+) -> tuple[Edges, dict]:
+    """Edges that carry penumbral occlusion. ``adjacency``: the silhouette edges seen from the light
+    centre (``geometry/silhouette.py``: facing mix or boundary, from the welded adjacency), plus
+    non-manifold edges, kept when the counted triangles around them do not cancel (sum of their
+    orientations seen from the centre != 0); with ``folds``, also the edges between two counted
+    triangles that fold as seen from some receiver (:func:`fold_candidates`, ``box`` = the
+    receivers' bounding box), so that the sum over edges equals the sum over counted triangles at
+    every sample. ``all-edges``: every edge of every counted triangle, separately (no adjacency)."""
+    occ, fr, counted = facing_and_counted(flat, center) if fc is None else fc
+    V = flat.vertices
+    if mode == "all-edges":
+        f = occ[counted]
+        a = V[f].reshape(-1, 3)
+        b = V[f[:, [1, 2, 0]]].reshape(-1, 3)
+        tv = V[f[:, [2, 0, 1]]].reshape(-1, 3)
+        E = len(a)
+        ed = Edges(
+            np.ascontiguousarray(a), np.ascontiguousarray(b), np.arange(E + 1, dtype=np.int64), np.ascontiguousarray(tv)
+        )
+        return ed, {"silhouette_edges": E, "fold_edges": 0, "counted_triangles": int(counted.sum())}
+    _occ, adj, _sheet, third, orient = _topology(flat)
+    sil = find_silhouette(V, occ, center, "adjacency", adjacency=adj)
+    nm = np.flatnonzero(adj.count > 2)
+    key_all = adj.edges[:, 0] * len(V) + adj.edges[:, 1]
+    cand = (
+        np.searchsorted(key_all, sil.edges[:, 0] * len(V) + sil.edges[:, 1]) if sil.n_edges else np.zeros(0, np.int64)
+    )
+    fold = (
+        fold_candidates(flat, counted, box[0], box[1], center, radius)
+        if folds and box is not None
+        else np.zeros(adj.n_edges, bool)
+    )
+    cand = np.unique(np.r_[cand, nm, np.flatnonzero(fold)]).astype(np.int64)
+    c = adj.count[cand]
+    ent = np.repeat(adj.offsets[cand], c) + (np.arange(c.sum()) - np.repeat(np.cumsum(c) - c, c))
+    fa = adj.edge_faces[ent]
+    cnt = counted[fa]
+    sig = np.where(cnt, orient[ent] * np.where(fr[fa], 1, -1), 0)
+    eid = np.repeat(np.arange(len(cand)), c)
+    w = np.bincount(eid, weights=sig, minlength=len(cand))
+    keep = (w != 0) | fold[cand]
+    kept = cand[keep]
+    ent_keep = keep[eid] & cnt
+    tv_cnt = np.bincount(eid[ent_keep], minlength=len(cand))[keep]
+    tv_start = np.zeros(len(kept) + 1, np.int64)
+    np.cumsum(tv_cnt, out=tv_start[1:])
+    tv = V[third[ent[ent_keep]]]
+    ed = Edges(
+        np.ascontiguousarray(V[adj.edges[kept, 0]]),
+        np.ascontiguousarray(V[adj.edges[kept, 1]]),
+        tv_start,
+        np.ascontiguousarray(tv),
+    )
+    n_fold = int((fold[kept] & (w[keep] == 0)).sum())
+    return ed, {
+        "silhouette_edges": int(len(kept)) - n_fold,
+        "fold_edges": n_fold,
+        "counted_triangles": int(counted.sum()),
+    }
+
+
+# ---------------------------------------------------------------------------------------------
+# (c) coarse penumbra: one light-view quad per silhouette edge, binned, refined per bin
+# ---------------------------------------------------------------------------------------------
+@kernel
+def _quad_setup(ea, eb, vp, center, radius, shape, nrm_l, dmax, qd):
+    """Per edge: image-plane endpoints, the minimum distance of the edge to the light centre and the
+    stretch factor of the image plane along the footprint (qd[e] = ax ay bx by dmin stretch valid)."""
+    for e in range(ea.shape[0]):
+        ax, ay, az = _project(vp, ea[e, 0], ea[e, 1], ea[e, 2])
+        bx, by, bz = _project(vp, eb[e, 0], eb[e, 1], eb[e, 2])
+        qd[e, 0] = ax
+        qd[e, 1] = ay
+        qd[e, 2] = bx
+        qd[e, 3] = by
+        # distance from the centre to the segment
+        ux, uy, uz = eb[e, 0] - ea[e, 0], eb[e, 1] - ea[e, 1], eb[e, 2] - ea[e, 2]
+        wx, wy, wz = center[0] - ea[e, 0], center[1] - ea[e, 1], center[2] - ea[e, 2]
+        uu = ux * ux + uy * uy + uz * uz
+        tt = 0.0 if uu == 0.0 else min(max((wx * ux + wy * uy + wz * uz) / uu, 0.0), 1.0)
+        qx, qy, qz = wx - tt * ux, wy - tt * uy, wz - tt * uz
+        dmin = np.sqrt(qx * qx + qy * qy + qz * qz)
+        # kappa bounds |x . o^| / r over light points x and occluder directions o^ that matter: the
+        # sphere's disk is perpendicular to the direction c -> p, within the footprint angle of o^;
+        # the rectangle lies in its plane (largest sine of an endpoint direction to its normal)
+        kappa = 1.0
+        if shape == 1:
+            if dmin > radius:
+                kappa = min(1.0, np.sin(np.arctan(radius * (1.0 / (dmin - radius) - 1.0 / dmax))) * (1.0 + _SLACK))
+        else:
+            kappa = 0.0
+            for px, py, pz in ((ea[e, 0], ea[e, 1], ea[e, 2]), (eb[e, 0], eb[e, 1], eb[e, 2])):
+                dx, dy, dz = px - center[0], py - center[1], pz - center[2]
+                dn = np.sqrt(dx * dx + dy * dy + dz * dz)
+                cs = abs(dx * nrm_l[0] + dy * nrm_l[1] + dz * nrm_l[2]) / dn
+                kappa = max(kappa, np.sqrt(max(1.0 - cs * cs, 0.0)))
+            kappa = min(1.0, kappa * (1.0 + _SLACK) + 1e-9)
+        # stored as an effective distance: dmin - kappa r + r, so that quad_half_width's (d - r) is
+        # (dmin - kappa r)
+        qd[e, 4] = dmin - kappa * radius + radius
+        qd[e, 5] = max(ax * ax + ay * ay, bx * bx + by * by)
+        qd[e, 6] = 1.0 if (az > 0.0 and bz > 0.0 and np.isfinite(ax) and np.isfinite(bx)) else 0.0
+
+
+@kernel(inline=True)
+def quad_half_width(qd, e, radius, dmax, corner2):
+    """Half-width R of edge e's penumbra quad (image-plane units) for receivers up to distance
+    ``dmax`` from the light centre: an occluder point at distance d shadows receivers within the
+    angle atan(r (1/(d - kappa r) - 1/D)) of it (r: radius of the light's bounding sphere, kappa: see
+    _quad_setup; qd stores d - kappa r + r); x the image
+    plane's stretch 1/cos^2 of the largest angle off the view axis among the edge's endpoints and the
+    box the receivers lie in (``corner2``: its largest squared image-plane radius). inf when the
+    light's sphere reaches the edge, <= 0 when no receiver can be hit."""
+    dmin = qd[e, 4]
+    if dmin <= radius:
+        return np.inf
+    return (1.0 + max(qd[e, 5], corner2)) * radius * (1.0 / (dmin - radius) - 1.0 / dmax) * (1.0 + _SLACK) + 1e-12
+
+
+@kernel(inline=True)
+def quad_overlaps_box(qd, e, R, x0, x1, y0, y1):
+    """Separating-axis test of the quad (segment A'B' grown by R along and across it) against an
+    image-plane box."""
+    if R <= 0.0:
+        return False
+    if not np.isfinite(R):
+        return True
+    ax, ay, bx, by = qd[e, 0], qd[e, 1], qd[e, 2], qd[e, 3]
+    dx, dy = bx - ax, by - ay
+    ln = np.sqrt(dx * dx + dy * dy)
+    if ln > 0.0:
+        ux, uy = dx / ln, dy / ln
+    else:
+        ux, uy = 1.0, 0.0
+    cx, cy = 0.5 * (ax + bx), 0.5 * (ay + by)
+    hl = 0.5 * ln + R
+    hw = R
+    hx, hy = 0.5 * (x1 - x0), 0.5 * (y1 - y0)
+    mx, my = 0.5 * (x0 + x1), 0.5 * (y0 + y1)
+    # box axes
+    if abs(mx - cx) > hx + hl * abs(ux) + hw * abs(uy):
+        return False
+    if abs(my - cy) > hy + hl * abs(uy) + hw * abs(ux):
+        return False
+    # quad axes
+    if abs((mx - cx) * ux + (my - cy) * uy) > hl + hx * abs(ux) + hy * abs(uy):
+        return False
+    return abs(-(mx - cx) * uy + (my - cy) * ux) <= hw + hx * abs(uy) + hy * abs(ux)
+
+
+@kernel(inline=True)
+def box_corner2(x0, x1, y0, y1):
+    return max(x0 * x0, x1 * x1) + max(y0 * y0, y1 * y1)
+
+
+@kernel(inline=True)
+def _bin_box(vp, gx, gy, B, bx, by):
+    l, r, b, t = vp[12], vp[13], vp[14], vp[15]
+    cw = (r - l) / gx
+    ch = (t - b) / gy
+    x0 = l + bx * B * cw
+    x1 = l + min((bx + 1) * B, gx) * cw
+    y1 = t - by * B * ch
+    y0 = t - min((by + 1) * B, gy) * ch
+    return x0, x1, y0, y1
+
+
+@kernel
+def _count_quad_bins(qd, radius, dmax, corner2, bin_maxd, per_bin, vp, gx, gy, B, nbx, nby, counts):
+    for e in range(qd.shape[0]):
+        n = 0
+        if qd[e, 6] > 0.0:
+            Rg = quad_half_width(qd, e, radius, dmax, corner2)
+            if Rg > 0.0:
+                if np.isfinite(Rg):
+                    x0 = min(qd[e, 0], qd[e, 2]) - Rg
+                    x1 = max(qd[e, 0], qd[e, 2]) + Rg
+                    y0 = min(qd[e, 1], qd[e, 3]) - Rg
+                    y1 = max(qd[e, 1], qd[e, 3]) + Rg
+                    cx0, cx1, cy0, cy1 = _cell_range(x0, x1, y0, y1, vp, gx, gy)
+                else:
+                    cx0, cx1, cy0, cy1 = 0, gx - 1, 0, gy - 1
+                if cx0 <= cx1 and cy0 <= cy1:
+                    for by in range(cy0 // B, cy1 // B + 1):
+                        for bx in range(cx0 // B, cx1 // B + 1):
+                            bi = by * nbx + bx
+                            if bin_maxd[bi] <= 0.0:
+                                continue
+                            bx0, bx1, by0, by1 = _bin_box(vp, gx, gy, B, bx, by)
+                            R = Rg
+                            if per_bin:
+                                R = quad_half_width(qd, e, radius, bin_maxd[bi], box_corner2(bx0, bx1, by0, by1))
+                            if quad_overlaps_box(qd, e, R, bx0, bx1, by0, by1):
+                                n += 1
+        counts[e] = n
+
+
+@kernel
+def _fill_quad_bins(qd, radius, dmax, corner2, bin_maxd, per_bin, vp, gx, gy, B, nbx, nby, offs, pair_bin):
+    for e in range(qd.shape[0]):
+        k = offs[e]
+        if k == offs[e + 1]:
+            continue
+        Rg = quad_half_width(qd, e, radius, dmax, corner2)
+        if np.isfinite(Rg):
+            x0 = min(qd[e, 0], qd[e, 2]) - Rg
+            x1 = max(qd[e, 0], qd[e, 2]) + Rg
+            y0 = min(qd[e, 1], qd[e, 3]) - Rg
+            y1 = max(qd[e, 1], qd[e, 3]) + Rg
+            cx0, cx1, cy0, cy1 = _cell_range(x0, x1, y0, y1, vp, gx, gy)
+        else:
+            cx0, cx1, cy0, cy1 = 0, gx - 1, 0, gy - 1
+        for by in range(cy0 // B, cy1 // B + 1):
+            for bx in range(cx0 // B, cx1 // B + 1):
+                bi = by * nbx + bx
+                if bin_maxd[bi] <= 0.0:
+                    continue
+                bx0, bx1, by0, by1 = _bin_box(vp, gx, gy, B, bx, by)
+                R = Rg
+                if per_bin:
+                    R = quad_half_width(qd, e, radius, bin_maxd[bi], box_corner2(bx0, bx1, by0, by1))
+                if quad_overlaps_box(qd, e, R, bx0, bx1, by0, by1) and k < offs[e + 1]:
+                    pair_bin[k] = bi
+                    k += 1
+
+
+def window_corner2(vp) -> float:
+    l, r, b, t = vp[12:16]
+    return float(max(l * l, r * r) + max(b * b, t * t))
+
+
+def build_penumbra_quads(grid: SampleGrid, edges: Edges, light, light_radius: float) -> np.ndarray:
+    """Step (c), setup: one light-view penumbra quad per silhouette edge (its image-plane segment,
+    minimum distance to the light centre and stretch; the half-width follows from the receiver
+    distance, :func:`quad_half_width`)."""
+    shape, _b, _r, _hu, _hv, nrm_l, _u, _v = _light_params(light)
+    qd = np.zeros((len(edges), 7))
+    _quad_setup(edges.a, edges.b, grid.vp, grid.vp[0:3].copy(), light_radius, shape, nrm_l, grid.dmax, qd)
+    return qd
+
+
+def bin_penumbra_quads(grid: SampleGrid, qd: np.ndarray, light_radius: float, per_bin: bool):
+    """Step (c), sort-middle binning: each quad goes to the screen bins it overlaps; with
+    ``per_bin`` (the first overdraw optimisation) its half-width is recomputed with each bin's
+    maximum receiver distance and it is dropped from bins it then misses."""
+    E = len(qd)
+    counts = np.zeros(E, np.int64)
+    args = (
+        qd,
+        light_radius,
+        grid.dmax,
+        window_corner2(grid.vp),
+        grid.bin_maxd,
+        per_bin,
+        grid.vp,
+        grid.gx,
+        grid.gy,
+        grid.bins,
+        grid.nbx,
+        grid.nby,
+    )
+    _count_quad_bins(*args, counts)
+    offs = np.zeros(E + 1, np.int64)
+    np.cumsum(counts, out=offs[1:])
+    pair_bin = np.empty(offs[-1], np.int64)
+    _fill_quad_bins(*args, offs, pair_bin)
+    return _pairs_by_bin(counts, pair_bin, grid.n_bins)
+
+
+# ---------------------------------------------------------------------------------------------
+# (d) final penumbra: exact signed edge integrals
+# ---------------------------------------------------------------------------------------------
+@kernel(inline=True)
+def segment_area(d, w0, w1):
+    """Eq. 3: normalised area between a chord segment and the arc of the unit circle, inside the angle
+    the segment [w0, w1] (positions along the chord line, at distance d >= 0 from the centre,
+    already clipped to the circle) subtends at the centre: (theta - d (w1 - w0)) / (2 pi)."""
+    den = np.sqrt((d * d + w0 * w0) * (d * d + w1 * w1))
+    if den == 0.0:
+        return 0.0
+    c = (d * d + w0 * w1) / den
+    c = min(max(c, -1.0), 1.0)
+    theta = np.arccos(c)
+    return (theta - d * (w1 - w0)) / (2.0 * np.pi)
+
+
+@kernel(inline=True)
+def _clip_poly(buf, src, n, a, b, c, dst):
+    """Clip the polygon in rows (2 src, 2 src + 1) of ``buf`` (x, y; n vertices) to
+    a*x + b*y + c >= 0 into rows (2 dst, 2 dst + 1); returns the new count."""
+    sx, sy, dx, dy = 2 * src, 2 * src + 1, 2 * dst, 2 * dst + 1
+    m = 0
+    for i in range(n):
+        j = (i + 1) % n
+        fi = a * buf[sx, i] + b * buf[sy, i] + c
+        fj = a * buf[sx, j] + b * buf[sy, j] + c
+        if fi >= 0.0:
+            buf[dx, m] = buf[sx, i]
+            buf[dy, m] = buf[sy, i]
+            m += 1
+        if (fi >= 0.0) != (fj >= 0.0):
+            t = fi / (fi - fj)
+            buf[dx, m] = buf[sx, i] + t * (buf[sx, j] - buf[sx, i])
+            buf[dy, m] = buf[sy, i] + t * (buf[sy, j] - buf[sy, i])
+            m += 1
+    return m
+
+
+@kernel(inline=True)
+def edge_occlusion(shape, lp, j, lu, lv, radius, hu, hv, p0, p1, p2, ax, ay, az, bx, by, bz, buf):
+    """Signed-by-geometry edge term at one sample. Returns (sO, V~): sO = sign of n.(c - p) (the side
+    of the light centre relative to the plane through p and the edge, n = (a-p) x (b-p)) and V~ = the
+    normalised area of the light's projection (from p, onto its plane) inside the angle the edge
+    subtends at the centre and beyond the edge (Fig. 4; Eq. 3 for the disk, polygon clipping for the
+    rectangle). Edge parts at or behind p's plane parallel to the light project to infinity.
+
+    lp[j]: sample j's light frame: [0:3] w (unit, p -> light plane), [3] L (distance to the plane),
+    [4:7] c - p; lu, lv: the rectangle's unit axes."""
+    rax, ray, raz = ax - p0, ay - p1, az - p2
+    rbx, rby, rbz = bx - p0, by - p1, bz - p2
+    nx = ray * rbz - raz * rby
+    ny = raz * rbx - rax * rbz
+    nz = rax * rby - ray * rbx
+    wx, wy, wz, L = lp[j, 0], lp[j, 1], lp[j, 2], lp[j, 3]
+    nw = nx * wx + ny * wy + nz * wz
+    nc = nx * lp[j, 4] + ny * lp[j, 5] + nz * lp[j, 6]  # n . (c - p)
+    if nc == 0.0:
+        return 0.0, 0.0
+    ha = rax * wx + ray * wy + raz * wz
+    hb = rbx * wx + rby * wy + rbz * wz
+    if ha <= 0.0 and hb <= 0.0:
+        return 0.0, 0.0  # the footprint radius at the edge is <= 0: the edge is behind p
+    so = 1.0 if nc > 0.0 else -1.0
+    if shape == 1:
+        # disk of radius r facing p: line = trace of the plane (p, edge) in the disk plane
+        m2 = nx * nx + ny * ny + nz * nz - nw * nw
+        if m2 <= 0.0:
+            return 0.0, 0.0
+        m = np.sqrt(m2)
+        d = abs(nc) / m / radius
+        if d >= 1.0:
+            return so, 0.0
+        # tangent T = w x n / m (in the disk plane, along the line)
+        tx = (wy * nz - wz * ny) / m
+        ty = (wz * nx - wx * nz) / m
+        tz = (wx * ny - wy * nx) / m
+        sa = 0.0
+        sb = 0.0
+        if ha > 0.0:
+            sa = (rax * tx + ray * ty + raz * tz) * L / ha / radius
+        if hb > 0.0:
+            sb = (rbx * tx + rby * ty + rbz * tz) * L / hb / radius
+        if ha <= 0.0 or hb <= 0.0:
+            # one endpoint behind p: that end of the projected edge runs to infinity
+            t0 = ha / (ha - hb)
+            ox = rax + t0 * (rbx - rax)
+            oy = ray + t0 * (rby - ray)
+            oz = raz + t0 * (rbz - raz)
+            inf = np.inf if (ox * tx + oy * ty + oz * tz) >= 0.0 else -np.inf
+            if ha <= 0.0:
+                sa = inf
+            else:
+                sb = inf
+        h = np.sqrt(1.0 - d * d)
+        w0 = max(min(sa, sb), -h)
+        w1 = min(max(sa, sb), h)
+        if not (w1 > w0):
+            return so, 0.0
+        return so, segment_area(d, w0, w1)
+    # rectangle: 2D light-plane coordinates (u, v) around the centre
+    ux, uy, uz, vx, vy, vz = lu[0], lu[1], lu[2], lv[0], lv[1], lv[2]
+    nu = nx * ux + ny * uy + nz * uz
+    nv = nx * vx + ny * vy + nz * vz
+    nn = np.sqrt(nu * nu + nv * nv)
+    if nn == 0.0 or abs(nc) / nn >= np.sqrt(hu * hu + hv * hv):
+        return so, 0.0
+    # directions (from the centre) of the projected endpoints
+    cpx, cpy, cpz = -lp[j, 4], -lp[j, 5], -lp[j, 6]  # p - c
+    dax = day = dbx = dby = 0.0
+    if ha > 0.0:
+        k = L / ha
+        dax = (cpx + rax * k) * ux + (cpy + ray * k) * uy + (cpz + raz * k) * uz
+        day = (cpx + rax * k) * vx + (cpy + ray * k) * vy + (cpz + raz * k) * vz
+    if hb > 0.0:
+        k = L / hb
+        dbx = (cpx + rbx * k) * ux + (cpy + rby * k) * uy + (cpz + rbz * k) * uz
+        dby = (cpx + rbx * k) * vx + (cpy + rby * k) * vy + (cpz + rbz * k) * vz
+    if ha <= 0.0 or hb <= 0.0:
+        t0 = ha / (ha - hb)
+        ox = rax + t0 * (rbx - rax)
+        oy = ray + t0 * (rby - ray)
+        oz = raz + t0 * (rbz - raz)
+        ix = ox * ux + oy * uy + oz * uz
+        iy = ox * vx + oy * vy + oz * vz
+        if ha <= 0.0:
+            dax, day = ix, iy
+        else:
+            dbx, dby = ix, iy
+    cr = dax * dby - day * dbx
+    if cr == 0.0:
+        return so, 0.0
+    sw = 1.0 if cr > 0.0 else -1.0
+    buf[0, 0], buf[1, 0] = -hu, -hv
+    buf[0, 1], buf[1, 1] = hu, -hv
+    buf[0, 2], buf[1, 2] = hu, hv
+    buf[0, 3], buf[1, 3] = -hu, hv
+    n = 4
+    # beyond the line: n.(c - p) + nu U + nv V has the sign opposite to n.(c - p)
+    n = _clip_poly(buf, 0, n, -so * nu, -so * nv, -so * nc, 1)
+    if n < 3:
+        return so, 0.0
+    # inside the angle: sw * cross(da, X) >= 0 and sw * cross(X, db) >= 0
+    n = _clip_poly(buf, 1, n, -sw * day, sw * dax, 0.0, 0)
+    if n < 3:
+        return so, 0.0
+    n = _clip_poly(buf, 0, n, sw * dby, -sw * dbx, 0.0, 1)
+    if n < 3:
+        return so, 0.0
+    area = 0.0
+    for i in range(n):
+        k = (i + 1) % n
+        area += buf[2, i] * buf[3, k] - buf[2, k] * buf[3, i]
+    return so, abs(area) * 0.5 / (4.0 * hu * hv)
+
+
+@kernel(parallel=True)
+def sample_light_frames(shape, center, nrm_l, sp):
+    """Per sample: [0:3] w (unit, from p toward the light's plane: the facing disk's normal for the
+    sphere, the rectangle's normal for the rectangle), [3] L (distance to that plane), [4:7] c - p."""
+    n = sp.shape[0]
+    lp = np.empty((n, 7))
+    for j in prange(n):
+        cx, cy, cz = center[0] - sp[j, 0], center[1] - sp[j, 1], center[2] - sp[j, 2]
+        lp[j, 4] = cx
+        lp[j, 5] = cy
+        lp[j, 6] = cz
+        if shape == 1:
+            L = np.sqrt(cx * cx + cy * cy + cz * cz)
+            lp[j, 0] = cx / L
+            lp[j, 1] = cy / L
+            lp[j, 2] = cz / L
+            lp[j, 3] = L
+        else:
+            L = cx * nrm_l[0] + cy * nrm_l[1] + cz * nrm_l[2]
+            s = 1.0 if L >= 0.0 else -1.0
+            lp[j, 0] = s * nrm_l[0]
+            lp[j, 1] = s * nrm_l[1]
+            lp[j, 2] = s * nrm_l[2]
+            lp[j, 3] = abs(L)
+    return lp
+
+
+@kernel(inline=True)
+def _side_sum(nx, ny, nz, p0, p1, p2, e, tv_start, tv):
+    """Sum over the edge's counted triangles of the side of their third vertex relative to the plane
+    through p and the edge (normal n): +1 / -1, 0 when in the plane."""
+    wsum = 0.0
+    for k in range(tv_start[e], tv_start[e + 1]):
+        s = nx * (tv[k, 0] - p0) + ny * (tv[k, 1] - p1) + nz * (tv[k, 2] - p2)
+        if s > 0.0:
+            wsum += 1.0
+        elif s < 0.0:
+            wsum -= 1.0
+    return wsum
+
+
+@kernel(inline=True)
+def sample_edge_term(shape, lp, j, lu, lv, radius, hu, hv, p0, p1, p2, e, ea, eb, tv_start, tv, buf):
+    """Signed penumbral occlusion of edge e at one sample: sum over the edge's counted triangles of
+    (+V~ when the light centre is outside the triangle's side of the edge, -V~ inside)."""
+    rax, ray, raz = ea[e, 0] - p0, ea[e, 1] - p1, ea[e, 2] - p2
+    rbx, rby, rbz = eb[e, 0] - p0, eb[e, 1] - p1, eb[e, 2] - p2
+    nx = ray * rbz - raz * rby
+    ny = raz * rbx - rax * rbz
+    nz = rax * rby - ray * rbx
+    # cheap exits first (each gives the exact 0 the full term would): for fold candidates (two or
+    # more counted triangles) the triangles usually cancel as seen from p, so test that first; for
+    # silhouettes first whether the edge's line misses the light's footprint, with edge_occlusion's
+    # own arithmetic (so the outcome is the same)
+    many = tv_start[e + 1] - tv_start[e] >= 2
+    wsum = 0.0
+    if many:
+        wsum = _side_sum(nx, ny, nz, p0, p1, p2, e, tv_start, tv)
+        if wsum == 0.0:
+            return 0.0
+    nc = nx * lp[j, 4] + ny * lp[j, 5] + nz * lp[j, 6]
+    if nc == 0.0:
+        return 0.0
+    if shape == 1:
+        nw = nx * lp[j, 0] + ny * lp[j, 1] + nz * lp[j, 2]
+        m2 = nx * nx + ny * ny + nz * nz - nw * nw
+        if m2 <= 0.0 or abs(nc) / np.sqrt(m2) / radius >= 1.0:
+            return 0.0
+    else:
+        nu = nx * lu[0] + ny * lu[1] + nz * lu[2]
+        nv = nx * lv[0] + ny * lv[1] + nz * lv[2]
+        nn = np.sqrt(nu * nu + nv * nv)
+        if nn == 0.0 or abs(nc) / nn >= np.sqrt(hu * hu + hv * hv):
+            return 0.0
+    if not many:
+        wsum = _side_sum(nx, ny, nz, p0, p1, p2, e, tv_start, tv)
+        if wsum == 0.0:
+            return 0.0  # the counted triangles at this edge cancel as seen from p
+    so, vt = edge_occlusion(
+        shape,
+        lp,
+        j,
+        lu,
+        lv,
+        radius,
+        hu,
+        hv,
+        p0,
+        p1,
+        p2,
+        ea[e, 0],
+        ea[e, 1],
+        ea[e, 2],
+        eb[e, 0],
+        eb[e, 1],
+        eb[e, 2],
+        buf,
+    )
+    if vt == 0.0:
+        return 0.0
+    return -so * wsum * vt
+
+
+@kernel(inline=True)
+def cancels_in_box(e, ea, eb, tv_start, tv, box, c):
+    """True when edge e's counted triangles cancel at every point of 3D box ``c``: the sign of a
+    sample's term for triangle (a, b, v) is -sign(((b - a) x (v - a)) . (p - a)); when every such
+    sign is constant on the box and they sum to zero, every sample in it gets an exact 0."""
+    if tv_start[e + 1] - tv_start[e] < 2:
+        return False
+    ux, uy, uz = eb[e, 0] - ea[e, 0], eb[e, 1] - ea[e, 1], eb[e, 2] - ea[e, 2]
+    mx = 0.5 * (box[c, 0] + box[c, 3]) - ea[e, 0]
+    my = 0.5 * (box[c, 1] + box[c, 4]) - ea[e, 1]
+    mz = 0.5 * (box[c, 2] + box[c, 5]) - ea[e, 2]
+    hx, hy, hz = 0.5 * (box[c, 3] - box[c, 0]), 0.5 * (box[c, 4] - box[c, 1]), 0.5 * (box[c, 5] - box[c, 2])
+    total = 0
+    for k in range(tv_start[e], tv_start[e + 1]):
+        vx, vy, vz = tv[k, 0] - ea[e, 0], tv[k, 1] - ea[e, 1], tv[k, 2] - ea[e, 2]
+        nx = uy * vz - uz * vy
+        ny = uz * vx - ux * vz
+        nz = ux * vy - uy * vx
+        val = nx * mx + ny * my + nz * mz
+        ext = (abs(nx) * hx + abs(ny) * hy + abs(nz) * hz) * (1.0 + _SLACK) + 1e-300
+        if abs(val) <= ext:
+            return False
+        total += 1 if val > 0.0 else -1
+    return total == 0
+
+
+@kernel(inline=True)
+def _point_seg_dist2(px, py, ax, ay, bx, by):
+    dx, dy = bx - ax, by - ay
+    uu = dx * dx + dy * dy
+    t = 0.0 if uu == 0.0 else min(max(((px - ax) * dx + (py - ay) * dy) / uu, 0.0), 1.0)
+    qx, qy = ax + t * dx - px, ay + t * dy - py
+    return qx * qx + qy * qy
+
+
+@kernel(inline=True)
+def _seg_box_dist(ax, ay, bx, by, x0, x1, y0, y1):
+    """Lower bound of the distance between segment AB and a box: distance to the box centre minus
+    its half diagonal (>= 0)."""
+    mx, my = 0.5 * (x0 + x1), 0.5 * (y0 + y1)
+    dx, dy = bx - ax, by - ay
+    uu = dx * dx + dy * dy
+    t = 0.0 if uu == 0.0 else min(max(((mx - ax) * dx + (my - ay) * dy) / uu, 0.0), 1.0)
+    qx, qy = ax + t * dx - mx, ay + t * dy - my
+    hd = 0.5 * np.sqrt((x1 - x0) ** 2 + (y1 - y0) ** 2)
+    return max(np.sqrt(qx * qx + qy * qy) - hd, 0.0)
+
+
+@kernel(parallel=True)
+def _penumbra_kernel(
+    wc2,
+    col_box,
+    g_start,
+    sp,
+    gx,
+    gy,
+    B,
+    nbx,
+    S,
+    dlo,
+    dhi,
+    dmax,
+    bin_maxd,
+    vp,
+    shape,
+    lpa,
+    u,
+    v,
+    radius,
+    hu,
+    hv,
+    qd,
+    ea,
+    eb,
+    tv_start,
+    tv,
+    bin_start,
+    bin_items,
+    per_bin,
+    wedge,
+    count_only,
+    pen,
+    frags,
+    tests,
+    hits,
+    evals,
+    nslot,
+    six,
+    siy,
+    sdist,
+):
+    nb = bin_start.shape[0] - 1
+    l, r, b, t = vp[12], vp[13], vp[14], vp[15]
+    cw = (r - l) / gx
+    ch = (t - b) / gy
+    for slot in prange(nslot):  # bins dealt round-robin: shadowed bins are clustered
+        for bi in range(slot, nb, nslot):
+            by = bi // nbx
+            bx = bi % nbx
+            buf = np.zeros((4, 8))
+            bx0, bx1, by0, by1 = _bin_box(vp, gx, gy, B, bx, by)
+            bc2 = box_corner2(bx0, bx1, by0, by1)
+            nf = 0
+            nt = 0
+            nh = 0
+            nev = 0
+            for kk in range(bin_start[bi], bin_start[bi + 1]):
+                e = bin_items[kk]
+                R = (
+                    quad_half_width(qd, e, radius, bin_maxd[bi], bc2)
+                    if per_bin
+                    else quad_half_width(qd, e, radius, dmax, wc2)
+                )
+                dmin = qd[e, 4]
+                for cy in range(by * B, min(by * B + B, gy)):
+                    y1 = t - cy * ch
+                    y0 = y1 - ch
+                    for cx in range(bx * B, min(bx * B + B, gx)):
+                        x0 = l + cx * cw
+                        x1 = x0 + cw
+                        if not quad_overlaps_box(qd, e, R, x0, x1, y0, y1):
+                            continue
+                        col = (bi * B * B + (cy % B) * B + cx % B) * S
+                        if g_start[col] == g_start[col + S]:
+                            continue
+                        if cancels_in_box(e, ea, eb, tv_start, tv, col_box, col // S):
+                            continue
+                        nf += 1
+                        s0 = 0
+                        dr = dmin - radius if dmin > radius else 0.0
+                        if wedge and dmin > radius:
+                            # the wedge enters this column at the distance where its angular radius
+                            # reaches the column: r (1/(dmin - r) - 1/D) * stretch >= dist(cell, edge)
+                            dc = _seg_box_dist(qd[e, 0], qd[e, 1], qd[e, 2], qd[e, 3], x0, x1, y0, y1)
+                            inv = 1.0 / (dmin - radius) - dc / ((1.0 + max(qd[e, 5], bc2)) * radius) / (1.0 + _SLACK)
+                            if inv <= 0.0:
+                                continue
+                            s0 = slice_of((1.0 / inv) * (1.0 - _SLACK), dlo, dhi, S)
+                        for j in range(g_start[col + s0], g_start[col + S]):
+                            nt += 1
+                            if count_only:
+                                continue
+                            # the same bound at the sample itself: its image-plane distance to the
+                            # edge's image against the angular radius at its own distance
+                            # (stretch from the sample's own off-axis angle and the edge's endpoints)
+                            sj = 1.0 + max(qd[e, 5], six[j] * six[j] + siy[j] * siy[j])
+                            rs = (
+                                np.inf
+                                if dr <= 0.0
+                                else sj * radius * (1.0 / dr - 1.0 / sdist[j]) * (1.0 + _SLACK) + 1e-12
+                            )
+                            if (
+                                rs < 0.0
+                                or _point_seg_dist2(six[j], siy[j], qd[e, 0], qd[e, 1], qd[e, 2], qd[e, 3]) > rs * rs
+                            ):
+                                continue
+                            nev += 1
+                            c = sample_edge_term(
+                                shape,
+                                lpa,
+                                j,
+                                u,
+                                v,
+                                radius,
+                                hu,
+                                hv,
+                                sp[j, 0],
+                                sp[j, 1],
+                                sp[j, 2],
+                                e,
+                                ea,
+                                eb,
+                                tv_start,
+                                tv,
+                                buf,
+                            )
+                            if c != 0.0:
+                                nh += 1
+                                pen[j] += c
+            frags[bi] = nf
+            tests[bi] = nt
+            hits[bi] = nh
+            evals[bi] = nev
+
+
+def _light_params(light):
+    if light.shape == "sphere":
+        z = np.zeros(3)
+        return 1, float(light.radius), float(light.radius), 0.0, 0.0, z, z, z
+    u = light.u / np.linalg.norm(light.u)
+    v = light.v - np.dot(light.v, u) * u
+    v = v / np.linalg.norm(v)
+    hu = 0.5 * float(np.linalg.norm(light.u))
+    hv = 0.5 * float(abs(np.dot(light.v, v)))
+    return 0, float(np.hypot(hu, hv)), 0.0, hu, hv, np.asarray(light.normal, float), u, v
+
+
+def accumulate_penumbrae(
+    grid: SampleGrid, edges: Edges, qd, bins, light, per_bin: bool, wedge: bool, count_only: bool = False
+):
+    """Step (d): for every bin, every quad in its list, every cell of the bin the quad covers (a
+    fragment) and every sample of that cell column at or beyond the wedge's entry slice (the second
+    overdraw optimisation, ``wedge``): add the edge's signed exact occlusion (Eq. 3 for the disk,
+    the clipped rectangle for the rectangle light). One thread per bin, no atomics."""
+    shape, bound_r, radius, hu, hv, nrm_l, u, v = _light_params(light)
+    n = len(grid.order)
+    pen = np.zeros(n)
+    nb = grid.n_bins
+    frags, tests, hits = np.zeros(nb, np.int64), np.zeros(nb, np.int64), np.zeros(nb, np.int64)
+    evals = np.zeros(nb, np.int64)
+    rad = radius if shape == 1 else bound_r
+    lpa = sample_light_frames(shape, np.asarray(light.center, float), nrm_l, grid.pos)
+    _penumbra_kernel(
+        window_corner2(grid.vp),
+        grid.col_box,
+        grid.start,
+        grid.pos,
+        grid.gx,
+        grid.gy,
+        grid.bins,
+        grid.nbx,
+        grid.slices,
+        grid.dlo,
+        grid.dhi,
+        grid.dmax,
+        grid.bin_maxd,
+        grid.vp,
+        shape,
+        lpa,
+        u,
+        v,
+        rad,
+        hu,
+        hv,
+        qd,
+        edges.a,
+        edges.b,
+        edges.tv_start,
+        edges.tv,
+        bins[0],
+        bins[1],
+        per_bin,
+        wedge,
+        count_only,
+        pen,
+        frags,
+        tests,
+        hits,
+        evals,
+        numba.get_num_threads(),
+        grid.ix,
+        grid.iy,
+        grid.dist,
+    )
+    return pen, {
+        "fragments": int(frags.sum()),
+        "sample_tests": int(tests.sum()),
+        "evaluated_terms": int(evals.sum()),
+        "nonzero_terms": int(hits.sum()),
+    }
+
+
+# ---------------------------------------------------------------------------------------------
+# composition
+# ---------------------------------------------------------------------------------------------
+@kernel(parallel=True)
+def _compose(order, umbra, pen, n_all, out):
+    for k in prange(n_all):
+        out[k] = 1.0
+    for j in prange(order.shape[0]):
+        x = 1.0 - (umbra[j] + pen[j])
+        out[order[j]] = min(max(x, 0.0), 1.0)
+
+
+def compose_visibility(grid: SampleGrid, umbra, pen, n_all: int) -> np.ndarray:
+    """Eq. 4 with C = 0: V = 1 - (umbral count + summed signed penumbral occlusion), clamped to
+    [0, 1]; samples outside the grid (behind the light's view) are lit."""
+    out = np.empty(n_all, np.float32)
+    _compose(grid.order, umbra, pen, n_all, out)
+    return out
+
+
+def offset_points(pts, nrm, eps):
+    return np.ascontiguousarray(pts + eps * nrm, dtype=np.float64)
+
+
+def irregular_visibility(
+    scene,
+    pts,
+    nrm,
+    *,
+    grid=128,
+    bins=8,
+    slices=16,
+    per_bin=True,
+    wedge=True,
+    silhouettes="adjacency",
+    folds=True,
+    offset=1e-4,
+    overdraw_stats=False,
+    timer=None,
+    raw=False,
+):
+    """V at eye samples (K,) float32 and stats; the steps of Figure 2 in order. With ``raw``, also
+    (umbral count, penumbral sum) per input sample (NaN for samples outside the grid)."""
+    import contextlib
+
+    def phase(name):
+        return timer.phase(name) if timer is not None else contextlib.nullcontext()
+
+    light = scene.light
+    flat = scene.flat
+    lo, hi = scene.bounds()
+    eps = offset * float(np.linalg.norm(hi - lo))
+    stats = {}
+    with phase("construction"):
+        p = offset_points(pts, nrm, eps)
+        g = build_sample_grid(light, p, grid, bins, slices)
+    with phase("hard_kernel"):
+        fc = facing_and_counted(flat, light.center)
+        occ, counted = fc[0], fc[2]
+        umbra, st_u = count_umbrae(g, flat.vertices, np.ascontiguousarray(occ), counted, light.center)
+    with phase("soft_kernel"):
+        box = (g.col_box[:, :3].min(axis=0), g.col_box[:, 3:].max(axis=0)) if len(g.order) else None
+        bound_r = _light_params(light)[1]
+        edges, st_s = select_silhouette_edges(flat, light.center, silhouettes, folds, box, bound_r, fc)
+        qd = build_penumbra_quads(g, edges, light, bound_r)
+        bl = bin_penumbra_quads(g, qd, bound_r, per_bin)
+        pen, st_p = accumulate_penumbrae(g, edges, qd, bl, light, per_bin, wedge)
+        v = compose_visibility(g, umbra, pen, len(pts))
+    cells = np.diff(g.start)
+    ne = cells[cells > 0]
+    stats.update(
+        samples=int(len(pts)),
+        grid_samples=int(len(g.order)),
+        grid=f"{g.gx}x{g.gy}x{g.slices}",
+        nonempty_cells=int(len(ne)),
+        mean_samples_per_cell=float(ne.mean()) if len(ne) else 0.0,
+        max_samples_per_cell=int(ne.max()) if len(ne) else 0,
+        quads=int(len(edges)),
+        quad_bin_pairs=int(len(bl[1])),
+        quad_fragments=st_p["fragments"],
+        penumbra_sample_tests=st_p["sample_tests"],
+        penumbra_evaluated_terms=st_p["evaluated_terms"],
+        penumbra_nonzero_terms=st_p["nonzero_terms"],
+        eps=eps,
+        **st_u,
+        **st_s,
+    )
+    if overdraw_stats:
+        for pb in (False, True):
+            blx = bin_penumbra_quads(g, qd, bound_r, pb)
+            for wd in (False, True):
+                _p, st = accumulate_penumbrae(g, edges, qd, blx, light, pb, wd, count_only=True)
+                tag = f"bins_{'on' if pb else 'off'}_wedge_{'on' if wd else 'off'}"
+                stats[f"overdraw_{tag}"] = {
+                    "quad_bin_pairs": int(len(blx[1])),
+                    **{k: st[k] for k in ("fragments", "sample_tests")},
+                }
+    if raw:
+        um = np.full(len(pts), np.nan)
+        pe = np.full(len(pts), np.nan)
+        um[g.order] = umbra
+        pe[g.order] = pen
+        return v, stats, um, pe
+    return v, stats
+
+
+@register
+class Irregular(Method):
+    name = "irregular"
+    light_shapes = ("rect", "sphere")
+    summary = "soft irregular shadow mapping: exact umbra count + exact per-edge penumbra at every eye sample"
+    paper = "Johnson et al. 2009"
+    params = (
+        Param("grid", 128, "light-view grid cells per side (image plane)", min=1, max=4096),
+        Param("slices", 16, "depth slices of the perspective grid", min=1, max=1024),
+        Param(
+            "bins",
+            8,
+            "grid cells per screen-bin side (the unit of parallel work and of quad refinement)",
+            min=1,
+            max=4096,
+        ),
+        Param("per_bin", True, "overdraw optimisation 1: refine each quad's width with each bin's max receiver depth"),
+        Param("wedge", True, "overdraw optimisation 2: per fragment, test only samples beyond the wedge's entry slice"),
+        Param(
+            "silhouettes",
+            "adjacency",
+            "silhouette edges from mesh adjacency, or every edge of every counted triangle",
+            choices=("adjacency", "all-edges"),
+        ),
+        Param(
+            "folds",
+            True,
+            "with adjacency, also edges that fold as seen from some receiver (off: silhouettes from the light "
+            "centre only, as the paper)",
+        ),
+        Param("offset", 1e-4, "sample offset along the normal, x scene diagonal (as ground-truth)", min=0.0),
+        Param("overdraw_stats", False, "also count fragments/tests with each optimisation off (extra passes)"),
+    )
+
+    def run(self, ctx, grid, slices, bins, per_bin, wedge, silhouettes, folds, offset, overdraw_stats):
+        pts, nrm, idx = ctx.points()
+        v, stats = irregular_visibility(
+            ctx.scene,
+            pts,
+            nrm,
+            grid=grid,
+            bins=bins,
+            slices=slices,
+            per_bin=per_bin,
+            wedge=wedge,
+            silhouettes=silhouettes,
+            folds=folds,
+            offset=offset,
+            overdraw_stats=overdraw_stats,
+            timer=ctx.timer,
+        )
+        return MethodOutput(ctx.scatter(v, idx), stats)
