@@ -1,13 +1,14 @@
 """A/B timing of the shared rasterizer against the one of another git revision, in one process.
 
-    PYTHONPATH=src python benchmarks/bench_raster_ab.py --rev 82e1f56 [--runs 15]
+    PYTHONPATH=src python benchmarks/bench_raster_ab.py --rev 82e1f56 [--runs 15] [--only gbuffer]
 
 Extracts ``src/softshadows/raster/`` and ``src/softshadows/_jit.py`` of ``--rev`` into a package
 ``softshadows_ref`` under ``$TMPDIR/softshadows_ref_<rev>`` (kept, with Numba's cache) (the raster package imports only relative modules), checks that both
 give identical outputs on the timed cases, then times the fill-bound paths of
 ``bench_raster_fill.py --bench`` (plus the penumbra program's min-blend with hierarchical culling)
 for both, interleaved run by run after a warm-up (the order alternates between runs), and prints
-the median time of each and the median of the per-run ratios (this tree / the revision).
+the median wall and CPU (process, all threads) time of each and the medians of the per-run ratios
+(this tree / the revision). On a shared, loaded machine the CPU-time ratio is the steadier one.
 """
 
 from __future__ import annotations
@@ -110,6 +111,7 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--rev", required=True, help="git revision to compare with (e.g. the commit before a refactor)")
     ap.add_argument("--runs", type=int, default=15)
+    ap.add_argument("--only", default="", help="time only the cases whose name contains this")
     a = ap.parse_args()
     import numba
 
@@ -128,22 +130,31 @@ def main():
     ref = importlib.import_module("softshadows_ref.raster")
     new = importlib.import_module("softshadows.raster")
     print(f"threads {numba.get_num_threads()}; this tree vs {rev}; median of {a.runs} interleaved runs")
-    cn, cr = cases(new), cases(ref)
+    cn = [c for c in cases(new) if a.only in c[0]]
+    cr = [c for c in cases(ref) if a.only in c[0]]
     for (name, fn), (_, fr) in zip(cn, cr, strict=True):
         if not _same(fn(), fr()):  # also the warm-up (compilation)
             print(f"{name}: OUTPUTS DIFFER")
             sys.exit(1)
-    print(f"{'case':45s} {'rev ms':>9s} {'this ms':>9s} {'ratio':>7s}")
+    print(f"{'':45s} {'wall time':^27s} {'CPU time (all threads)':^27s}")
+    print(f"{'case':45s} {'rev ms':>9s} {'this ms':>9s} {'ratio':>7s} {'rev ms':>9s} {'this ms':>9s} {'ratio':>7s}")
     for (name, fn), (_, fr) in zip(cn, cr, strict=True):
-        tn, tr, ratio = [], [], []
+        tn, tr, cn_, cr_ = [], [], [], []
         for r in range(a.runs):
-            pair = ((fn, tn), (fr, tr)) if r % 2 == 0 else ((fr, tr), (fn, tn))
-            for f, acc in pair:
+            pair = ((fn, tn, cn_), (fr, tr, cr_)) if r % 2 == 0 else ((fr, tr, cr_), (fn, tn, cn_))
+            for f, acc, cacc in pair:
+                c0 = time.process_time()
                 t0 = time.perf_counter()
                 f()
                 acc.append(time.perf_counter() - t0)
-            ratio.append(tn[-1] / tr[-1])
-        print(f"{name:45s} {np.median(tr) * 1e3:9.2f} {np.median(tn) * 1e3:9.2f} {np.median(ratio):7.3f}", flush=True)
+                cacc.append(time.process_time() - c0)
+        wr = np.median(np.array(tn) / np.array(tr))
+        cr = np.median(np.array(cn_) / np.array(cr_))
+        print(
+            f"{name:45s} {np.median(tr) * 1e3:9.2f} {np.median(tn) * 1e3:9.2f} {wr:7.3f}"
+            f" {np.median(cr_) * 1e3:9.2f} {np.median(cn_) * 1e3:9.2f} {cr:7.3f}",
+            flush=True,
+        )
 
 
 if __name__ == "__main__":

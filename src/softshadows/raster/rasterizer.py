@@ -352,7 +352,7 @@ def _setup_count(
     verts, faces, vp, near, cull, NC, box, edges, zinfo, planes, normals, T, ntx, chunk, cnt, nslot, tile_any, use_bits
 ):
     """Setup of every triangle (parallel over chunks of triangles, dealt round-robin to ``nslot``
-    slots: see ``_run_tiles``) and per (chunk, tile) bin counts. With ``use_bits``, only the tiles
+    slots: load balance, see docs/rasterizer.md) and per (chunk, tile) bin counts. With ``use_bits``, only the tiles
     with ``tile_any`` set get pieces (min-blend's texel mask)."""
     nchunk = cnt.shape[0]
     ntiles = cnt.shape[1]
