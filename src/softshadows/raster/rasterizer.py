@@ -682,7 +682,7 @@ def _edge_span(lo, hi, j0, j1, r, e):
     return lo, hi
 
 
-@kernel(inline=True)
+@kernel
 def _fast_bound(lo, hi, slow, py, j0, j1, e):
     """Edge e's bound of the covered columns [lo, hi] of the row at py by the fast path of
     :func:`_edge_span` (branch-free, so that the loop over a tile's rows vectorizes); slow is set
@@ -895,9 +895,15 @@ def _view_frame(vp):
 def _gbuffer_row(out, i, li, cols, nk, yw, zb, tb, frame, planes, normals, ortho):
     """The G-buffer ``out`` = (depth, tri, pos, nrm, bary, mask) of the nk pixels of image row i
     (tile row li) from the tile's winners (branch-free per pixel, so that it vectorizes)."""
-    depth_out, tri_out, pos_out, nrm_out, bary_out, mask_out = out
     x0, wl, wsx = cols
     o0, o1, o2, rx, ry, rz, ux, uy, uz, fx, fy, fz = frame
+    # row views: their indices are known non-negative (no wrap-around selects in the vector loop)
+    drow = out[0][i, x0 : x0 + nk]
+    trow = out[1][i, x0 : x0 + nk]
+    prow = out[2][i, x0 : x0 + nk]
+    nrow = out[3][i, x0 : x0 + nk]
+    brow = out[4][i, x0 : x0 + nk]
+    mrow = out[5][i, x0 : x0 + nk]
     for k in range(nk):
         t = tb[li, k]
         hit = t >= 0
@@ -907,18 +913,17 @@ def _gbuffer_row(out, i, li, cols, nk, yw, zb, tb, frame, planes, normals, ortho
         b1, b2 = _bary(_dual(planes, tt), xw, yw, z, ortho)
         vx = xw if ortho else xw * z
         vy = yw if ortho else yw * z
-        j = x0 + k
-        tri_out[i, j] = t
-        depth_out[i, j] = z
-        mask_out[i, j] = hit
-        pos_out[i, j, 0] = (o0 + vx * rx + vy * ux + z * fx) if hit else np.nan
-        pos_out[i, j, 1] = (o1 + vx * ry + vy * uy + z * fy) if hit else np.nan
-        pos_out[i, j, 2] = (o2 + vx * rz + vy * uz + z * fz) if hit else np.nan
-        nrm_out[i, j, 0] = normals[tt, 0] if hit else np.nan
-        nrm_out[i, j, 1] = normals[tt, 1] if hit else np.nan
-        nrm_out[i, j, 2] = normals[tt, 2] if hit else np.nan
-        bary_out[i, j, 0] = b1 if hit else np.nan
-        bary_out[i, j, 1] = b2 if hit else np.nan
+        trow[k] = t
+        drow[k] = z
+        mrow[k] = hit
+        prow[k, 0] = (o0 + vx * rx + vy * ux + z * fx) if hit else np.nan
+        prow[k, 1] = (o1 + vx * ry + vy * uy + z * fy) if hit else np.nan
+        prow[k, 2] = (o2 + vx * rz + vy * uz + z * fz) if hit else np.nan
+        nrow[k, 0] = normals[tt, 0] if hit else np.nan
+        nrow[k, 1] = normals[tt, 1] if hit else np.nan
+        nrow[k, 2] = normals[tt, 2] if hit else np.nan
+        brow[k, 0] = b1 if hit else np.nan
+        brow[k, 1] = b2 if hit else np.nan
 
 
 # ----------------------------------------------------------------------------------------------
@@ -1085,9 +1090,12 @@ def _tiles_depth(fe, sc, depth_out, tri_out):
                 _depth_pass(vw, near, ty * ntx + tx, rect, start, bins, box, edges, zinfo, planes, zb, tb, SP)
                 y0, y1, x0, x1 = rect
                 for i in range(y0, y1 + 1):
-                    for k in range(x1 - x0 + 1):
-                        depth_out[i, x0 + k] = zb[i - y0, k]
-                        tri_out[i, x0 + k] = tb[i - y0, k]
+                    # row views: their indices are known non-negative (no wrap-around selects)
+                    drow = depth_out[i, x0 : x1 + 1]
+                    trow = tri_out[i, x0 : x1 + 1]
+                    for k in range(drow.shape[0]):
+                        drow[k] = zb[i - y0, k]
+                        trow[k] = tb[i - y0, k]
 
 
 @kernel(parallel=True)
@@ -1330,8 +1338,9 @@ def _make_min_blend_kernel(prog):
                 bstats[tile, 4] += nculled
                 bstats[tile, 5] += nvculled
                 for i in range(y0, y1 + 1):
-                    for k in range(x1 - x0 + 1):
-                        blend[i, x0 + k] = zb[i - y0, k]
+                    brow = blend[i, x0 : x1 + 1]
+                    for k in range(brow.shape[0]):
+                        brow[k] = zb[i - y0, k]
 
     return tiles
 
