@@ -414,8 +414,6 @@ def _bin_fill(NC, box, T, ntx, chunk, off, bins, nslot, tile_any, use_bits):
 # ----------------------------------------------------------------------------------------------
 # rows of a thread's span scratch SP (int64, (5, TILE)), indexed by the row of the tile
 _SP_LO, _SP_HI, _SP_EX, _SP_RW, _SP_RN = 0, 1, 2, 3, 4
-# how a piece's rows are visited (see _piece_rows)
-_FULL, _SPANS, _SCAN = 0, 1, 2
 
 
 @kernel(inline=True)
@@ -711,16 +709,16 @@ def _fast_bound(lo, hi, slow, py, j0, j1, e):
 @kernel(inline=True)
 def _piece_rows(edges, zinfo, ct, prect, y0, x0, W, H, SP, by_texel):
     """The coverage of piece ``ct`` over rows i0..i1, columns j0..j1 (``prect``) of the tile whose
-    first row and column are y0, x0: (e0, e1, e2, how, nrows), its three edges, how its rows are
-    visited and how many (0: none).
+    first row and column are y0, x0: (e0, e1, e2, scan, nrows), its three edges, whether its rows
+    must be scanned pixel by pixel and the number of rows to visit (0: none), listed in SP[_SP_RW].
 
-    how == _FULL: every pixel center of the rectangle is covered (one span per row). _SPANS: the
-    covered columns of every row are one span, found for all the tile's rows at once by the fast
-    path (vectorized) into SP[_SP_LO], SP[_SP_HI] (SP[_SP_EX] set where a row needs the exact
-    search), and the rows to visit are compacted into SP[_SP_RW]: those with a span (``by_texel``:
-    one holding a texel set in SP[_SP_RN]) or a slow search (branch-free; a thin piece's box has
-    many empty rows, whose skipping branch the CPU cannot predict). _SCAN: the edge functions might
-    overflow: every row of the rectangle is scanned pixel by pixel (:func:`_scan_run`)."""
+    Where the edge functions cannot overflow, the covered columns of every row are one span
+    [SP[_SP_LO], SP[_SP_HI]], found for all the tile's rows at once by the fast path (vectorized;
+    SP[_SP_EX] set where a row needs the exact search) or, where a conservative test shows the
+    whole rectangle covered, [j0, j1]. The rows to visit are then compacted into SP[_SP_RW]: those
+    with a span (``by_texel``: one holding a texel set in SP[_SP_RN]) or a slow search
+    (branch-free; a thin piece's box has many empty rows, whose skipping branch the CPU cannot
+    predict). Otherwise (``scan``) every row of the rectangle is scanned (:func:`_scan_run`)."""
     i0, i1, j0, j1 = prect
     e0 = _edge(edges, ct, 0)
     e1 = _edge(edges, ct, 1)
@@ -730,12 +728,16 @@ def _piece_rows(edges, zinfo, ct, prect, y0, x0, W, H, SP, by_texel):
     if (i1 - i0 + 1) * (j1 - j0 + 1) > 16:
         reject, full = _rect_edge_test(edges, ct, i0, i1, j0, j1, W + 0.0, H + 0.0)
         if reject:
-            return e0, e1, e2, _FULL, 0
-    if full:
-        return e0, e1, e2, _FULL, i1 - i0 + 1
-    if zinfo[ct, Z_ROBUST] == 0.0:
-        return e0, e1, e2, _SCAN, i1 - i0 + 1
-    for k in range(SP.shape[1]):
+            return e0, e1, e2, False, 0
+    if full or zinfo[ct, Z_ROBUST] == 0.0:
+        # every row of the rectangle: one span [j0, j1] (full) or a scan
+        for k in range(i0 - y0, i1 - y0 + 1):
+            SP[_SP_RW, k - (i0 - y0)] = k
+            SP[_SP_LO, k] = j0
+            SP[_SP_HI, k] = j1
+            SP[_SP_EX, k] = 0
+        return e0, e1, e2, not full, i1 - i0 + 1
+    for k in range(TILE):
         py = (y0 + k) + 0.5
         lo, hi, slow = _fast_bound(j0, j1, False, py, j0, j1, e0)
         lo, hi, slow = _fast_bound(lo, hi, slow, py, j0, j1, e1)
@@ -754,28 +756,17 @@ def _piece_rows(edges, zinfo, ct, prect, y0, x0, W, H, SP, by_texel):
             nrows += hit | (SP[_SP_EX, k] != 0)
         else:
             nrows += (lo <= hi) | (SP[_SP_EX, k] != 0)
-    return e0, e1, e2, _SPANS, nrows
+    return e0, e1, e2, False, nrows
 
 
 @kernel(inline=True)
-def _row_of(rr, how, SP, i0, y0):
-    """(i, li): the image row and the tile row of the piece's rr-th row to visit."""
-    if how == _SPANS:
-        li = SP[_SP_RW, rr]
-        return li + y0, li
-    return i0 + rr, i0 + rr - y0
-
-
-@kernel(inline=True)
-def _first_span(how, li, py, j0, j1, SP, e0, e1, e2):
+def _first_span(scan, li, py, j0, j1, SP, e0, e1, e2):
     """(lo, hi, r0, r1, r2): the first run of covered columns of the row at py (tile row li; lo > hi:
     none) and the edges' row terms (for :func:`_next_span`)."""
     r0 = 0.0
     r1 = 0.0
     r2 = 0.0
-    if how == _FULL:
-        return j0, j1, r0, r1, r2
-    if how == _SPANS:
+    if not scan:
         lo = SP[_SP_LO, li]
         hi = SP[_SP_HI, li]
         if SP[_SP_EX, li] != 0:
@@ -794,9 +785,9 @@ def _first_span(how, li, py, j0, j1, SP, e0, e1, e2):
 
 
 @kernel(inline=True)
-def _next_span(how, hi, j1, e0, e1, e2, r0, r1, r2):
-    """The run of covered columns after the one ending at hi (only _SCAN rows have more than one)."""
-    if how != _SCAN:
+def _next_span(scan, hi, j1, e0, e1, e2, r0, r1, r2):
+    """The run of covered columns after the one ending at hi (only scanned rows have more than one)."""
+    if not scan:
         return j1 + 1, j1
     return _scan_run(hi + 1, j1, e0, e1, e2, r0, r1, r2)
 
@@ -812,7 +803,7 @@ def _depth_test_row(zb, tb, t, span, cols, pl, zrow, zr, ortho):
     li, klo, khi = span
     x0, wl, wsx = cols
     zlo, zhi, far = zr
-    for k in range(zb.shape[1]):
+    for k in range(TILE):
         xw = wl + ((x0 + k) + 0.5) * wsx
         z = _clamp_depth(_frag_depth(ortho, pl, zrow, xw), zlo, zhi)
         zc = zb[li, k]
@@ -842,30 +833,31 @@ def _depth_pass(vw, near, tile, rect, start, bins, box, edges, zinfo, planes, zb
         zlo, zhi = _depth_bounds(zinfo, ct, ortho, near)
         zr = (zlo, zhi, far)
         pl = _plane(planes, t)
-        e0, e1, e2, how, nrows = _piece_rows(edges, zinfo, ct, prect, y0, x0, W, H, SP, False)
+        e0, e1, e2, scan, nrows = _piece_rows(edges, zinfo, ct, prect, y0, x0, W, H, SP, False)
         for rr in range(nrows):
-            i, li = _row_of(rr, how, SP, i0, y0)
+            li = SP[_SP_RW, rr]
+            i = li + y0
             py = i + 0.5
             zrow = _row_depth(ortho, pl, wt - py * wsy)
-            lo, hi, r0, r1, r2 = _first_span(how, li, py, j0, j1, SP, e0, e1, e2)
+            lo, hi, r0, r1, r2 = _first_span(scan, li, py, j0, j1, SP, e0, e1, e2)
             while lo <= hi:
                 span = (li, lo - x0, hi - x0)
                 if ortho:
                     _depth_test_row(zb, tb, t, span, cols, pl, zrow, zr, True)
                 else:
                     _depth_test_row(zb, tb, t, span, cols, pl, zrow, zr, False)
-                lo, hi = _next_span(how, hi, j1, e0, e1, e2, r0, r1, r2)
+                lo, hi = _next_span(scan, hi, j1, e0, e1, e2, r0, r1, r2)
 
 
 @kernel(inline=True)
-def _count_row(span, cols, pl, zrow, zr, T, ortho):
+def _count_row(span, cols, pl, zrow, zr, ortho):
     """The number of fragments (not beyond ``far``) of the span of a tile row (vectorized over the
     whole tile row, masked to the span)."""
     _li, klo, khi = span
     x0, wl, wsx = cols
     zlo, zhi, far = zr
     cnt = 0
-    for k in range(T):
+    for k in range(TILE):
         xw = wl + ((x0 + k) + 0.5) * wsx
         z = _clamp_depth(_frag_depth(ortho, pl, zrow, xw), zlo, zhi)
         cnt += (k >= klo) & (k <= khi) & (not (z > far))
@@ -1150,19 +1142,20 @@ def _tiles_count(fe, sc, fcount):
                     zlo, zhi = _depth_bounds(zinfo, ct, ortho, near)
                     zr = (zlo, zhi, far)
                     pl = _plane(planes, ct >> 1)
-                    e0, e1, e2, how, nrows = _piece_rows(edges, zinfo, ct, prect, y0, x0, W, H, SP, False)
+                    e0, e1, e2, scan, nrows = _piece_rows(edges, zinfo, ct, prect, y0, x0, W, H, SP, False)
                     for rr in range(nrows):
-                        i, li = _row_of(rr, how, SP, i0, y0)
+                        li = SP[_SP_RW, rr]
+                        i = li + y0
                         py = i + 0.5
                         zrow = _row_depth(ortho, pl, wt - py * wsy)
-                        lo, hi, r0, r1, r2 = _first_span(how, li, py, j0, j1, SP, e0, e1, e2)
+                        lo, hi, r0, r1, r2 = _first_span(scan, li, py, j0, j1, SP, e0, e1, e2)
                         while lo <= hi:
                             span = (li, lo - x0, hi - x0)
                             if ortho:
-                                nfrag += _count_row(span, cols, pl, zrow, zr, T, True)
+                                nfrag += _count_row(span, cols, pl, zrow, zr, True)
                             else:
-                                nfrag += _count_row(span, cols, pl, zrow, zr, T, False)
-                            lo, hi = _next_span(how, hi, j1, e0, e1, e2, r0, r1, r2)
+                                nfrag += _count_row(span, cols, pl, zrow, zr, False)
+                            lo, hi = _next_span(scan, hi, j1, e0, e1, e2, r0, r1, r2)
                 fcount[tile] = nfrag
 
 
@@ -1191,13 +1184,14 @@ def _tiles_fragments(fe, sc, foff, fpix, ftri, fbary, fdepth):
                     zlo, zhi = _depth_bounds(zinfo, ct, ortho, near)
                     pl = _plane(planes, t)
                     q = _dual(planes, t)
-                    e0, e1, e2, how, nrows = _piece_rows(edges, zinfo, ct, prect, y0, x0, W, H, SP, False)
+                    e0, e1, e2, scan, nrows = _piece_rows(edges, zinfo, ct, prect, y0, x0, W, H, SP, False)
                     for rr in range(nrows):
-                        i, li = _row_of(rr, how, SP, i0, y0)
+                        li = SP[_SP_RW, rr]
+                        i = li + y0
                         py = i + 0.5
                         yw = wt - py * wsy
                         zrow = _row_depth(ortho, pl, yw)
-                        lo, hi, r0, r1, r2 = _first_span(how, li, py, j0, j1, SP, e0, e1, e2)
+                        lo, hi, r0, r1, r2 = _first_span(scan, li, py, j0, j1, SP, e0, e1, e2)
                         while lo <= hi:
                             for j in range(lo, hi + 1):
                                 xw = wl + (j + 0.5) * wsx
@@ -1211,7 +1205,7 @@ def _tiles_fragments(fe, sc, foff, fpix, ftri, fbary, fdepth):
                                 fbary[w, 1] = b2
                                 fdepth[w] = z
                                 w += 1
-                            lo, hi = _next_span(how, hi, j1, e0, e1, e2, r0, r1, r2)
+                            lo, hi = _next_span(scan, hi, j1, e0, e1, e2, r0, r1, r2)
 
 
 def _make_min_blend_kernel(prog):
@@ -1291,7 +1285,7 @@ def _make_min_blend_kernel(prog):
                             if vb >= cmax:
                                 nvculled += 1
                                 continue
-                    e0, e1, e2, how, nrows = _piece_rows(edges, zinfo, ct, prect, y0, x0, W, H, SP, True)
+                    e0, e1, e2, scan, nrows = _piece_rows(edges, zinfo, ct, prect, y0, x0, W, H, SP, True)
                     if nrows == 0:
                         continue
                     dirty = True  # this piece will lower texels: the tile's largest value may fall
@@ -1299,14 +1293,15 @@ def _make_min_blend_kernel(prog):
                     zr = (zlo, zhi, far)
                     side_a = t < split
                     for rr in range(nrows):
-                        i, li = _row_of(rr, how, SP, i0, y0)
+                        li = SP[_SP_RW, rr]
+                        i = li + y0
                         rn = SP[_SP_RN, li]
                         if use_mask and rn == 0:
                             continue  # no texel of this row is shaded
                         py = i + 0.5
                         yw = wt - py * wsy
                         zrow = _row_depth(ortho, pl, yw)
-                        lo, hi, r0, r1, r2 = _first_span(how, li, py, j0, j1, SP, e0, e1, e2)
+                        lo, hi, r0, r1, r2 = _first_span(scan, li, py, j0, j1, SP, e0, e1, e2)
                         while lo <= hi:
                             klo = lo - x0
                             khi = hi - x0
@@ -1330,7 +1325,7 @@ def _make_min_blend_kernel(prog):
                                 else:
                                     nb += cin
                                     kb += ckp
-                            lo, hi = _next_span(how, hi, j1, e0, e1, e2, r0, r1, r2)
+                            lo, hi = _next_span(scan, hi, j1, e0, e1, e2, r0, r1, r2)
                 bstats[tile, 0] += na
                 bstats[tile, 1] += nb
                 bstats[tile, 2] += ka
@@ -1416,7 +1411,7 @@ class FrontEnd(NamedTuple):
     """What the front end (setup + binning, :func:`_front_end`) hands the tile kernels."""
 
     vp: np.ndarray  #: View.params() (indexed with the VP_* constants)
-    tile: int  #: tile size T in pixels
+    tile: int  #: tile size T in pixels (= TILE: the vector row loops run over TILE columns)
     ntx: int  #: tiles per row
     nty: int  #: rows of tiles
     near: float  #: the near plane (perspective: at least _PERSPECTIVE_MIN_NEAR)
