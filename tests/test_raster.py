@@ -145,16 +145,16 @@ def _edge_test_coverage(view, V, F):
     from softshadows.raster import rasterizer as R
 
     vp, W, H, verts, fcs, code, near = R._prepare(view, V, F, "none")
-    _T, _ntx, _nty, _bstart, bins, CB, CE, _CZ, _PL, _NW, near, _ = R._front_end(vp, W, H, verts, fcs, code, near)
+    fe = R._front_end(vp, W, H, verts, fcs, code, near)
     pairs = []
-    for ct in np.unique(bins):
-        i0, i1, j0, j1 = CB[ct]
+    for ct in np.unique(fe.bins):
+        i0, i1, j0, j1 = fe.box[ct, [R.BOX_I0, R.BOX_I1, R.BOX_J0, R.BOX_J1]]
         i, j = np.mgrid[i0 : i1 + 1, j0 : j1 + 1]
         py = i + 0.5
         px = j + 0.5
         cov = np.ones(i.shape, bool)
         for k in range(3):
-            ax, ay, dx, dy, sg, inc = CE[ct, k, :6]
+            ax, ay, dx, dy, sg, inc = fe.edges[ct, k, [R.E_AX, R.E_AY, R.E_DX, R.E_DY, R.E_SG, R.E_OWN]]
             r = dx * (py - ay)
             e = sg * (r - dy * (px - ax))
             cov &= ~((e < 0) | ((e == 0) & (inc == 0)))
@@ -212,25 +212,9 @@ def test_span_coverage_equals_pixel_edge_tests(kind, ortho):
 
     vp, W_, H_, verts, fcs, code, near = R._prepare(view, V, F, "none")
     fe = R._front_end(vp, W_, H_, verts, fcs, code, near)
-    fe[7][:, 2] = 0.0  # CZ[:, 2]: no piece is "robust"
-    ntiles = fe[1] * fe[2]
-    fcount = np.empty(ntiles, dtype=np.int64)
-    R._run_tiles(R._M_FCOUNT, vp, fe, fcount=fcount)
-    foff = np.zeros(ntiles + 1, dtype=np.int64)
-    np.cumsum(fcount, out=foff[1:])
-    K = int(foff[-1])
-    fpix, ftri = np.empty(K, np.int64), np.empty(K, np.int32)
-    R._run_tiles(
-        R._M_FFILL,
-        vp,
-        fe,
-        fcount=fcount,
-        foff=foff,
-        fpix=fpix,
-        ftri=ftri,
-        fbary=np.empty((K, 2), np.float32),
-        fdepth=np.empty(K, np.float32),
-    )
+    fe.zinfo[:, R.Z_ROBUST] = 0.0  # no piece is "robust"
+    fr_scan = R._fragments(fe, W_, H_)
+    ftri, fpix = fr_scan.tri, fr_scan.pixel
     assert sorted(zip(ftri.tolist(), fpix.tolist())) == ref
     # the depth-test paths see the same coverage
     _depth, tri = rasterize_depth(view, V, F)

@@ -19,6 +19,7 @@ from numba import prange
 
 from .._jit import kernel
 from ..raster.kernels import view_project, view_ray
+from ..raster.view import VP_FORWARD, VP_L, VP_ORIGIN, VP_R, VP_RIGHT, VP_UP, VP_W
 from .base import Method, MethodOutput, Param, register
 from .shadowmap import build_shadow_map, fit_light_view, receiver_offset
 
@@ -114,9 +115,9 @@ def _tap_offset(pattern, i, disk, rot, c, s, shx, shy):
 def _view_normal(vp, nx, ny, nz):
     """The normal in light-view coordinates (right, up, forward components)."""
     return (
-        nx * vp[3] + ny * vp[4] + nz * vp[5],
-        nx * vp[6] + ny * vp[7] + nz * vp[8],
-        nx * vp[9] + ny * vp[10] + nz * vp[11],
+        nx * vp[VP_RIGHT] + ny * vp[VP_RIGHT + 1] + nz * vp[VP_RIGHT + 2],
+        nx * vp[VP_UP] + ny * vp[VP_UP + 1] + nz * vp[VP_UP + 2],
+        nx * vp[VP_FORWARD] + ny * vp[VP_FORWARD + 1] + nz * vp[VP_FORWARD + 2],
     )
 
 
@@ -194,7 +195,7 @@ def blocker_search_kernel(
     n = pts.shape[0]
     H, W = depth_map.shape
     S = pattern.shape[0]
-    texel1 = (vp[13] - vp[12]) / vp[18]  # texel size at depth 1 (perspective)
+    texel1 = (vp[VP_R] - vp[VP_L]) / vp[VP_W]  # texel size at depth 1 (perspective)
     nblock = (n + 63) // 64  # blocks of 64 dealt round-robin to one slot per thread
     for slot in prange(nslot):
         for blk in range(slot, nblock, nslot):
@@ -214,9 +215,9 @@ def blocker_search_kernel(
                 npo = nr * 0.0
                 if plane:  # n.(p - o) in view coordinates: receiver plane through p
                     npo = (
-                        nrm[k, 0] * (pts[k, 0] - vp[0])
-                        + nrm[k, 1] * (pts[k, 1] - vp[1])
-                        + nrm[k, 2] * (pts[k, 2] - vp[2])
+                        nrm[k, 0] * (pts[k, 0] - vp[VP_ORIGIN])
+                        + nrm[k, 1] * (pts[k, 1] - vp[VP_ORIGIN + 1])
+                        + nrm[k, 2] * (pts[k, 2] - vp[VP_ORIGIN + 2])
                     )
                 # similar triangles: the light seen from p, cut at depth z_near, in map texels
                 f = (z - z_near) / (z * z_near) / texel1
@@ -290,7 +291,7 @@ def filtering_kernel(
     kernel of radius w / 2 (per light axis) in texels at the receiver's depth."""
     n = pts.shape[0]
     S = pattern.shape[0]
-    texel1 = (vp[13] - vp[12]) / vp[18]  # texel size at depth 1 (perspective map)
+    texel1 = (vp[VP_R] - vp[VP_L]) / vp[VP_W]  # texel size at depth 1 (perspective map)
     nblock = (n + 63) // 64  # blocks of 64 dealt round-robin to one slot per thread
     for slot in prange(nslot):
         for blk in range(slot, nblock, nslot):
@@ -311,7 +312,9 @@ def filtering_kernel(
                 off = z - zt
                 nr, nu, nf = _view_normal(vp, nrm[k, 0], nrm[k, 1], nrm[k, 2])
                 npo = (
-                    nrm[k, 0] * (pts[k, 0] - vp[0]) + nrm[k, 1] * (pts[k, 1] - vp[1]) + nrm[k, 2] * (pts[k, 2] - vp[2])
+                    nrm[k, 0] * (pts[k, 0] - vp[VP_ORIGIN])
+                    + nrm[k, 1] * (pts[k, 1] - vp[VP_ORIGIN + 1])
+                    + nrm[k, 2] * (pts[k, 2] - vp[VP_ORIGIN + 2])
                 )
                 c = 1.0
                 s = 0.0

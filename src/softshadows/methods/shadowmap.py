@@ -24,7 +24,7 @@ from numba import prange
 from .._jit import kernel
 from ..raster import View, rasterize_depth
 from ..raster.kernels import view_project
-from ..raster.view import light_view
+from ..raster.view import VP_L, VP_ORIGIN, VP_ORTHO, VP_R, VP_W, light_view
 
 
 @dataclass
@@ -71,8 +71,8 @@ def build_shadow_map(scene, view: View, faces_mask: np.ndarray | None = None, cu
 @kernel(inline=True)
 def texel_world_size(vp, depth):
     """World size of one texel (x) at a view depth."""
-    s = (vp[13] - vp[12]) / vp[18]
-    if vp[20] == 0.0:
+    s = (vp[VP_R] - vp[VP_L]) / vp[VP_W]
+    if vp[VP_ORTHO] == 0.0:
         s *= depth
     return s
 
@@ -80,7 +80,7 @@ def texel_world_size(vp, depth):
 @kernel(inline=True)
 def receiver_offset(vp, px, py, pz, nx, ny, nz, depth, bias, slope_bias):
     """Depth offset (world units) for the shadow test at a point with normal n."""
-    lx, ly, lz = vp[0] - px, vp[1] - py, vp[2] - pz
+    lx, ly, lz = vp[VP_ORIGIN] - px, vp[VP_ORIGIN + 1] - py, vp[VP_ORIGIN + 2] - pz
     ln = np.sqrt(lx * lx + ly * ly + lz * lz)
     c = abs(nx * lx + ny * ly + nz * lz) / max(ln, 1e-30)
     c = min(max(c, 1e-3), 1.0)

@@ -28,7 +28,7 @@ from ..analytic import polygon_disk_area
 from ..errors import SoftShadowsError
 from ..raster import View, rasterize_depth, rasterize_fragments
 from ..raster.kernels import sample_bilinear, view_project
-from ..raster.view import light_view
+from ..raster.view import VP_B, VP_H, VP_L, VP_R, VP_T, VP_W, light_view
 from .base import Method, MethodOutput, Param, register
 
 BAND_ROWS = 2  # SSM rows per accumulation band (one thread sums one band)
@@ -156,7 +156,7 @@ def discretize_occluders(depth, mesh, ovp):
     covering the pixel's footprint: rows ``[x0, x1, y0, y1, z_O]`` in the light frame (x along
     ``right``, y along ``up``, z = depth), in occluder-map (row-major, draw) order; and its mesh id."""
     H, W = depth.shape
-    l, r, b, t = ovp[12], ovp[13], ovp[14], ovp[15]
+    l, r, b, t = ovp[VP_L], ovp[VP_R], ovp[VP_B], ovp[VP_T]
     dx = (r - l) / W
     dy = (t - b) / H
     n = 0
@@ -202,9 +202,9 @@ def penumbra_extents(patches, hx, hy, z_plane, svp):
     whose centers lie in the patch's penumbra rectangle on the virtual plane at depth ``z_plane``."""
     n = patches.shape[0]
     out = np.empty((n, 4), np.int32)
-    l, r, b, t = svp[12], svp[13], svp[14], svp[15]
-    W = svp[18]
-    H = svp[19]
+    l, r, b, t = svp[VP_L], svp[VP_R], svp[VP_B], svp[VP_T]
+    W = svp[VP_W]
+    H = svp[VP_H]
     dxs = (r - l) / W
     dys = (t - b) / H
     for k in range(n):
@@ -637,7 +637,7 @@ def accumulate_soft_shadow_map(
     self-shadowing) gets k = 0, hence a percentage of exactly 0: the float32 inner loop has no
     branch and vectorizes (adding 0.0 leaves the sum unchanged)."""
     H, W = recv_depth.shape
-    l, r, b, t = svp[12], svp[13], svp[14], svp[15]
+    l, r, b, t = svp[VP_L], svp[VP_R], svp[VP_B], svp[VP_T]
     dxs = (r - l) / W
     dys = (t - b) / H
     n_bands = band_ptr.shape[0] - 1

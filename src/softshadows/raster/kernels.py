@@ -1,11 +1,9 @@
 """Numba device helpers for kernels that work with a :class:`~softshadows.raster.view.View`.
 
-All helpers take the flat parameter array ``vp = View.params()``::
-
-    vp[0:3]  origin      vp[3:6]  right      vp[6:9]  up      vp[9:12] forward
-    vp[12] l  vp[13] r  vp[14] b  vp[15] t  vp[16] near  vp[17] far  vp[18] W  vp[19] H  vp[20] ortho
-
-and implement exactly the math of ``View.project`` / ``View.unproject``: pixel coordinates are
+All helpers take the flat parameter array ``vp = View.params()``, indexed with the ``VP_*``
+constants of :mod:`softshadows.raster.view` (origin, right, up, forward: 3 components each from
+``VP_ORIGIN``, ``VP_RIGHT``, ``VP_UP``, ``VP_FORWARD``; window ``VP_L``, ``VP_R``, ``VP_B``, ``VP_T``;
+``VP_NEAR``, ``VP_FAR``, image size ``VP_W``, ``VP_H``; ``VP_ORTHO``), and implement exactly the math of ``View.project`` / ``View.unproject``: pixel coordinates are
 continuous, row 0 at the top, pixel (i, j) has its center at ``(j + 0.5, i + 0.5)``; depth is the
 view-space z (distance along ``forward``, world units).
 
@@ -20,28 +18,29 @@ import math
 import numpy as np
 
 from .._jit import kernel
+from .view import VP_B, VP_FORWARD, VP_H, VP_L, VP_ORIGIN, VP_ORTHO, VP_R, VP_RIGHT, VP_T, VP_UP, VP_W
 
 
 @kernel
 def view_coords(vp, px, py, pz):
     """World point -> view coordinates (x, y, z) (x along right, y along up, z = depth)."""
-    dx = px - vp[0]
-    dy = py - vp[1]
-    dz = pz - vp[2]
-    x = dx * vp[3] + dy * vp[4] + dz * vp[5]
-    y = dx * vp[6] + dy * vp[7] + dz * vp[8]
-    z = dx * vp[9] + dy * vp[10] + dz * vp[11]
+    dx = px - vp[VP_ORIGIN]
+    dy = py - vp[VP_ORIGIN + 1]
+    dz = pz - vp[VP_ORIGIN + 2]
+    x = dx * vp[VP_RIGHT] + dy * vp[VP_RIGHT + 1] + dz * vp[VP_RIGHT + 2]
+    y = dx * vp[VP_UP] + dy * vp[VP_UP + 1] + dz * vp[VP_UP + 2]
+    z = dx * vp[VP_FORWARD] + dy * vp[VP_FORWARD + 1] + dz * vp[VP_FORWARD + 2]
     return x, y, z
 
 
 @kernel
 def view_coords_to_screen(vp, x, y, z):
     """View coordinates -> continuous pixel coordinates (sx, sy) (perspective divides by z)."""
-    if vp[20] == 0.0:
+    if vp[VP_ORTHO] == 0.0:
         x = x / z
         y = y / z
-    sx = (x - vp[12]) / (vp[13] - vp[12]) * vp[18]
-    sy = (vp[15] - y) / (vp[15] - vp[14]) * vp[19]
+    sx = (x - vp[VP_L]) / (vp[VP_R] - vp[VP_L]) * vp[VP_W]
+    sy = (vp[VP_T] - y) / (vp[VP_T] - vp[VP_B]) * vp[VP_H]
     return sx, sy
 
 
@@ -57,8 +56,8 @@ def view_project(vp, px, py, pz):
 def view_ray(vp, sx, sy):
     """Continuous pixel coordinates -> (x', y') window coordinates: view-space ``x/z, y/z``
     (perspective) or ``x, y`` (orthographic)."""
-    xw = vp[12] + sx / vp[18] * (vp[13] - vp[12])
-    yw = vp[15] - sy / vp[19] * (vp[15] - vp[14])
+    xw = vp[VP_L] + sx / vp[VP_W] * (vp[VP_R] - vp[VP_L])
+    yw = vp[VP_T] - sy / vp[VP_H] * (vp[VP_T] - vp[VP_B])
     return xw, yw
 
 
@@ -66,12 +65,12 @@ def view_ray(vp, sx, sy):
 def view_unproject(vp, sx, sy, depth):
     """Continuous pixel coordinates and view depth -> world point (x, y, z), same as ``View.unproject``."""
     x, y = view_ray(vp, sx, sy)
-    if vp[20] == 0.0:
+    if vp[VP_ORTHO] == 0.0:
         x = x * depth
         y = y * depth
-    wx = vp[0] + x * vp[3] + y * vp[6] + depth * vp[9]
-    wy = vp[1] + x * vp[4] + y * vp[7] + depth * vp[10]
-    wz = vp[2] + x * vp[5] + y * vp[8] + depth * vp[11]
+    wx = vp[VP_ORIGIN] + x * vp[VP_RIGHT] + y * vp[VP_UP] + depth * vp[VP_FORWARD]
+    wy = vp[VP_ORIGIN + 1] + x * vp[VP_RIGHT + 1] + y * vp[VP_UP + 1] + depth * vp[VP_FORWARD + 1]
+    wz = vp[VP_ORIGIN + 2] + x * vp[VP_RIGHT + 2] + y * vp[VP_UP + 2] + depth * vp[VP_FORWARD + 2]
     return wx, wy, wz
 
 

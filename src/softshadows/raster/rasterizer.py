@@ -1,67 +1,19 @@
 """The shared software rasterizer: sort-middle, tile-parallel, watertight, near-plane clipped.
 
-Pipeline (all Numba kernels on plain arrays; the functions at the bottom only orchestrate):
-
-1. **setup** (parallel over chunks of triangles, fused with the binning count pass): transform the three corners to view space, cull in *world*
-   space, reject triangles beyond ``far`` or behind ``near``, clip against the near plane
-   (``z = near``) in view space (up to 2 pieces per triangle, both carrying the original index), project,
-   snap to a 1/4096 px grid, orient, and store per piece its pixel bounding box and its three edge
-   equations; per original triangle store the view-space plane (``n . X = d``) and the dual vectors
-   that give its barycentrics. Depth and barycentrics of a fragment are computed from the *original*
-   triangle's plane by intersecting the ray through the pixel center with it, so they are exact
-   (float64) and perspective-correct whatever clipping did; clipping only decides coverage.
-2. **binning**: per (chunk, tile) counts (during setup), prefix sum, fill pass (parallel over the same
-   chunks); each tile's bin lists its pieces in increasing triangle index, so the result does not
-   depend on the thread count.
-3. **tiles** (parallel over ``TILE`` x ``TILE`` pixel tiles; one kernel per mode, see
-   :func:`_make_tiles_kernel`): each tile is rasterized by one thread into its own region of the
-   outputs (no atomics). Coverage: pixel centers ``(j+0.5, i+0.5)``, float64 edge functions evaluated
-   from the edge's canonically ordered endpoints (a shared edge gives exactly opposite values for the
-   two triangles, always) and a top-left fill rule: a pixel center on a shared edge or vertex belongs
-   to exactly one triangle. With the 1/4096 px snap the edge functions are exact (no rounding at all)
-   for every piece whose bounding box is under 16384 px, and coverage differs from the true triangle
-   by at most 1/8192 px, so the exact plane depth is never extrapolated noticeably (a coarser snap,
-   e.g. 1/256 px, let back faces win the depth test on some silhouette pixels). Either winding is
-   rasterized.
-
-   The coverage test is not evaluated pixel by pixel (but for pieces whose edge functions could
-   overflow, ``_scan_run``): each float64 edge function is monotonic along a row (``px - ax``, the
-   product and the difference round monotonically), so a row's covered columns
-   are one span, whose ends are the real zero crossings of the edge functions when these are farther
-   than a proven rounding margin from an integer column (``_fast_bound``, vectorized over the tile's
-   rows) and are otherwise found by evaluating the exact test at the boundary columns
-   (``_edge_span``): the coverage is bit for bit that of the per-pixel test. Depth, G-buffer and
-   count modes then evaluate the whole tile row at once (vectorized, masked to the span); the bins list
-   a tile's pieces in increasing triangle index, so the depth tie rule (equal depth: the smaller
-   index wins) is "strictly nearer wins".
-
-   Min-blend mode (``rasterize_min_blend``) runs a fragment program per fragment, branch-free over
-   the whole tile row (vectorized; a kernel is compiled per program so that the program inlines),
-   and can skip the pieces of a tile that cannot change the output (hierarchical culling, same
-   output): those the program would discard entirely (an exact depth bound per piece and tile
-   against ``programs.discard_depth``: a coarse depth test) and those whose every value is at least
-   the tile's largest stored value (``programs.value_lower_bound``: a coarse test of the MIN blend).
-   An optional texel mask restricts the shading to some texels: tiles without one get no pieces,
-   and pieces, rows and spans without one are skipped before the vector pass.
-
-4. **load balance**: Numba splits a ``prange`` into equal contiguous parts, one per thread,
-   whatever ``set_parallel_chunksize`` says (measured: a loop with all its work in the first half
-   runs on one thread), while the work of a tile pass is concentrated where the geometry is. The
-   tile and setup kernels therefore run a ``prange`` over one slot per thread, and slot p takes
-   tiles (chunks) p, p + n, p + 2n, ...: every thread gets a share of every busy region. No
-   output depends on the thread count.
-
-Depth is the view-space z (distance along ``forward``, world units) for both perspective and
-orthographic views; the depth test runs in float64 and the outputs are float32.
-
-Hot loops index scratch arrays with 2-D subscripts instead of taking row views: a view costs an
-atomic reference-count update on the shared parent array, and with two threads these contended
-updates cost more than the rasterization itself.
+Every public function runs the same front end (setup of each triangle in view space: cull, clip
+against the near plane, project, snap, edge equations; binning of the clipped pieces to ``TILE`` x
+``TILE`` pixel tiles) and then one tile kernel per mode: nearest depth (``rasterize_depth``), G-buffer
+(``rasterize``), fragment count and fragment write (``rasterize_fragments``) and, per fragment
+program, MIN-blend (``rasterize_min_blend``). The kernels share small inlined helpers (coverage
+spans, plane depth, barycentrics) so that coverage, depth and tie rules are the same in every mode.
+The design (exact coverage, depth from the original triangle's plane, culling, load balance) and
+its measured notes are in ``docs/rasterizer.md``.
 """
 
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -71,6 +23,20 @@ from .._jit import kernel
 from .gbuffer import Fragments, GBuffer
 from .kernels import view_coords, view_coords_to_screen
 from .programs import PROGRAMS, discard_depth, run_program, value_lower_bound
+from .view import (
+    VP_B,
+    VP_FAR,
+    VP_FORWARD,
+    VP_H,
+    VP_L,
+    VP_ORIGIN,
+    VP_ORTHO,
+    VP_R,
+    VP_RIGHT,
+    VP_T,
+    VP_UP,
+    VP_W,
+)
 
 TILE = 16  #: tile size in pixels (square)
 SUBPIXEL = 4096.0  #: screen coordinates are snapped to 1/SUBPIXEL px before coverage
@@ -83,8 +49,29 @@ _CULL = {"none": 0, "back": 1, "front": 2}
 #: it) only when a piece's value bound comes within this of the stale one
 _VALUE_RECOMPUTE = 0.05
 
-# modes of the tile kernel
-_M_DEPTH, _M_GBUF, _M_FCOUNT, _M_FFILL, _M_MINBLEND = 0, 1, 2, 3, 4
+# ----------------------------------------------------------------------------------------------
+# the setup arrays' columns. A triangle t has two piece slots, 2t and 2t + 1 (clipping by the near
+# plane may cut it into two pieces); ``bins`` lists slots, and ``slot >> 1`` is the triangle.
+# ----------------------------------------------------------------------------------------------
+#: box[slot, BOX_*] (int32): the rows i0..i1 and columns j0..j1 of the pixel centers inside the
+#: piece's bounding box (clamped to the image)
+BOX_I0, BOX_I1, BOX_J0, BOX_J1 = 0, 1, 2, 3
+#: zinfo[slot, Z_*]: the piece's view-depth range and 1.0 if its edge functions cannot overflow
+#: (robust: the covered columns of a row are one span) else 0.0
+Z_MIN, Z_MAX, Z_ROBUST = 0, 1, 2
+#: edges[slot, k, E_*] for edge k = 0, 1, 2 of a piece (see _store_edge): the edge function
+#: E = SG * (DX * (py - AY) - DY * (px - AX)) from the canonically ordered endpoints, OWN = 1.0 if
+#: the edge owns the pixel centers on it (top-left rule); the per-row span search (see _edge_span):
+#: INV = 1 / DY (0 if DY == 0), C0 = AX - 0.5, MARGIN of the fast path and KIND of bound (1: the
+#: edge bounds the covered columns from above, -1: from below, 0: DY == 0, it passes or rejects
+#: whole rows)
+E_AX, E_AY, E_DX, E_DY, E_SG, E_OWN, E_INV, E_C0, E_MARGIN, E_KIND = range(10)
+E_WIDTH = 10
+#: planes[t, PL_*] of the original triangle t in view space: the plane n . X = d (n at PL_N + 0..2,
+#: d at PL_D) and the dual vectors m1, m2 giving the barycentrics b1 = m1 . X - d1, b2 = m2 . X - d2
+#: of a point X of the plane (m1 at PL_M1 + 0..2, d1 at PL_D1; m2 at PL_M2 + 0..2, d2 at PL_D2)
+PL_N, PL_D, PL_M1, PL_D1, PL_M2, PL_D2 = 0, 3, 4, 7, 8, 11
+PL_WIDTH = 12
 
 
 # ----------------------------------------------------------------------------------------------
@@ -103,17 +90,12 @@ def _clip_point(xi, yi, zi, xo, yo, zo, near):
     return xi + s * (xo - xi), yi + s * (yo - yi), near
 
 
-# CE[slot, k, :] per edge k of a piece: the edge function's data (ax, ay, dx, dy, sg, inK: see
-# _store_edge) and the data of the per-row span search (see _edge_span): 1/dy (0 if dy == 0),
-# ax - 0.5, the margin M of the fast path and the kind of bound (1: the edge bounds the covered
-# columns from above, -1: from below, 0: dy == 0, the edge passes or rejects whole rows).
-_CE_W = 10
 _U = 2.0**-53  # unit roundoff of float64
 _ROBUST = 1e150  # coordinates below this never overflow the edge functions (no inf - inf = NaN)
 
 
 @kernel
-def _store_edge(CE, slot, k, ax, ay, bx, by, ext_x, ext_y):
+def _store_edge(edges, slot, k, ax, ay, bx, by, ext_x, ext_y):
     """Directed edge a->b of a positively oriented piece; inside is E >= 0 with
     E(p) = cross(b - a, p - a), evaluated from the canonically ordered endpoints.
     ext_x, ext_y: the extents of the piece's bounding box (for the span-search margin)."""
@@ -129,16 +111,16 @@ def _store_edge(CE, slot, k, ax, ay, bx, by, ext_x, ext_y):
         cdx = ax - bx
         cdy = ay - by
         sg = -1.0
-    CE[slot, k, 0] = cax
-    CE[slot, k, 1] = cay
-    CE[slot, k, 2] = cdx
-    CE[slot, k, 3] = cdy
-    CE[slot, k, 4] = sg
+    edges[slot, k, E_AX] = cax
+    edges[slot, k, E_AY] = cay
+    edges[slot, k, E_DX] = cdx
+    edges[slot, k, E_DY] = cdy
+    edges[slot, k, E_SG] = sg
     ddx = bx - ax
     ddy = by - ay
     # top-left rule (y down): top edges (horizontal, going right) and left edges (going up) own
     # the pixel centers lying exactly on them. Opposite directions never both qualify.
-    CE[slot, k, 5] = 1.0 if (ddy < 0.0 or (ddy == 0.0 and ddx > 0.0)) else 0.0
+    edges[slot, k, E_OWN] = 1.0 if (ddy < 0.0 or (ddy == 0.0 and ddx > 0.0)) else 0.0
     # span search: e(j) = sg * (r - dy * (j + 0.5 - ax)), r = dx * (i + 0.5 - ay), crosses zero at
     # the real column j* = ax - 0.5 + r / dy, computed as x = (ax - 0.5) + r * (1/dy). With
     # K = |dx| * (ext_y + 1) / |dy|, a = |j + 0.5 - ax| <= ext_x + 1 and b = |i + 0.5 - ay| <= ext_y + 1
@@ -150,21 +132,21 @@ def _store_edge(CE, slot, k, ax, ay, bx, by, ext_x, ext_y):
     if cdy != 0.0:
         inv = 1.0 / cdy
         K = abs(cdx) * (ext_y + 1.0) * abs(inv)
-        CE[slot, k, 6] = inv
-        CE[slot, k, 8] = 16.0 * _U * (K + ext_x + 1.0 + abs(cax) + 1.0) + 1e-9
-        CE[slot, k, 9] = 1.0 if sg * cdy > 0.0 else -1.0
+        edges[slot, k, E_INV] = inv
+        edges[slot, k, E_MARGIN] = 16.0 * _U * (K + ext_x + 1.0 + abs(cax) + 1.0) + 1e-9
+        edges[slot, k, E_KIND] = 1.0 if sg * cdy > 0.0 else -1.0
     else:
-        CE[slot, k, 6] = 0.0
-        CE[slot, k, 8] = 1.0
-        CE[slot, k, 9] = 0.0
-    CE[slot, k, 7] = cax - 0.5
+        edges[slot, k, E_INV] = 0.0
+        edges[slot, k, E_MARGIN] = 1.0
+        edges[slot, k, E_KIND] = 0.0
+    edges[slot, k, E_C0] = cax - 0.5
 
 
 @kernel
-def _setup_piece(vp, slot, x0, y0, z0, x1, y1, z1, x2, y2, z2, far, CB, CE, CZ):
+def _setup_piece(vp, slot, x0, y0, z0, x1, y1, z1, x2, y2, z2, far, box, edges, zinfo):
     """Project, snap, orient one (clipped) triangle; returns 1 if it may cover a pixel center."""
-    W = vp[18]
-    H = vp[19]
+    W = vp[VP_W]
+    H = vp[VP_H]
     zmin = min(z0, min(z1, z2))
     zmax = max(z0, max(z1, z2))
     if zmin > far:
@@ -204,32 +186,32 @@ def _setup_piece(vp, slot, x0, y0, z0, x1, y1, z1, x2, y2, z2, far, CB, CE, CZ):
     if area < 0.0:
         sx1, sx2 = sx2, sx1
         sy1, sy2 = sy2, sy1
-    CB[slot, 0] = int(fi0)
-    CB[slot, 1] = int(fi1)
-    CB[slot, 2] = int(fj0)
-    CB[slot, 3] = int(fj1)
-    CZ[slot, 0] = zmin
-    CZ[slot, 1] = zmax
+    box[slot, BOX_I0] = int(fi0)
+    box[slot, BOX_I1] = int(fi1)
+    box[slot, BOX_J0] = int(fj0)
+    box[slot, BOX_J1] = int(fj1)
+    zinfo[slot, Z_MIN] = zmin
+    zinfo[slot, Z_MAX] = zmax
     ext_x = xmax - xmin
     ext_y = ymax - ymin
-    _store_edge(CE, slot, 0, sx0, sy0, sx1, sy1, ext_x, ext_y)
-    _store_edge(CE, slot, 1, sx1, sy1, sx2, sy2, ext_x, ext_y)
-    _store_edge(CE, slot, 2, sx2, sy2, sx0, sy0, ext_x, ext_y)
+    _store_edge(edges, slot, 0, sx0, sy0, sx1, sy1, ext_x, ext_y)
+    _store_edge(edges, slot, 1, sx1, sy1, sx2, sy2, ext_x, ext_y)
+    _store_edge(edges, slot, 2, sx2, sy2, sx0, sy0, ext_x, ext_y)
     # robust: no edge function can overflow, so each is monotonic in the column (never NaN) and the
     # covered columns of a row are one span; otherwise the tile kernel tests pixel by pixel
     big = 0.0
     for k in range(3):
-        for c in range(4):
-            big = max(big, abs(CE[slot, k, c]))
-    CZ[slot, 2] = 1.0 if big < _ROBUST else 0.0
+        for c in range(E_AX, E_DY + 1):
+            big = max(big, abs(edges[slot, k, c]))
+    zinfo[slot, Z_ROBUST] = 1.0 if big < _ROBUST else 0.0
     return 1
 
 
 @kernel
-def _setup_one(t, verts, faces, vp, near, cull, NC, CB, CE, CZ, PL, NW):
-    """Triangle t: NC[t] pieces in slots 2t, 2t+1 of CB/CE/CZ; PL[t] plane data; NW[t] unit normal."""
-    ortho = vp[20] != 0.0
-    far = vp[17]
+def _setup_one(t, verts, faces, vp, near, cull, NC, box, edges, zinfo, planes, normals):
+    """Triangle t: NC[t] pieces in slots 2t, 2t+1 of box/edges/zinfo; planes[t] plane data; normals[t] unit normal."""
+    ortho = vp[VP_ORTHO] != 0.0
+    far = vp[VP_FAR]
     NC[t] = 0
     ia = faces[t, 0]
     ib = faces[t, 1]
@@ -258,17 +240,17 @@ def _setup_one(t, verts, faces, vp, near, cull, NC, CB, CE, CZ, PL, NW):
         return  # degenerate or non-finite
     if cull != 0:
         if ortho:
-            f = nx * vp[9] + ny * vp[10] + nz * vp[11]
+            f = nx * vp[VP_FORWARD] + ny * vp[VP_FORWARD + 1] + nz * vp[VP_FORWARD + 2]
         else:
-            f = nx * (ax - vp[0]) + ny * (ay - vp[1]) + nz * (az - vp[2])
+            f = nx * (ax - vp[VP_ORIGIN]) + ny * (ay - vp[VP_ORIGIN + 1]) + nz * (az - vp[VP_ORIGIN + 2])
         # front-facing: f < 0; back-facing: f > 0; edge-on (f == 0) is dropped by either cull
         if cull == 1 and not (f < 0.0):
             return
         if cull == 2 and not (f > 0.0):
             return
-    NW[t, 0] = nx / nn
-    NW[t, 1] = ny / nn
-    NW[t, 2] = nz / nn
+    normals[t, 0] = nx / nn
+    normals[t, 1] = ny / nn
+    normals[t, 2] = nz / nn
     # view space
     x0, y0, z0 = view_coords(vp, ax, ay, az)
     x1, y1, z1 = view_coords(vp, bx, by, bz)
@@ -294,18 +276,18 @@ def _setup_one(t, verts, faces, vp, near, cull, NC, CB, CE, CZ, PL, NW):
     m2x = (vny * f1z - vnz * f1y) / n2  # (n x e1) / |n|^2
     m2y = (vnz * f1x - vnx * f1z) / n2
     m2z = (vnx * f1y - vny * f1x) / n2
-    PL[t, 0] = vnx
-    PL[t, 1] = vny
-    PL[t, 2] = vnz
-    PL[t, 3] = vnx * x0 + vny * y0 + vnz * z0
-    PL[t, 4] = m1x
-    PL[t, 5] = m1y
-    PL[t, 6] = m1z
-    PL[t, 7] = m1x * x0 + m1y * y0 + m1z * z0
-    PL[t, 8] = m2x
-    PL[t, 9] = m2y
-    PL[t, 10] = m2z
-    PL[t, 11] = m2x * x0 + m2y * y0 + m2z * z0
+    planes[t, PL_N] = vnx
+    planes[t, PL_N + 1] = vny
+    planes[t, PL_N + 2] = vnz
+    planes[t, PL_D] = vnx * x0 + vny * y0 + vnz * z0
+    planes[t, PL_M1] = m1x
+    planes[t, PL_M1 + 1] = m1y
+    planes[t, PL_M1 + 2] = m1z
+    planes[t, PL_D1] = m1x * x0 + m1y * y0 + m1z * z0
+    planes[t, PL_M2] = m2x
+    planes[t, PL_M2 + 1] = m2y
+    planes[t, PL_M2 + 2] = m2z
+    planes[t, PL_D2] = m2x * x0 + m2y * y0 + m2z * z0
     # near-plane clipping in view space
     in0 = z0 >= near
     in1 = z1 >= near
@@ -313,7 +295,7 @@ def _setup_one(t, verts, faces, vp, near, cull, NC, CB, CE, CZ, PL, NW):
     nin = int(in0) + int(in1) + int(in2)
     s0 = 2 * t
     if nin == 3:
-        NC[t] = _setup_piece(vp, s0, x0, y0, z0, x1, y1, z1, x2, y2, z2, far, CB, CE, CZ)
+        NC[t] = _setup_piece(vp, s0, x0, y0, z0, x1, y1, z1, x2, y2, z2, far, box, edges, zinfo)
         return
     # rotate the corners (keeping the cyclic order) so that the odd one out comes first
     if nin == 1:
@@ -332,13 +314,13 @@ def _setup_one(t, verts, faces, vp, near, cull, NC, CB, CE, CZ, PL, NW):
         # P inside, Q and R outside: triangle P, PQ', PR'
         ux, uy, uz = _clip_point(px, py, pz, qx, qy, qz, near)
         wx, wy, wz = _clip_point(px, py, pz, rx, ry, rz, near)
-        NC[t] = _setup_piece(vp, s0, px, py, pz, ux, uy, uz, wx, wy, wz, far, CB, CE, CZ)
+        NC[t] = _setup_piece(vp, s0, px, py, pz, ux, uy, uz, wx, wy, wz, far, box, edges, zinfo)
     else:
         # P outside, Q and R inside: quad Q, R, RP', QP' -> (Q, R, RP') and (Q, RP', QP')
         ux, uy, uz = _clip_point(rx, ry, rz, px, py, pz, near)
         wx, wy, wz = _clip_point(qx, qy, qz, px, py, pz, near)
-        k = _setup_piece(vp, s0, qx, qy, qz, rx, ry, rz, ux, uy, uz, far, CB, CE, CZ)
-        k += _setup_piece(vp, s0 + k, qx, qy, qz, ux, uy, uz, wx, wy, wz, far, CB, CE, CZ)
+        k = _setup_piece(vp, s0, qx, qy, qz, rx, ry, rz, ux, uy, uz, far, box, edges, zinfo)
+        k += _setup_piece(vp, s0 + k, qx, qy, qz, ux, uy, uz, wx, wy, wz, far, box, edges, zinfo)
         NC[t] = k
 
 
@@ -365,20 +347,12 @@ def _tile_row_bits(mask, T, ntx, nty, bits, tile_any):
         tile_any[tile] = a != 0
 
 
-@kernel
-def _rect_has_bits(RN, i0, i1, j0, j1):
-    """Whether rows i0..i1, columns j0..j1 of a tile (tile coordinates) hold a bit set in the row
-    masks ``RN`` (see :func:`_tile_row_bits`)."""
-    acc = np.int64(0)
-    for li in range(i0, i1 + 1):
-        acc |= RN[li]
-    return ((acc >> j0) & ((np.int64(1) << (j1 - j0 + 1)) - 1)) != 0
-
-
 @kernel(parallel=True)
-def _setup_count(verts, faces, vp, near, cull, NC, CB, CE, CZ, PL, NW, T, ntx, chunk, cnt, nslot, tile_any, use_bits):
+def _setup_count(
+    verts, faces, vp, near, cull, NC, box, edges, zinfo, planes, normals, T, ntx, chunk, cnt, nslot, tile_any, use_bits
+):
     """Setup of every triangle (parallel over chunks of triangles, dealt round-robin to ``nslot``
-    slots: see ``_run_tiles``) and per (chunk, tile) bin counts. With ``use_bits``, only the tiles
+    slots: load balance, see docs/rasterizer.md) and per (chunk, tile) bin counts. With ``use_bits``, only the tiles
     with ``tile_any`` set get pieces (min-blend's texel mask)."""
     nchunk = cnt.shape[0]
     ntiles = cnt.shape[1]
@@ -389,11 +363,11 @@ def _setup_count(verts, faces, vp, near, cull, NC, CB, CE, CZ, PL, NW, T, ntx, c
                 cnt[c, tt] = 0
             t1 = min(F, (c + 1) * chunk)
             for t in range(c * chunk, t1):
-                _setup_one(t, verts, faces, vp, near, cull, NC, CB, CE, CZ, PL, NW)
+                _setup_one(t, verts, faces, vp, near, cull, NC, box, edges, zinfo, planes, normals)
                 for k in range(NC[t]):
                     ct = 2 * t + k
-                    for ty in range(CB[ct, 0] // T, CB[ct, 1] // T + 1):
-                        for tx in range(CB[ct, 2] // T, CB[ct, 3] // T + 1):
+                    for ty in range(box[ct, BOX_I0] // T, box[ct, BOX_I1] // T + 1):
+                        for tx in range(box[ct, BOX_J0] // T, box[ct, BOX_J1] // T + 1):
                             tile = ty * ntx + tx
                             if use_bits and tile_any[tile] == 0:
                                 continue
@@ -417,7 +391,7 @@ def _bin_offsets(cnt, bstart):
 
 
 @kernel(parallel=True)
-def _bin_fill(NC, CB, T, ntx, chunk, off, bins, nslot, tile_any, use_bits):
+def _bin_fill(NC, box, T, ntx, chunk, off, bins, nslot, tile_any, use_bits):
     nchunk = off.shape[0]
     F = NC.shape[0]
     for slot in prange(nslot):
@@ -426,8 +400,8 @@ def _bin_fill(NC, CB, T, ntx, chunk, off, bins, nslot, tile_any, use_bits):
             for t in range(c * chunk, t1):
                 for k in range(NC[t]):
                     ct = 2 * t + k
-                    for ty in range(CB[ct, 0] // T, CB[ct, 1] // T + 1):
-                        for tx in range(CB[ct, 2] // T, CB[ct, 3] // T + 1):
+                    for ty in range(box[ct, BOX_I0] // T, box[ct, BOX_I1] // T + 1):
+                        for tx in range(box[ct, BOX_J0] // T, box[ct, BOX_J1] // T + 1):
                             tile = ty * ntx + tx
                             if use_bits and tile_any[tile] == 0:
                                 continue
@@ -436,45 +410,120 @@ def _bin_fill(NC, CB, T, ntx, chunk, off, bins, nslot, tile_any, use_bits):
 
 
 # ----------------------------------------------------------------------------------------------
-# tiles
+# tiles: the helpers the tile kernels share (coverage, depth, barycentrics; all inlined)
 # ----------------------------------------------------------------------------------------------
-@kernel
-def _rect_edge_test(CE, ct, i0, i1, j0, j1, W, H):
-    """Conservative tests of piece ``ct`` against the pixel centers of rows i0..i1 and columns
-    j0..j1: (reject, full). reject: some edge function is below -thr at the rectangle's four corner
-    centers, so no center of the rectangle is covered; full: every edge function is above thr there,
-    so every center is. The edge functions are affine, so their extremes are at the corners; thr
-    bounds their rounding error."""
-    pa = i0 + 0.5
-    pb = i1 + 0.5
-    qa = j0 + 0.5
-    qb = j1 + 0.5
-    full = True
-    for k in range(3):
-        ax = CE[ct, k, 0]
-        ay = CE[ct, k, 1]
-        dx = CE[ct, k, 2]
-        dy = CE[ct, k, 3]
-        sg = CE[ct, k, 4]
-        e00 = sg * (dx * (pa - ay) - dy * (qa - ax))
-        e01 = sg * (dx * (pa - ay) - dy * (qb - ax))
-        e10 = sg * (dx * (pb - ay) - dy * (qa - ax))
-        e11 = sg * (dx * (pb - ay) - dy * (qb - ax))
-        emin = min(min(e00, e01), min(e10, e11))
-        emax = max(max(e00, e01), max(e10, e11))
-        thr = 1e-12 * (abs(dx) + abs(dy)) * (abs(ax) + abs(ay) + W + H + 1.0)
-        if emax < -thr:
-            return True, False
-        if emin <= thr:
-            full = False
-    return False, full
+# rows of a thread's span scratch SP (int64, (5, TILE)), indexed by the row of the tile
+_SP_LO, _SP_HI, _SP_EX, _SP_RW, _SP_RN = 0, 1, 2, 3, 4
 
 
-@kernel
-def _bary_c(q4, q5, q6, q7, q8, q9, q10, q11, xw, yw, z, ortho):
-    """Barycentrics (b1, b2) of the original triangle t (q4..q11 = PL[t, 4:12]) at the plane point
-    seen through window coordinates (xw, yw) at depth z; clamped into the triangle (guards
-    snapped-edge extrapolation)."""
+@kernel(inline=True)
+def _view_window(vp):
+    """(W, H, ortho, far, wl, wt, wsx, wsy): the image size, whether the view is orthographic, the
+    far plane, the window coordinates of the image's left and top sides and the window units per
+    pixel (x right, y down)."""
+    W = int(vp[VP_W])
+    H = int(vp[VP_H])
+    wsx = (vp[VP_R] - vp[VP_L]) / vp[VP_W]
+    wsy = (vp[VP_T] - vp[VP_B]) / vp[VP_H]
+    return W, H, vp[VP_ORTHO] != 0.0, vp[VP_FAR], vp[VP_L], vp[VP_T], wsx, wsy
+
+
+@kernel(inline=True)
+def _tile_rect(ty, tx, T, W, H):
+    """(y0, y1, x0, x1): the pixel rows y0..y1 and columns x0..x1 of tile (ty, tx)."""
+    y0 = ty * T
+    x0 = tx * T
+    return y0, min(y0 + T, H) - 1, x0, min(x0 + T, W) - 1
+
+
+@kernel(inline=True)
+def _piece_rect(box, ct, rect):
+    """(i0, i1, j0, j1): the rows and columns of piece ``ct``'s bounding box inside the tile
+    ``rect`` = (y0, y1, x0, x1); empty when i0 > i1 or j0 > j1."""
+    y0, y1, x0, x1 = rect
+    return max(box[ct, BOX_I0], y0), min(box[ct, BOX_I1], y1), max(box[ct, BOX_J0], x0), min(box[ct, BOX_J1], x1)
+
+
+@kernel(inline=True)
+def _depth_bounds(zinfo, ct, ortho, near):
+    """(zlo, zhi): sanity bounds for the plane depth of piece ``ct``'s pixels. The snapped coverage
+    may extrapolate the plane a fraction of a pixel beyond the true triangle, which near the plane's
+    horizon or for edge-on triangles can give huge, negative or NaN depths. zlo <= zhi."""
+    zmin = zinfo[ct, Z_MIN]
+    zmax = zinfo[ct, Z_MAX]
+    if ortho:
+        zlo = zmin - (zmax - zmin) - 1e-9 * (abs(zmin) + abs(zmax))
+        zhi = zmax + (zmax - zmin) + 1e-9 * (abs(zmin) + abs(zmax))
+    else:
+        zlo = 0.5 * zmin
+        zhi = 2.0 * zmax
+    if zlo < near:
+        zlo = near
+    return zlo, zhi
+
+
+@kernel(inline=True)
+def _clamp_depth(z, zlo, zhi):
+    """z clamped to [zlo, zhi] (branch-free); NaN (an edge-on plane) gives zlo."""
+    z = z if z >= zlo else zlo
+    return zhi if z > zhi else z
+
+
+@kernel(inline=True)
+def _plane(planes, t):
+    """(nx, ny, nz, d): the view-space plane n . X = d of triangle t."""
+    return planes[t, PL_N], planes[t, PL_N + 1], planes[t, PL_N + 2], planes[t, PL_D]
+
+
+@kernel(inline=True)
+def _dual(planes, t):
+    """The dual vectors of triangle t and their offsets (m1, d1, m2, d2) as an 8-tuple (see _bary)."""
+    return (
+        planes[t, PL_M1],
+        planes[t, PL_M1 + 1],
+        planes[t, PL_M1 + 2],
+        planes[t, PL_D1],
+        planes[t, PL_M2],
+        planes[t, PL_M2 + 1],
+        planes[t, PL_M2 + 2],
+        planes[t, PL_D2],
+    )
+
+
+@kernel(inline=True)
+def _row_depth(ortho, pl, yw):
+    """The part of plane ``pl``'s depth that is constant along the row at window y ``yw`` (see
+    :func:`_frag_depth`)."""
+    _pnx, pny, pnz, pd = pl
+    if ortho:
+        return pd - pny * yw
+    return pny * yw + pnz
+
+
+@kernel(inline=True)
+def _frag_depth(ortho, pl, zrow, xw):
+    """The view depth of plane ``pl`` seen through window point (xw, yw), zrow = _row_depth(ortho, pl,
+    yw): the intersection of the ray through the pixel center with the original triangle's plane,
+    exact and perspective-correct whatever clipping did. NaN or inf where the ray is parallel to
+    the plane (clamped by the callers with :func:`_clamp_depth`)."""
+    pnx, _pny, pnz, pd = pl
+    if ortho:
+        return (zrow - pnx * xw) / pnz
+    return pd / (pnx * xw + zrow)
+
+
+@kernel(inline=True)
+def _plane_depth(ortho, pl, xw, yw):
+    """The view depth of plane ``pl`` at window point (xw, yw), the same operations as per fragment."""
+    return _frag_depth(ortho, pl, _row_depth(ortho, pl, yw), xw)
+
+
+@kernel(inline=True)
+def _bary(q, xw, yw, z, ortho):
+    """Barycentrics (b1, b2) of the original triangle (``q`` = :func:`_dual`) at the plane point seen
+    through window coordinates (xw, yw) at depth z; clamped into the triangle (guards snapped-edge
+    extrapolation)."""
+    q4, q5, q6, q7, q8, q9, q10, q11 = q
     if ortho:
         b1 = q4 * xw + q5 * yw + q6 * z - q7
         b2 = q8 * xw + q9 * yw + q10 * z - q11
@@ -492,38 +541,104 @@ def _bary_c(q4, q5, q6, q7, q8, q9, q10, q11, xw, yw, z, ortho):
     return b1, b2
 
 
-@kernel
-def _edge_in(r, ax, dy, sg, inc, j):
-    """The coverage test of one edge at column j (r = dx * (i + 0.5 - ay) of the row): the pixel
-    center is outside if e < 0, or e == 0 on an edge that does not own it (top-left rule)."""
-    e = sg * (r - dy * ((j + 0.5) - ax))
-    return not (e < 0.0 or (e == 0.0 and not inc))
-
-
-@kernel
-def _covered(j, r0, ax0, dy0, sg0, in0, r1, ax1, dy1, sg1, in1, r2, ax2, dy2, sg2, in2):
+@kernel(inline=True)
+def _edge(edges, ct, k):
+    """Edge k of piece ct: a tuple of its E_* columns (index it with the E_* constants)."""
     return (
-        _edge_in(r0, ax0, dy0, sg0, in0, j)
-        and _edge_in(r1, ax1, dy1, sg1, in1, j)
-        and _edge_in(r2, ax2, dy2, sg2, in2, j)
+        edges[ct, k, E_AX],
+        edges[ct, k, E_AY],
+        edges[ct, k, E_DX],
+        edges[ct, k, E_DY],
+        edges[ct, k, E_SG],
+        edges[ct, k, E_OWN],
+        edges[ct, k, E_INV],
+        edges[ct, k, E_C0],
+        edges[ct, k, E_MARGIN],
+        edges[ct, k, E_KIND],
     )
 
 
+@kernel(inline=True)
+def _edge_row(e, py):
+    """The part r = DX * (py - AY) of edge e's function that is constant along the row at py."""
+    return e[E_DX] * (py - e[E_AY])
+
+
+@kernel(inline=True)
+def _edge_in(e, r, j):
+    """The coverage test of edge e at column j of a row (r = _edge_row(e, py)): the pixel center is
+    outside if E < 0, or E == 0 on an edge that does not own it (top-left rule)."""
+    v = e[E_SG] * (r - e[E_DY] * ((j + 0.5) - e[E_AX]))
+    return not (v < 0.0 or (v == 0.0 and e[E_OWN] == 0.0))
+
+
+@kernel(inline=True)
+def _covered(e0, e1, e2, r0, r1, r2, j):
+    return _edge_in(e0, r0, j) and _edge_in(e1, r1, j) and _edge_in(e2, r2, j)
+
+
 @kernel
-def _edge_span(lo, hi, j0, j1, r, ax, dy, sg, inc, inv, c0, M, kind):
+def _scan_run(js, j1, e0, e1, e2, r0, r1, r2):
+    """Next run [lo, hi] of covered columns at or after js, testing pixel by pixel (lo > hi: none);
+    for the pieces whose edge functions might overflow."""
+    j = js
+    while j <= j1 and not _covered(e0, e1, e2, r0, r1, r2, j):
+        j += 1
+    lo = j
+    while j <= j1 and _covered(e0, e1, e2, r0, r1, r2, j):
+        j += 1
+    return lo, j - 1
+
+
+@kernel
+def _rect_edge_test(edges, ct, i0, i1, j0, j1, W, H):
+    """Conservative tests of piece ``ct`` against the pixel centers of rows i0..i1 and columns
+    j0..j1: (reject, full). reject: some edge function is below -thr at the rectangle's four corner
+    centers, so no center of the rectangle is covered; full: every edge function is above thr there,
+    so every center is. The edge functions are affine, so their extremes are at the corners; thr
+    bounds their rounding error."""
+    pa = i0 + 0.5
+    pb = i1 + 0.5
+    qa = j0 + 0.5
+    qb = j1 + 0.5
+    full = True
+    for k in range(3):
+        ax = edges[ct, k, E_AX]
+        ay = edges[ct, k, E_AY]
+        dx = edges[ct, k, E_DX]
+        dy = edges[ct, k, E_DY]
+        sg = edges[ct, k, E_SG]
+        e00 = sg * (dx * (pa - ay) - dy * (qa - ax))
+        e01 = sg * (dx * (pa - ay) - dy * (qb - ax))
+        e10 = sg * (dx * (pb - ay) - dy * (qa - ax))
+        e11 = sg * (dx * (pb - ay) - dy * (qb - ax))
+        emin = min(min(e00, e01), min(e10, e11))
+        emax = max(max(e00, e01), max(e10, e11))
+        thr = 1e-12 * (abs(dx) + abs(dy)) * (abs(ax) + abs(ay) + W + H + 1.0)
+        if emax < -thr:
+            return True, False
+        if emin <= thr:
+            full = False
+    return False, full
+
+
+@kernel
+def _edge_span(lo, hi, j0, j1, r, e):
     """Intersect the column span [lo, hi] of a row with the columns of [j0, j1] that pass the test of
-    one edge, exactly as :func:`_edge_in` decides them (which is monotonic in j: px - ax, the product
+    edge e, exactly as :func:`_edge_in` decides them (which is monotonic in j: px - ax, the product
     and the difference are rounded monotonically, so the passing columns are a prefix (kind 1) or a
     suffix (kind -1) of the row, or all or none of it (kind 0, dy == 0)). The boundary comes from
     the real crossing x; when x lies within the margin M of an integer, the test itself is evaluated
     at the boundary columns (stepping until exact)."""
+    kind = e[E_KIND]
     if kind == 0.0:
-        if not _edge_in(r, ax, dy, sg, inc, j0):
+        if not _edge_in(e, r, j0):
             return j1 + 1, j1
         return lo, hi
-    x = c0 + r * inv
+    x = e[E_C0] + r * e[E_INV]
     fx = np.floor(x)
     f = x - fx
+    M = e[E_MARGIN]
     fast = f > M and f < 1.0 - M
     if kind > 0.0:
         # largest c in [j0 - 1, j1] such that every column of [j0, c] passes
@@ -534,12 +649,12 @@ def _edge_span(lo, hi, j0, j1, r, ax, dy, sg, inc, inv, c0, M, kind):
         else:
             c = int(fx)
         if not fast:
-            if c >= j0 and not _edge_in(r, ax, dy, sg, inc, c):
+            if c >= j0 and not _edge_in(e, r, c):
                 c -= 1
-                while c >= j0 and not _edge_in(r, ax, dy, sg, inc, c):
+                while c >= j0 and not _edge_in(e, r, c):
                     c -= 1
             else:
-                while c < j1 and _edge_in(r, ax, dy, sg, inc, c + 1):
+                while c < j1 and _edge_in(e, r, c + 1):
                     c += 1
         if c < hi:
             hi = c
@@ -553,12 +668,12 @@ def _edge_span(lo, hi, j0, j1, r, ax, dy, sg, inc, inv, c0, M, kind):
         else:
             c = int(fx)
         if not fast:
-            if c <= j1 and not _edge_in(r, ax, dy, sg, inc, c):
+            if c <= j1 and not _edge_in(e, r, c):
                 c += 1
-                while c <= j1 and not _edge_in(r, ax, dy, sg, inc, c):
+                while c <= j1 and not _edge_in(e, r, c):
                     c += 1
             else:
-                while c > j0 and _edge_in(r, ax, dy, sg, inc, c - 1):
+                while c > j0 and _edge_in(e, r, c - 1):
                     c -= 1
         if c > lo:
             lo = c
@@ -566,19 +681,20 @@ def _edge_span(lo, hi, j0, j1, r, ax, dy, sg, inc, inv, c0, M, kind):
 
 
 @kernel
-def _fast_bound(lo, hi, slow, py, j0, j1, ax, ay, dx, dy, sg, inc, inv, c0, M, kind):
-    """One edge's bound of the covered columns [lo, hi] of the row at py by the fast path of
+def _fast_bound(lo, hi, slow, py, j0, j1, e):
+    """Edge e's bound of the covered columns [lo, hi] of the row at py by the fast path of
     :func:`_edge_span` (branch-free, so that the loop over a tile's rows vectorizes); slow is set
     where the fast path does not apply (the row must then be searched with :func:`_edge_span`)."""
-    r = dx * (py - ay)
-    x = c0 + r * inv
+    r = _edge_row(e, py)
+    x = e[E_C0] + r * e[E_INV]
     fx = np.floor(x)
     f = x - fx
+    M = e[E_MARGIN]
     near_int = not (f > M and f < 1.0 - M)
     cu = int(min(max(fx, j0 - 1.0), j1 + 0.0))
     cl = int(min(max(fx + 1.0, j0 + 0.0), j1 + 1.0))
-    e = sg * (r - dy * ((j0 + 0.5) - ax))  # kind 0 (dy == 0): the same test for every column
-    rej = e < 0.0 or (e == 0.0 and not inc)
+    rej = not _edge_in(e, r, j0)  # kind 0 (dy == 0): the same test for every column
+    kind = e[E_KIND]
     if kind > 0.0:
         hi = min(hi, cu)
         slow = slow | near_int
@@ -590,38 +706,302 @@ def _fast_bound(lo, hi, slow, py, j0, j1, ax, ay, dx, dy, sg, inc, inv, c0, M, k
     return lo, hi, slow
 
 
-@kernel
-def _scan_run(js, j1, r0, ax0, dy0, sg0, in0, r1, ax1, dy1, sg1, in1, r2, ax2, dy2, sg2, in2):
-    """Next run [lo, hi] of covered columns at or after js, testing pixel by pixel (lo > hi: none);
-    for the pieces whose edge functions might overflow."""
-    j = js
-    while j <= j1 and not _covered(j, r0, ax0, dy0, sg0, in0, r1, ax1, dy1, sg1, in1, r2, ax2, dy2, sg2, in2):
-        j += 1
-    lo = j
-    while j <= j1 and _covered(j, r0, ax0, dy0, sg0, in0, r1, ax1, dy1, sg1, in1, r2, ax2, dy2, sg2, in2):
-        j += 1
-    return lo, j - 1
+@kernel(inline=True)
+def _piece_rows(edges, zinfo, ct, prect, y0, x0, W, H, SP, by_texel):
+    """The coverage of piece ``ct`` over rows i0..i1, columns j0..j1 (``prect``) of the tile whose
+    first row and column are y0, x0: (e0, e1, e2, scan, nrows), its three edges, whether its rows
+    must be scanned pixel by pixel and the number of rows to visit (0: none), listed in SP[_SP_RW].
+
+    Where the edge functions cannot overflow, the covered columns of every row are one span
+    [SP[_SP_LO], SP[_SP_HI]], found for all the tile's rows at once by the fast path (vectorized;
+    SP[_SP_EX] set where a row needs the exact search) or, where a conservative test shows the
+    whole rectangle covered, [j0, j1]. The rows to visit are then compacted into SP[_SP_RW]: those
+    with a span (``by_texel``: one holding a texel set in SP[_SP_RN]) or a slow search
+    (branch-free; a thin piece's box has many empty rows, whose skipping branch the CPU cannot
+    predict). Otherwise (``scan``) every row of the rectangle is scanned (:func:`_scan_run`)."""
+    i0, i1, j0, j1 = prect
+    e0 = _edge(edges, ct, 0)
+    e1 = _edge(edges, ct, 1)
+    e2 = _edge(edges, ct, 2)
+    # conservative whole-rectangle tests (edge functions are affine: extremes at corners)
+    full = False
+    if (i1 - i0 + 1) * (j1 - j0 + 1) > 16:
+        reject, full = _rect_edge_test(edges, ct, i0, i1, j0, j1, W + 0.0, H + 0.0)
+        if reject:
+            return e0, e1, e2, False, 0
+    if full or zinfo[ct, Z_ROBUST] == 0.0:
+        # every row of the rectangle: one span [j0, j1] (full) or a scan
+        for k in range(i0 - y0, i1 - y0 + 1):
+            SP[_SP_RW, k - (i0 - y0)] = k
+            SP[_SP_LO, k] = j0
+            SP[_SP_HI, k] = j1
+            SP[_SP_EX, k] = 0
+        return e0, e1, e2, not full, i1 - i0 + 1
+    for k in range(TILE):
+        py = (y0 + k) + 0.5
+        lo, hi, slow = _fast_bound(j0, j1, False, py, j0, j1, e0)
+        lo, hi, slow = _fast_bound(lo, hi, slow, py, j0, j1, e1)
+        lo, hi, slow = _fast_bound(lo, hi, slow, py, j0, j1, e2)
+        SP[_SP_LO, k] = lo
+        SP[_SP_HI, k] = hi
+        SP[_SP_EX, k] = slow
+    nrows = 0
+    for k in range(i0 - y0, i1 - y0 + 1):
+        SP[_SP_RW, nrows] = k
+        lo = SP[_SP_LO, k]
+        hi = SP[_SP_HI, k]
+        if by_texel:
+            width = max(hi - lo + 1, 0)
+            hit = ((SP[_SP_RN, k] >> (lo - x0)) & ((np.int64(1) << width) - 1)) != 0
+            nrows += hit | (SP[_SP_EX, k] != 0)
+        else:
+            nrows += (lo <= hi) | (SP[_SP_EX, k] != 0)
+    return e0, e1, e2, False, nrows
+
+
+@kernel(inline=True)
+def _first_span(scan, li, py, j0, j1, SP, e0, e1, e2):
+    """(lo, hi, r0, r1, r2): the first run of covered columns of the row at py (tile row li; lo > hi:
+    none) and the edges' row terms (for :func:`_next_span`)."""
+    r0 = 0.0
+    r1 = 0.0
+    r2 = 0.0
+    if not scan:
+        lo = SP[_SP_LO, li]
+        hi = SP[_SP_HI, li]
+        if SP[_SP_EX, li] != 0:
+            r0 = _edge_row(e0, py)
+            r1 = _edge_row(e1, py)
+            r2 = _edge_row(e2, py)
+            lo, hi = _edge_span(j0, j1, j0, j1, r0, e0)
+            lo, hi = _edge_span(lo, hi, j0, j1, r1, e1)
+            lo, hi = _edge_span(lo, hi, j0, j1, r2, e2)
+        return lo, hi, r0, r1, r2
+    r0 = _edge_row(e0, py)
+    r1 = _edge_row(e1, py)
+    r2 = _edge_row(e2, py)
+    lo, hi = _scan_run(j0, j1, e0, e1, e2, r0, r1, r2)
+    return lo, hi, r0, r1, r2
+
+
+@kernel(inline=True)
+def _next_span(scan, hi, j1, e0, e1, e2, r0, r1, r2):
+    """The run of covered columns after the one ending at hi (only scanned rows have more than one)."""
+    if not scan:
+        return j1 + 1, j1
+    return _scan_run(hi + 1, j1, e0, e1, e2, r0, r1, r2)
+
+
+@kernel(inline=True)
+def _depth_test_row(zb, tb, t, span, cols, pl, zrow, zr, ortho):
+    """Depth test of the fragments of triangle t on ``span`` = (li, klo, khi), the columns klo..khi
+    of tile row li, against the tile's nearest depths ``zb`` and triangles ``tb``: the whole tile
+    row at once (vectorizes), masked to the span. ``cols`` = (x0, wl, wsx): the tile's first column
+    and the window x of the image's left side and per pixel; ``zr`` = (zlo, zhi, far): the piece's
+    depth clamp and the far plane. Strictly nearer wins: the bins list a tile's pieces in increasing
+    triangle index, so equal depths go to the smaller index."""
+    li, klo, khi = span
+    x0, wl, wsx = cols
+    zlo, zhi, far = zr
+    for k in range(TILE):
+        xw = wl + ((x0 + k) + 0.5) * wsx
+        z = _clamp_depth(_frag_depth(ortho, pl, zrow, xw), zlo, zhi)
+        zc = zb[li, k]
+        take = (k >= klo) & (k <= khi) & (not (z > far)) & (z < zc)
+        zb[li, k] = z if take else zc
+        tb[li, k] = t if take else tb[li, k]
+
+
+@kernel(inline=True)
+def _depth_pass(vw, near, tile, rect, start, bins, box, edges, zinfo, planes, zb, tb, SP):
+    """The nearest depth ``zb`` and triangle ``tb`` (-1: none) of every pixel of the tile ``rect`` =
+    (y0, y1, x0, x1), from the pieces binned to it (the dense modes: depth and G-buffer)."""
+    W, H, ortho, far, wl, wt, wsx, wsy = vw
+    y0, _y1, x0, _x1 = rect
+    cols = (x0, wl, wsx)
+    for li in range(zb.shape[0]):
+        for k in range(zb.shape[1]):
+            zb[li, k] = np.inf
+            tb[li, k] = -1
+    for bi in range(start[tile], start[tile + 1]):
+        ct = bins[bi]
+        t = ct >> 1
+        prect = _piece_rect(box, ct, rect)
+        i0, i1, j0, j1 = prect
+        if i0 > i1 or j0 > j1:
+            continue
+        zlo, zhi = _depth_bounds(zinfo, ct, ortho, near)
+        zr = (zlo, zhi, far)
+        pl = _plane(planes, t)
+        e0, e1, e2, scan, nrows = _piece_rows(edges, zinfo, ct, prect, y0, x0, W, H, SP, False)
+        for rr in range(nrows):
+            li = SP[_SP_RW, rr]
+            i = li + y0
+            py = i + 0.5
+            zrow = _row_depth(ortho, pl, wt - py * wsy)
+            lo, hi, r0, r1, r2 = _first_span(scan, li, py, j0, j1, SP, e0, e1, e2)
+            while lo <= hi:
+                span = (li, lo - x0, hi - x0)
+                if ortho:
+                    _depth_test_row(zb, tb, t, span, cols, pl, zrow, zr, True)
+                else:
+                    _depth_test_row(zb, tb, t, span, cols, pl, zrow, zr, False)
+                lo, hi = _next_span(scan, hi, j1, e0, e1, e2, r0, r1, r2)
+
+
+@kernel(inline=True)
+def _count_row(span, cols, pl, zrow, zr, ortho):
+    """The number of fragments (not beyond ``far``) of the span of a tile row (vectorized over the
+    whole tile row, masked to the span)."""
+    _li, klo, khi = span
+    x0, wl, wsx = cols
+    zlo, zhi, far = zr
+    cnt = 0
+    for k in range(TILE):
+        xw = wl + ((x0 + k) + 0.5) * wsx
+        z = _clamp_depth(_frag_depth(ortho, pl, zrow, xw), zlo, zhi)
+        cnt += (k >= klo) & (k <= khi) & (not (z > far))
+    return cnt
+
+
+@kernel(inline=True)
+def _view_frame(vp):
+    """The view's origin, right, up and forward vectors as a 12-tuple (hoisted out of pixel loops)."""
+    return (
+        vp[VP_ORIGIN],
+        vp[VP_ORIGIN + 1],
+        vp[VP_ORIGIN + 2],
+        vp[VP_RIGHT],
+        vp[VP_RIGHT + 1],
+        vp[VP_RIGHT + 2],
+        vp[VP_UP],
+        vp[VP_UP + 1],
+        vp[VP_UP + 2],
+        vp[VP_FORWARD],
+        vp[VP_FORWARD + 1],
+        vp[VP_FORWARD + 2],
+    )
+
+
+@kernel(inline=True)
+def _gbuffer_row(out, i, li, cols, nk, yw, zb, tb, frame, planes, normals, ortho):
+    """The G-buffer ``out`` = (depth, tri, pos, nrm, bary, mask) of the nk pixels of image row i
+    (tile row li) from the tile's winners (branch-free per pixel, so that it vectorizes)."""
+    x0, wl, wsx = cols
+    o0, o1, o2, rx, ry, rz, ux, uy, uz, fx, fy, fz = frame
+    # row views: their indices are known non-negative (no wrap-around selects in the vector loop)
+    drow = out[0][i, x0 : x0 + nk]
+    trow = out[1][i, x0 : x0 + nk]
+    prow = out[2][i, x0 : x0 + nk]
+    nrow = out[3][i, x0 : x0 + nk]
+    brow = out[4][i, x0 : x0 + nk]
+    mrow = out[5][i, x0 : x0 + nk]
+    for k in range(nk):
+        t = tb[li, k]
+        hit = t >= 0
+        tt = max(t, 0)  # planes, normals have a row 0 (read, then discarded, where no hit)
+        z = zb[li, k]  # +inf where no hit
+        xw = wl + ((x0 + k) + 0.5) * wsx
+        b1, b2 = _bary(_dual(planes, tt), xw, yw, z, ortho)
+        vx = xw if ortho else xw * z
+        vy = yw if ortho else yw * z
+        trow[k] = t
+        drow[k] = z
+        mrow[k] = hit
+        prow[k, 0] = (o0 + vx * rx + vy * ux + z * fx) if hit else np.nan
+        prow[k, 1] = (o1 + vx * ry + vy * uy + z * fy) if hit else np.nan
+        prow[k, 2] = (o2 + vx * rz + vy * uz + z * fz) if hit else np.nan
+        nrow[k, 0] = normals[tt, 0] if hit else np.nan
+        nrow[k, 1] = normals[tt, 1] if hit else np.nan
+        nrow[k, 2] = normals[tt, 2] if hit else np.nan
+        brow[k, 0] = b1 if hit else np.nan
+        brow[k, 1] = b2 if hit else np.nan
+
+
+# ----------------------------------------------------------------------------------------------
+# min-blend helpers: texel mask, coarse (hierarchical) tests, the fragment program's row
+# ----------------------------------------------------------------------------------------------
+@kernel(inline=True)
+def _texels_to_shade(SP, rowbits, tile, use_mask, ny, nx):
+    """Fill SP[_SP_RN] (bit k of row li set where texel (li, k) of the tile is to be shaded) with
+    the tile's rows of the texel mask ``rowbits`` or, without one, with every texel of the tile's
+    ny + 1 rows and nx + 1 columns. False when there is none."""
+    if use_mask:
+        anyb = 0
+        for li in range(SP.shape[1]):
+            SP[_SP_RN, li] = rowbits[tile, li]
+            anyb |= SP[_SP_RN, li]
+        return anyb != 0
+    for li in range(SP.shape[1]):
+        SP[_SP_RN, li] = ((np.int64(1) << (nx + 1)) - 1) if li <= ny else 0
+    return True
 
 
 @kernel
-def _plane_depth(ortho, pnx, pny, pnz, pd, xw, yw):
-    """The view depth of a triangle's plane seen through window point (xw, yw), written exactly as
-    the tile kernel's per-fragment depth (same operations in the same order, so the same rounding);
-    NaN where the view ray is parallel to the plane."""
-    if ortho:
-        zrow = pd - pny * yw
-        return (zrow - pnx * xw) / pnz
-    zrow = pny * yw + pnz
-    return pd / (pnx * xw + zrow)
+def _rect_has_bits(SP, i0, i1, j0, j1):
+    """Whether rows i0..i1, columns j0..j1 of a tile (tile coordinates) hold a texel to shade
+    (SP[_SP_RN], see :func:`_texels_to_shade`)."""
+    acc = np.int64(0)
+    for li in range(i0, i1 + 1):
+        acc |= SP[_SP_RN, li]
+    return ((acc >> j0) & ((np.int64(1) << (j1 - j0 + 1)) - 1)) != 0
 
 
-@kernel
-def _rect_min_depth(ortho, pnx, pny, pnz, pd, wl, wt, wsx, wsy, i0, i1, j0, j1):
+@kernel(inline=True)
+def _load_blend_tile(prog, pparams, blend, img, rect, SP, zb, ib):
+    """Copy the tile's current values of ``blend`` into zb and its input image into ib; over the
+    texels to shade, return the bounds of the coarse tests: (the largest depth from which the
+    program discards, the largest finite input-image value, the largest current value)."""
+    y0, y1, x0, x1 = rect
+    tthr = -np.inf
+    smax = -np.inf
+    cmax = -np.inf
+    for i in range(y0, y1 + 1):
+        li = i - y0
+        rb = SP[_SP_RN, li]
+        for k in range(x1 - x0 + 1):
+            bv = np.float64(blend[i, x0 + k])
+            sv = img[i, x0 + k]
+            need = ((rb >> k) & 1) != 0
+            zb[li, k] = bv
+            ib[li, k] = sv
+            d = discard_depth(prog, pparams, sv)
+            # NaN: the program discards there whatever the depth
+            tthr = d if (need and d > tthr) else tthr
+            smax = sv if (need and sv > smax and sv < np.inf) else smax
+            cmax = bv if (need and bv > cmax) else cmax
+    return tthr, smax, cmax
+
+
+@kernel(inline=True)
+def _tile_max(zb, SP, CM, ny):
+    """The largest current value over the texels to shade of the tile's ny + 1 rows: lane-wise
+    maxima first (vectorizes), then across lanes (CM: lane scratch)."""
+    T = CM.shape[0]
+    rb = SP[_SP_RN, 0]
+    for k in range(T):
+        CM[k] = zb[0, k] if ((rb >> k) & 1) != 0 else -np.inf
+    for li in range(1, ny + 1):
+        rb = SP[_SP_RN, li]
+        for k in range(T):
+            c = zb[li, k] if ((rb >> k) & 1) != 0 else -np.inf
+            CM[k] = c if c > CM[k] else CM[k]
+    cmax = CM[0]
+    for k in range(1, T):
+        cmax = CM[k] if CM[k] > cmax else cmax
+    return cmax
+
+
+@kernel(inline=True)
+def _rect_min_depth(ortho, pl, vw, prect):
     """A lower bound of the plane depth (as :func:`_plane_depth`) over the pixel centers of rows
-    i0..i1 and columns j0..j1, or -inf where there is none (the denominator may vanish). The
-    denominator is an affine function of (xw, yw) whose floating-point evaluation is monotonic in
-    each, so its extremes are at the four corner pixel centers; where it keeps one sign there the
-    depth is monotonic too and the minimum of the four corner depths is exact."""
+    i0..i1 and columns j0..j1 (``prect``), or -inf where there is none (the denominator may
+    vanish). The denominator is an affine function of (xw, yw) whose floating-point evaluation is
+    monotonic in each, so its extremes are at the four corner pixel centers; where it keeps one sign
+    there the depth is monotonic too and the minimum of the four corner depths is exact."""
+    pnx, pny, pnz, _pd = pl
+    _W, _H, _ortho, _far, wl, wt, wsx, wsy = vw
+    i0, i1, j0, j1 = prect
     xa = wl + (j0 + 0.5) * wsx
     xb = wl + (j1 + 0.5) * wsx
     ya = wt - (i0 + 0.5) * wsy
@@ -641,630 +1021,326 @@ def _rect_min_depth(ortho, pnx, pny, pnz, pd, wl, wt, wsx, wsy, i0, i1, j0, j1):
         if not (pos or neg):
             return -np.inf
     z = min(
-        min(_plane_depth(ortho, pnx, pny, pnz, pd, xa, ya), _plane_depth(ortho, pnx, pny, pnz, pd, xb, ya)),
-        min(_plane_depth(ortho, pnx, pny, pnz, pd, xa, yb), _plane_depth(ortho, pnx, pny, pnz, pd, xb, yb)),
+        min(_plane_depth(ortho, pl, xa, ya), _plane_depth(ortho, pl, xb, ya)),
+        min(_plane_depth(ortho, pl, xa, yb), _plane_depth(ortho, pl, xb, yb)),
     )
     return z if z == z else -np.inf
 
 
-def _make_tiles_kernel(mode, prog=0):
-    """The tile kernel for one mode and, for mode 4, one fragment program (constants of the closure:
-    each kernel compiles only its own mode's and program's code, which keeps the hot loops free of
-    branches, so that they vectorize, and their register allocation clean)."""
+@kernel(inline=True)
+def _blend_row(prog, pparams, zb, ib, rn, span, cols, yw, zrow, pl, q, ca, zr, ortho, cconst):
+    """Run fragment program ``prog`` on the fragments of a span of a tile row and MIN-blend the
+    values kept into ``zb``: the whole tile row at once, masked to the span and to the texels to
+    shade ``rn`` (a branch-free loop of T columns: it vectorizes; cheaper than pixel by pixel even
+    for short spans). ``ca``: the corner attributes; ``cconst``: they are equal (e.g. a cone's Z_v),
+    no barycentrics needed. Returns (fragments, kept fragments)."""
+    li, klo, khi = span
+    x0, wl, wsx = cols
+    zlo, zhi, far = zr
+    ca0, ca1, ca2 = ca
+    cin = 0
+    ckp = 0
+    for k in range(zb.shape[1]):
+        xw = wl + ((x0 + k) + 0.5) * wsx
+        z = _clamp_depth(_frag_depth(ortho, pl, zrow, xw), zlo, zhi)
+        if cconst:
+            a = ca0
+        else:
+            b1, b2 = _bary(q, xw, yw, z, ortho)
+            a = (1.0 - b1 - b2) * ca0 + b1 * ca1 + b2 * ca2
+        val = run_program(prog, pparams, a, ib[li, k], z)
+        inside = (k >= klo) & (k <= khi) & (not (z > far)) & (((rn >> k) & 1) != 0)
+        kept = inside & (val == val)
+        cin += inside
+        ckp += kept
+        zc = zb[li, k]
+        zb[li, k] = val if (kept & (val < zc)) else zc
+    return cin, ckp
+
+
+# ----------------------------------------------------------------------------------------------
+# the tile kernels, one per mode. Load balance (see docs/rasterizer.md): Numba splits a prange into
+# equal contiguous parts, one per thread, while the work sits where the geometry is; so each kernel
+# runs a prange over one slot per thread and slot p takes tiles (or tile rows) p, p + n, p + 2n, ...
+# A slot runs on one thread: its scratch is taken once per slot.
+# ----------------------------------------------------------------------------------------------
+@kernel(parallel=True)
+def _tiles_depth(fe, sc, depth_out, tri_out):
+    """rasterize_depth: the nearest depth (+inf: none) and triangle (-1: none) of every pixel."""
+    vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, _normals, _rowbits = fe
+    zbuf, tbuf, spbuf, _ibuf, _lbuf, nslot = sc
+    vw = _view_window(vp)
+    W, H = vw[0], vw[1]
+    for slot in prange(nslot):
+        tid = numba.get_thread_id()
+        zb = zbuf[tid]
+        tb = tbuf[tid]
+        SP = spbuf[tid]
+        for ty in range(slot, nty, nslot):  # tile rows dealt round-robin: contiguous output rows
+            for tx in range(ntx):
+                rect = _tile_rect(ty, tx, T, W, H)
+                _depth_pass(vw, near, ty * ntx + tx, rect, start, bins, box, edges, zinfo, planes, zb, tb, SP)
+                y0, y1, x0, x1 = rect
+                for i in range(y0, y1 + 1):
+                    # row views: their indices are known non-negative (no wrap-around selects)
+                    drow = depth_out[i, x0 : x1 + 1]
+                    trow = tri_out[i, x0 : x1 + 1]
+                    for k in range(drow.shape[0]):
+                        drow[k] = zb[i - y0, k]
+                        trow[k] = tb[i - y0, k]
+
+
+@kernel(parallel=True)
+def _tiles_gbuffer(fe, sc, out):
+    """rasterize: the nearest surface's G-buffer ``out`` = (depth, tri, pos, nrm, bary, mask)."""
+    vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, normals, _rowbits = fe
+    zbuf, tbuf, spbuf, _ibuf, _lbuf, nslot = sc
+    vw = _view_window(vp)
+    W, H, ortho, _far, wl, wt, wsx, wsy = vw
+    frame = _view_frame(vp)
+    for slot in prange(nslot):
+        tid = numba.get_thread_id()
+        zb = zbuf[tid]
+        tb = tbuf[tid]
+        SP = spbuf[tid]
+        for ty in range(slot, nty, nslot):
+            for tx in range(ntx):
+                rect = _tile_rect(ty, tx, T, W, H)
+                _depth_pass(vw, near, ty * ntx + tx, rect, start, bins, box, edges, zinfo, planes, zb, tb, SP)
+                y0, y1, x0, x1 = rect
+                cols = (x0, wl, wsx)
+                for i in range(y0, y1 + 1):
+                    yw = wt - (i + 0.5) * wsy
+                    if ortho:
+                        _gbuffer_row(out, i, i - y0, cols, x1 - x0 + 1, yw, zb, tb, frame, planes, normals, True)
+                    else:
+                        _gbuffer_row(out, i, i - y0, cols, x1 - x0 + 1, yw, zb, tb, frame, planes, normals, False)
+
+
+@kernel(parallel=True)
+def _tiles_count(fe, sc, fcount):
+    """rasterize_fragments, first pass: fcount[tile] = the number of fragments of the tile."""
+    vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, _normals, _rowbits = fe
+    _zbuf, _tbuf, spbuf, _ibuf, _lbuf, nslot = sc
+    vw = _view_window(vp)
+    W, H, ortho, far, wl, wt, wsx, wsy = vw
+    for slot in prange(nslot):
+        SP = spbuf[numba.get_thread_id()]
+        for ty in range(slot, nty, nslot):
+            for tx in range(ntx):
+                tile = ty * ntx + tx
+                rect = _tile_rect(ty, tx, T, W, H)
+                y0, _y1, x0, _x1 = rect
+                cols = (x0, wl, wsx)
+                nfrag = 0
+                for bi in range(start[tile], start[tile + 1]):
+                    ct = bins[bi]
+                    prect = _piece_rect(box, ct, rect)
+                    i0, i1, j0, j1 = prect
+                    if i0 > i1 or j0 > j1:
+                        continue
+                    zlo, zhi = _depth_bounds(zinfo, ct, ortho, near)
+                    zr = (zlo, zhi, far)
+                    pl = _plane(planes, ct >> 1)
+                    e0, e1, e2, scan, nrows = _piece_rows(edges, zinfo, ct, prect, y0, x0, W, H, SP, False)
+                    for rr in range(nrows):
+                        li = SP[_SP_RW, rr]
+                        i = li + y0
+                        py = i + 0.5
+                        zrow = _row_depth(ortho, pl, wt - py * wsy)
+                        lo, hi, r0, r1, r2 = _first_span(scan, li, py, j0, j1, SP, e0, e1, e2)
+                        while lo <= hi:
+                            span = (li, lo - x0, hi - x0)
+                            if ortho:
+                                nfrag += _count_row(span, cols, pl, zrow, zr, True)
+                            else:
+                                nfrag += _count_row(span, cols, pl, zrow, zr, False)
+                            lo, hi = _next_span(scan, hi, j1, e0, e1, e2, r0, r1, r2)
+                fcount[tile] = nfrag
+
+
+@kernel(parallel=True)
+def _tiles_fragments(fe, sc, foff, fpix, ftri, fbary, fdepth):
+    """rasterize_fragments, second pass: write the fragments of each tile from foff[tile] on, by
+    triangle, piece and pixel (row-major)."""
+    vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, _normals, _rowbits = fe
+    _zbuf, _tbuf, spbuf, _ibuf, _lbuf, nslot = sc
+    W, H, ortho, far, wl, wt, wsx, wsy = _view_window(vp)
+    for slot in prange(nslot):
+        SP = spbuf[numba.get_thread_id()]
+        for ty in range(slot, nty, nslot):
+            for tx in range(ntx):
+                tile = ty * ntx + tx
+                rect = _tile_rect(ty, tx, T, W, H)
+                y0, _y1, x0, _x1 = rect
+                w = foff[tile]
+                for bi in range(start[tile], start[tile + 1]):
+                    ct = bins[bi]
+                    t = ct >> 1
+                    prect = _piece_rect(box, ct, rect)
+                    i0, i1, j0, j1 = prect
+                    if i0 > i1 or j0 > j1:
+                        continue
+                    zlo, zhi = _depth_bounds(zinfo, ct, ortho, near)
+                    pl = _plane(planes, t)
+                    q = _dual(planes, t)
+                    e0, e1, e2, scan, nrows = _piece_rows(edges, zinfo, ct, prect, y0, x0, W, H, SP, False)
+                    for rr in range(nrows):
+                        li = SP[_SP_RW, rr]
+                        i = li + y0
+                        py = i + 0.5
+                        yw = wt - py * wsy
+                        zrow = _row_depth(ortho, pl, yw)
+                        lo, hi, r0, r1, r2 = _first_span(scan, li, py, j0, j1, SP, e0, e1, e2)
+                        while lo <= hi:
+                            for j in range(lo, hi + 1):
+                                xw = wl + (j + 0.5) * wsx
+                                z = _clamp_depth(_frag_depth(ortho, pl, zrow, xw), zlo, zhi)
+                                if z > far:
+                                    continue
+                                b1, b2 = _bary(q, xw, yw, z, ortho)
+                                fpix[w] = i * W + j
+                                ftri[w] = t
+                                fbary[w, 0] = b1
+                                fbary[w, 1] = b2
+                                fdepth[w] = z
+                                w += 1
+                            lo, hi = _next_span(scan, hi, j1, e0, e1, e2, r0, r1, r2)
+
+
+def _make_min_blend_kernel(prog):
+    """rasterize_min_blend's tile kernel for fragment program ``prog`` (a constant of the closure:
+    each kernel compiles only its own program, which inlines into the vector loops)."""
 
     @kernel(parallel=True)
-    def tiles(
-        vp,
-        near,
-        T,
-        ntx,
-        nty,
-        bstart,
-        bins,
-        CB,
-        CE,
-        CZ,
-        PL,
-        NW,
-        scratch,
-        tscratch,
-        iscratch,
-        fscratch,
-        xscratch,
-        depth_out,
-        tri_out,
-        pos_out,
-        nrm_out,
-        bary_out,
-        mask_out,
-        fcount,
-        foff,
-        fpix,
-        ftri,
-        fbary,
-        fdepth,
-        program,
-        pparams,
-        cattr,
-        img,
-        blend,
-        bstats,
-        split,
-        cull_discarded,
-        rowbits,
-        use_mask,
-        nslot,
-    ):
-        """mode 0: depth + tri; 1: full G-buffer; 2: count fragments per tile; 3: write fragments;
-        4: run a fragment program per fragment and MIN-blend its value into ``blend`` (bstats[tile] =
-        fragments and kept fragments for triangles below / from ``split``, pieces culled by depth,
-        by value). With ``cull_discarded`` (mode 4), the pieces of a tile whose every fragment lies
-        at or beyond the depth where the program discards (``discard_depth``, max over the tile) are
+    def tiles(fe, sc, mb):
+        """Run the program per fragment and MIN-blend its value into ``mb.out``; ``mb.stats[tile]`` +=
+        (fragments and kept fragments of the triangles below / from ``mb.split``, pieces culled by
+        depth, by value). With ``mb.cull_discarded``, the pieces of a tile whose every fragment lies at
+        or beyond the depth where the program discards (``discard_depth``, max over the tile) are
         skipped, and so are the pieces with a constant attribute whose value bound
-        (``value_lower_bound``) is at least the tile's largest value; the result is the same. With
-        ``use_mask`` (mode 4), only the texels set in ``rowbits`` (bit k of ``rowbits[tile, row]``:
-        column k) are shaded, the others keep their value.
-
-        Per piece and row, the covered columns are one span [lo, hi], found exactly from the three edge
-        functions (:func:`_edge_span`); depth/G-buffer modes then run the depth of the whole tile row
-        (vectorized) and keep the span's columns that pass the depth test. Bins list a tile's pieces in
-        increasing triangle index, so the tie rule (equal depth: smaller index wins) is "strictly less
-        wins"."""
-        W = int(vp[18])
-        H = int(vp[19])
-        ortho = vp[20] != 0.0
-        far = vp[17]
-        wl = vp[12]
-        wt = vp[15]
-        wsx = (vp[13] - vp[12]) / vp[18]  # window units per pixel
-        wsy = (vp[15] - vp[14]) / vp[19]
+        (``value_lower_bound``) is at least the tile's largest value: the output is the same. With a
+        texel mask (``fe.rowbits``), only its texels are shaded, the others keep their value."""
+        vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, _normals, rowbits = fe
+        zbuf, _tbuf, spbuf, ibuf, lbuf, nslot = sc
+        pparams, cattr, img, blend, bstats, split, cull_discarded = mb
+        vw = _view_window(vp)
+        W, H, ortho, far, wl, wt, wsx, wsy = vw
+        use_mask = rowbits.size > 0
         ntiles = ntx * nty
         for slot in prange(nslot):
-            # min-blend: tiles slot, slot + n, ... (its work sits in few tiles); dense modes: tile rows
-            # slot, slot + n, ... (contiguous rows of output keep the memory traffic local)
-            if mode == 4:
-                nk = (ntiles - slot + nslot - 1) // nslot
-            else:
-                nk = (nty - slot + nslot - 1) // nslot * ntx
-            for kt in range(nk):
-                if mode == 4:
-                    tile = slot + kt * nslot
-                else:
-                    tile = (slot + (kt // ntx) * nslot) * ntx + kt % ntx
-                if mode >= 2 and bstart[tile] == bstart[tile + 1]:
-                    continue  # nothing binned here: no fragments, ``blend`` unchanged (modes 2-4)
+            tid = numba.get_thread_id()
+            zb = zbuf[tid]
+            ib = ibuf[tid]
+            SP = spbuf[tid]
+            CM = lbuf[tid]
+            for tile in range(slot, ntiles, nslot):  # tiles dealt round-robin: the work sits in few
+                if start[tile] == start[tile + 1]:
+                    continue  # nothing binned here: ``blend`` unchanged
                 ty = tile // ntx
-                tx = tile - ty * ntx
-                y0 = ty * T
-                x0 = tx * T
-                y1 = min(y0 + T, H) - 1
-                x1 = min(x0 + T, W) - 1
-                tid = numba.get_thread_id()
-                zb = scratch[tid]
-                tb = tscratch[tid]
-                LO = iscratch[tid, 0]
-                HI = iscratch[tid, 1]
-                EX = iscratch[tid, 2]
-                RW = iscratch[tid, 3]
-                RN = iscratch[tid, 4]  # min-blend: texels to shade per row of the tile
-                CM = xscratch[tid]
-                ib = fscratch[tid]
-                if mode <= 1:
-                    for li in range(T):
-                        zr = zb[li]
-                        tr = tb[li]
-                        for k in range(zr.shape[0]):
-                            zr[k] = np.inf
-                            tr[k] = -1
-                nfrag = 0
-                nculled = 0
-                nvculled = 0
-                w = 0
+                rect = _tile_rect(ty, tile - ty * ntx, T, W, H)
+                y0, y1, x0, x1 = rect
+                if not _texels_to_shade(SP, rowbits, tile, use_mask, y1 - y0, x1 - x0):
+                    continue  # no texel to shade: ``blend`` unchanged
+                tthr, smax, cmax = _load_blend_tile(prog, pparams, blend, img, rect, SP, zb, ib)
+                dirty = False  # whether pieces have lowered values since cmax was computed
+                cols = (x0, wl, wsx)
                 na = 0
                 nb = 0
                 ka = 0
                 kb = 0
-                if mode == 3:
-                    w = foff[tile]
-                elif mode == 4:
-                    # the tile's texels: current values, input image, texel mask (``mask``: only these
-                    # texels are shaded) and, over the texels shaded, the bounds of the coarse tests
-                    tthr = -np.inf
-                    smax = -np.inf  # the largest finite input-image value
-                    cmax = -np.inf  # the largest current value (an upper bound once ``dirty``)
-                    # RN[li]: bit k set where texel (li, k) of the tile is to be shaded
-                    if use_mask:
-                        anyb = 0
-                        for li in range(T):
-                            RN[li] = rowbits[tile, li]
-                            anyb |= RN[li]
-                        if anyb == 0:
-                            continue  # no texel to shade: ``blend`` unchanged
-                    else:
-                        for li in range(T):
-                            RN[li] = ((np.int64(1) << (x1 - x0 + 1)) - 1) if li <= y1 - y0 else 0
-                    for i in range(y0, y1 + 1):
-                        li = i - y0
-                        rb = RN[li]
-                        for k in range(x1 - x0 + 1):
-                            bv = np.float64(blend[i, x0 + k])
-                            sv = img[i, x0 + k]
-                            need = ((rb >> k) & 1) != 0
-                            zb[li, k] = bv
-                            ib[li, k] = sv
-                            d = discard_depth(prog, pparams, sv)
-                            # NaN: the program discards there whatever the depth
-                            tthr = d if (need and d > tthr) else tthr
-                            smax = sv if (need and sv > smax and sv < np.inf) else smax
-                            cmax = bv if (need and bv > cmax) else cmax
-                    dirty = False
-                for bi in range(bstart[tile], bstart[tile + 1]):
+                nculled = 0
+                nvculled = 0
+                for bi in range(start[tile], start[tile + 1]):
                     ct = bins[bi]
                     t = ct >> 1
-                    i0 = max(CB[ct, 0], y0)
-                    i1 = min(CB[ct, 1], y1)
-                    j0 = max(CB[ct, 2], x0)
-                    j1 = min(CB[ct, 3], x1)
+                    prect = _piece_rect(box, ct, rect)
+                    i0, i1, j0, j1 = prect
                     if i0 > i1 or j0 > j1:
                         continue
-                    if mode == 4 and use_mask and not _rect_has_bits(RN, i0 - y0, i1 - y0, j0 - x0, j1 - x0):
+                    if use_mask and not _rect_has_bits(SP, i0 - y0, i1 - y0, j0 - x0, j1 - x0):
                         continue  # no texel to shade in the piece's rectangle of the tile
-                    # sanity bounds for the plane depth of this piece's pixels: the snapped coverage may
-                    # extrapolate the plane a fraction of a pixel beyond the true triangle, which near the
-                    # plane's horizon or for edge-on triangles can give huge, negative or NaN depths
-                    zmin = CZ[ct, 0]
-                    zmax = CZ[ct, 1]
-                    if ortho:
-                        zlo = zmin - (zmax - zmin) - 1e-9 * (abs(zmin) + abs(zmax))
-                        zhi = zmax + (zmax - zmin) + 1e-9 * (abs(zmin) + abs(zmax))
-                    else:
-                        zlo = 0.5 * zmin
-                        zhi = 2.0 * zmax
-                    if zlo < near:
-                        zlo = near
-                    pnx = PL[t, 0]
-                    pny = PL[t, 1]
-                    pnz = PL[t, 2]
-                    pd = PL[t, 3]
-                    q4 = PL[t, 4]
-                    q5 = PL[t, 5]
-                    q6 = PL[t, 6]
-                    q7 = PL[t, 7]
-                    q8 = PL[t, 8]
-                    q9 = PL[t, 9]
-                    q10 = PL[t, 10]
-                    q11 = PL[t, 11]
-                    if mode == 4 and cull_discarded:
-                        # hierarchical culling (the equivalent of a GPU's coarse depth test): the nearest
-                        # fragment of the piece in this tile; if the program discards at that depth on
-                        # every pixel of the tile, skip the piece. The depth is evaluated exactly as per
-                        # fragment; its rounding is monotonic in x and in y, so the minimum over the
-                        # pixel centers is at a corner of the rectangle: exact, no margin needed.
-                        zc_min = _rect_min_depth(ortho, pnx, pny, pnz, pd, wl, wt, wsx, wsy, i0, i1, j0, j1)
-                        zc_min = min(max(zc_min, zlo), zhi)
+                    zlo, zhi = _depth_bounds(zinfo, ct, ortho, near)
+                    pl = _plane(planes, t)
+                    ca = (cattr[t, 0], cattr[t, 1], cattr[t, 2])
+                    cconst = (ca[0] == ca[1]) & (ca[0] == ca[2])
+                    if cull_discarded:
+                        # hierarchical culling (a GPU's coarse depth test): the nearest fragment of the
+                        # piece in this tile; if the program discards at that depth on every pixel of
+                        # the tile, skip the piece. The depth is evaluated exactly as per fragment; its
+                        # rounding is monotonic in x and in y, so the minimum over the pixel centers
+                        # is at a corner of the rectangle: exact, no margin needed.
+                        zc_min = min(max(_rect_min_depth(ortho, pl, vw, prect), zlo), zhi)
                         if zc_min >= tthr:
                             nculled += 1
                             continue
                         # the coarse value test (MIN blending): if no fragment of the piece can go
                         # below the tile's largest current value, it can change no texel. Values
                         # only decrease, so cmax is recomputed only after a piece has run.
-                        if cattr[t, 0] == cattr[t, 1] and cattr[t, 0] == cattr[t, 2]:
-                            vb = value_lower_bound(prog, pparams, cattr[t, 0], zc_min, smax)
+                        if cconst:
+                            vb = value_lower_bound(prog, pparams, ca[0], zc_min, smax)
                             if dirty and vb >= cmax - _VALUE_RECOMPUTE:  # recompute only where it may pay
-                                rb = RN[0]
-                                for k in range(T):  # lane-wise maxima first (vectorizes), then across lanes
-                                    CM[k] = zb[0, k] if ((rb >> k) & 1) != 0 else -np.inf
-                                for li in range(1, y1 - y0 + 1):
-                                    rb = RN[li]
-                                    for k in range(T):
-                                        c = zb[li, k] if ((rb >> k) & 1) != 0 else -np.inf
-                                        CM[k] = c if c > CM[k] else CM[k]
-                                cmax = CM[0]
-                                for k in range(1, T):
-                                    cmax = CM[k] if CM[k] > cmax else cmax
+                                cmax = _tile_max(zb, SP, CM, y1 - y0)
                                 dirty = False
                             if vb >= cmax:
                                 nvculled += 1
                                 continue
-                    ax0 = CE[ct, 0, 0]
-                    ay0 = CE[ct, 0, 1]
-                    dx0 = CE[ct, 0, 2]
-                    dy0 = CE[ct, 0, 3]
-                    sg0 = CE[ct, 0, 4]
-                    in0 = CE[ct, 0, 5] != 0.0
-                    ax1 = CE[ct, 1, 0]
-                    ay1 = CE[ct, 1, 1]
-                    dx1 = CE[ct, 1, 2]
-                    dy1 = CE[ct, 1, 3]
-                    sg1 = CE[ct, 1, 4]
-                    in1 = CE[ct, 1, 5] != 0.0
-                    ax2 = CE[ct, 2, 0]
-                    ay2 = CE[ct, 2, 1]
-                    dx2 = CE[ct, 2, 2]
-                    dy2 = CE[ct, 2, 3]
-                    sg2 = CE[ct, 2, 4]
-                    in2 = CE[ct, 2, 5] != 0.0
-                    # conservative whole-rectangle tests (edge functions are affine: extremes at corners)
-                    full = False
-                    if (i1 - i0 + 1) * (j1 - j0 + 1) > 16:
-                        reject, full = _rect_edge_test(CE, ct, i0, i1, j0, j1, W + 0.0, H + 0.0)
-                        if reject:
-                            continue
-                    robust = CZ[ct, 2] != 0.0
-                    iv0 = CE[ct, 0, 6]
-                    c00 = CE[ct, 0, 7]
-                    M0 = CE[ct, 0, 8]
-                    k0 = CE[ct, 0, 9]
-                    iv1 = CE[ct, 1, 6]
-                    c01 = CE[ct, 1, 7]
-                    M1 = CE[ct, 1, 8]
-                    k1 = CE[ct, 1, 9]
-                    iv2 = CE[ct, 2, 6]
-                    c02 = CE[ct, 2, 7]
-                    M2 = CE[ct, 2, 8]
-                    k2 = CE[ct, 2, 9]
-                    if robust and not full:
-                        # the spans of all the tile's rows at once (vectorizes)
-                        for k in range(LO.shape[0]):
-                            py = (y0 + k) + 0.5
-                            lo, hi, slow = _fast_bound(
-                                j0, j1, False, py, j0, j1, ax0, ay0, dx0, dy0, sg0, in0, iv0, c00, M0, k0
-                            )
-                            lo, hi, slow = _fast_bound(
-                                lo, hi, slow, py, j0, j1, ax1, ay1, dx1, dy1, sg1, in1, iv1, c01, M1, k1
-                            )
-                            lo, hi, slow = _fast_bound(
-                                lo, hi, slow, py, j0, j1, ax2, ay2, dx2, dy2, sg2, in2, iv2, c02, M2, k2
-                            )
-                            LO[k] = lo
-                            HI[k] = hi
-                            EX[k] = slow
-                        # the rows left to visit: those with a span (min-blend: one holding a texel to
-                        # shade) or a slow search (branch-free compaction; a thin piece's box has many
-                        # empty rows, whose skipping branch the CPU cannot predict)
-                        nrows = 0
-                        for k in range(i0 - y0, i1 - y0 + 1):
-                            RW[nrows] = k
-                            if mode == 4:
-                                width = max(HI[k] - LO[k] + 1, 0)
-                                hit = ((RN[k] >> (LO[k] - x0)) & ((np.int64(1) << width) - 1)) != 0
-                                nrows += hit | (EX[k] != 0)
-                            else:
-                                nrows += (LO[k] <= HI[k]) | (EX[k] != 0)
-                        if nrows == 0:
-                            continue
-                    else:
-                        nrows = i1 - i0 + 1
-                    r0 = 0.0
-                    r1 = 0.0
-                    r2 = 0.0
-                    ca0 = 0.0
-                    ca1 = 0.0
-                    ca2 = 0.0
+                    e0, e1, e2, scan, nrows = _piece_rows(edges, zinfo, ct, prect, y0, x0, W, H, SP, True)
+                    if nrows == 0:
+                        continue
+                    dirty = True  # this piece will lower texels: the tile's largest value may fall
+                    q = _dual(planes, t)
+                    zr = (zlo, zhi, far)
                     side_a = t < split
-                    cconst = False
-                    if mode == 4:
-                        dirty = True  # this piece will lower texels: the tile's largest value may fall
-                        ca0 = cattr[t, 0]
-                        ca1 = cattr[t, 1]
-                        ca2 = cattr[t, 2]
-                        cconst = (ca0 == ca1) & (ca0 == ca2)
                     for rr in range(nrows):
-                        if robust and not full:
-                            li = RW[rr]
-                            i = li + y0
-                        else:
-                            i = i0 + rr
-                            li = i - y0
-                        if mode == 4 and use_mask and RN[li] == 0:
+                        li = SP[_SP_RW, rr]
+                        i = li + y0
+                        rn = SP[_SP_RN, li]
+                        if use_mask and rn == 0:
                             continue  # no texel of this row is shaded
                         py = i + 0.5
                         yw = wt - py * wsy
-                        if ortho:
-                            zrow = pd - pny * yw
-                        else:
-                            zrow = pny * yw + pnz
-                        if full:
-                            lo = j0
-                            hi = j1
-                        elif robust:
-                            lo = LO[li]
-                            hi = HI[li]
-                            if EX[li] != 0:
-                                r0 = dx0 * (py - ay0)
-                                r1 = dx1 * (py - ay1)
-                                r2 = dx2 * (py - ay2)
-                                lo, hi = _edge_span(j0, j1, j0, j1, r0, ax0, dy0, sg0, in0, iv0, c00, M0, k0)
-                                lo, hi = _edge_span(lo, hi, j0, j1, r1, ax1, dy1, sg1, in1, iv1, c01, M1, k1)
-                                lo, hi = _edge_span(lo, hi, j0, j1, r2, ax2, dy2, sg2, in2, iv2, c02, M2, k2)
-                            if lo > hi:
-                                continue
-                        else:
-                            r0 = dx0 * (py - ay0)
-                            r1 = dx1 * (py - ay1)
-                            r2 = dx2 * (py - ay2)
-                            lo, hi = _scan_run(
-                                j0, j1, r0, ax0, dy0, sg0, in0, r1, ax1, dy1, sg1, in1, r2, ax2, dy2, sg2, in2
-                            )
+                        zrow = _row_depth(ortho, pl, yw)
+                        lo, hi, r0, r1, r2 = _first_span(scan, li, py, j0, j1, SP, e0, e1, e2)
                         while lo <= hi:
-                            if mode <= 2:
-                                # the whole tile row at once (vectorizes), masked to the span
-                                klo = lo - x0
-                                khi = hi - x0
-                                if mode == 2:
-                                    cnt = 0
-                                    if ortho:
-                                        for k in range(T):
-                                            xw = wl + ((x0 + k) + 0.5) * wsx
-                                            z = (zrow - pnx * xw) / pnz
-                                            if not (z >= zlo):
-                                                z = zlo
-                                            elif z > zhi:
-                                                z = zhi
-                                            cnt += (k >= klo) & (k <= khi) & (not (z > far))
-                                    else:
-                                        for k in range(T):
-                                            xw = wl + ((x0 + k) + 0.5) * wsx
-                                            z = pd / (pnx * xw + zrow)
-                                            if not (z >= zlo):
-                                                z = zlo
-                                            elif z > zhi:
-                                                z = zhi
-                                            cnt += (k >= klo) & (k <= khi) & (not (z > far))
-                                    nfrag += cnt
-                                elif ortho:
-                                    for k in range(T):
-                                        xw = wl + ((x0 + k) + 0.5) * wsx
-                                        z = (zrow - pnx * xw) / pnz
-                                        if not (z >= zlo):
-                                            z = zlo
-                                        elif z > zhi:
-                                            z = zhi
-                                        zc = zb[li, k]
-                                        take = (k >= klo) & (k <= khi) & (not (z > far)) & (z < zc)
-                                        zb[li, k] = z if take else zc
-                                        tb[li, k] = t if take else tb[li, k]
-                                else:
-                                    for k in range(T):
-                                        xw = wl + ((x0 + k) + 0.5) * wsx
-                                        z = pd / (pnx * xw + zrow)
-                                        if not (z >= zlo):
-                                            z = zlo
-                                        elif z > zhi:
-                                            z = zhi
-                                        zc = zb[li, k]
-                                        take = (k >= klo) & (k <= khi) & (not (z > far)) & (z < zc)
-                                        zb[li, k] = z if take else zc
-                                        tb[li, k] = t if take else tb[li, k]
-                            elif mode == 4:
-                                # the whole tile row at once, masked to the span (a branch-free loop of T
-                                # columns: it vectorizes; cheaper than pixel by pixel even for short spans)
-                                klo = lo - x0
-                                khi = hi - x0
-                                rn = RN[li]
-                                if use_mask and ((rn >> klo) & ((np.int64(1) << (khi - klo + 1)) - 1)) == 0:
-                                    if full or robust:
-                                        break
-                                    lo, hi = _scan_run(
-                                        hi + 1,
-                                        j1,
-                                        r0,
-                                        ax0,
-                                        dy0,
-                                        sg0,
-                                        in0,
-                                        r1,
-                                        ax1,
-                                        dy1,
-                                        sg1,
-                                        in1,
-                                        r2,
-                                        ax2,
-                                        dy2,
-                                        sg2,
-                                        in2,
-                                    )
-                                    continue  # no texel of the span to shade
-                                cin = 0  # fragments and kept fragments of the row (reductions in the vector loop)
-                                ckp = 0
+                            klo = lo - x0
+                            khi = hi - x0
+                            if not use_mask or ((rn >> klo) & ((np.int64(1) << (khi - klo + 1)) - 1)) != 0:
+                                span = (li, klo, khi)
                                 if ortho:
-                                    for k in range(T):
-                                        xw = wl + ((x0 + k) + 0.5) * wsx
-                                        z = (zrow - pnx * xw) / pnz
-                                        z = z if z >= zlo else zlo
-                                        z = zhi if z > zhi else z
-                                        b1, b2 = _bary_c(q4, q5, q6, q7, q8, q9, q10, q11, xw, yw, z, True)
-                                        a = (1.0 - b1 - b2) * ca0 + b1 * ca1 + b2 * ca2
-                                        val = run_program(prog, pparams, a, ib[li, k], z)
-                                        inside = (k >= klo) & (k <= khi) & (not (z > far)) & (((rn >> k) & 1) != 0)
-                                        kept = inside & (val == val)
-                                        cin += inside
-                                        ckp += kept
-                                        zc = zb[li, k]
-                                        zb[li, k] = val if (kept & (val < zc)) else zc
+                                    cin, ckp = _blend_row(
+                                        prog, pparams, zb, ib, rn, span, cols, yw, zrow, pl, q, ca, zr, True, False
+                                    )
                                 elif cconst:
-                                    # the same attribute at the three corners (e.g. a cone's Z_v): no
-                                    # barycentrics needed
-                                    for k in range(T):
-                                        xw = wl + ((x0 + k) + 0.5) * wsx
-                                        z = pd / (pnx * xw + zrow)
-                                        z = z if z >= zlo else zlo
-                                        z = zhi if z > zhi else z
-                                        val = run_program(prog, pparams, ca0, ib[li, k], z)
-                                        inside = (k >= klo) & (k <= khi) & (not (z > far)) & (((rn >> k) & 1) != 0)
-                                        kept = inside & (val == val)
-                                        cin += inside
-                                        ckp += kept
-                                        zc = zb[li, k]
-                                        zb[li, k] = val if (kept & (val < zc)) else zc
+                                    cin, ckp = _blend_row(
+                                        prog, pparams, zb, ib, rn, span, cols, yw, zrow, pl, q, ca, zr, False, True
+                                    )
                                 else:
-                                    for k in range(T):
-                                        xw = wl + ((x0 + k) + 0.5) * wsx
-                                        z = pd / (pnx * xw + zrow)
-                                        z = z if z >= zlo else zlo
-                                        z = zhi if z > zhi else z
-                                        b1, b2 = _bary_c(q4, q5, q6, q7, q8, q9, q10, q11, xw, yw, z, False)
-                                        a = (1.0 - b1 - b2) * ca0 + b1 * ca1 + b2 * ca2
-                                        val = run_program(prog, pparams, a, ib[li, k], z)
-                                        inside = (k >= klo) & (k <= khi) & (not (z > far)) & (((rn >> k) & 1) != 0)
-                                        kept = inside & (val == val)
-                                        cin += inside
-                                        ckp += kept
-                                        zc = zb[li, k]
-                                        zb[li, k] = val if (kept & (val < zc)) else zc
+                                    cin, ckp = _blend_row(
+                                        prog, pparams, zb, ib, rn, span, cols, yw, zrow, pl, q, ca, zr, False, False
+                                    )
                                 if side_a:
                                     na += cin
                                     ka += ckp
                                 else:
                                     nb += cin
                                     kb += ckp
-                            else:
-                                for j in range(lo, hi + 1):
-                                    xw = wl + (j + 0.5) * wsx
-                                    if ortho:
-                                        z = (zrow - pnx * xw) / pnz
-                                    else:
-                                        z = pd / (pnx * xw + zrow)
-                                    if not (z >= zlo):  # also catches NaN (edge-on planes)
-                                        z = zlo
-                                    elif z > zhi:
-                                        z = zhi
-                                    if z > far:
-                                        continue
-                                    # mode 3: write the fragment
-                                    b1, b2 = _bary_c(q4, q5, q6, q7, q8, q9, q10, q11, xw, yw, z, ortho)
-                                    fpix[w] = i * W + j
-                                    ftri[w] = t
-                                    fbary[w, 0] = b1
-                                    fbary[w, 1] = b2
-                                    fdepth[w] = z
-                                    w += 1
-                            if full or robust:
-                                break
-                            lo, hi = _scan_run(
-                                hi + 1, j1, r0, ax0, dy0, sg0, in0, r1, ax1, dy1, sg1, in1, r2, ax2, dy2, sg2, in2
-                            )
-                if mode == 0:
-                    for i in range(y0, y1 + 1):
-                        zr = zb[i - y0]
-                        tr = tb[i - y0]
-                        drow = depth_out[i, x0 : x1 + 1]
-                        trow = tri_out[i, x0 : x1 + 1]
-                        for k in range(drow.shape[0]):
-                            drow[k] = zr[k]
-                            trow[k] = tr[k]
-                elif mode == 1:
-                    # G-buffer of the tile from the winners (branch-free per pixel, so that it vectorizes)
-                    o0 = vp[0]
-                    o1 = vp[1]
-                    o2 = vp[2]
-                    rx = vp[3]
-                    ry = vp[4]
-                    rz = vp[5]
-                    ux = vp[6]
-                    uy = vp[7]
-                    uz = vp[8]
-                    fx = vp[9]
-                    fy = vp[10]
-                    fz = vp[11]
-                    for i in range(y0, y1 + 1):
-                        yw = wt - (i + 0.5) * wsy
-                        zr = zb[i - y0]
-                        tr = tb[i - y0]
-                        trow = tri_out[i, x0 : x1 + 1]
-                        drow = depth_out[i, x0 : x1 + 1]
-                        mrow = mask_out[i, x0 : x1 + 1]
-                        prow = pos_out[i, x0 : x1 + 1]
-                        nrow = nrm_out[i, x0 : x1 + 1]
-                        brow = bary_out[i, x0 : x1 + 1]
-                        if ortho:
-                            for k in range(drow.shape[0]):
-                                t = tr[k]
-                                hit = t >= 0
-                                tt = max(t, 0)  # PL, NW have a row 0 (read, then discarded, where no hit)
-                                z = zr[k]  # +inf where no hit
-                                xw = wl + ((x0 + k) + 0.5) * wsx
-                                b1, b2 = _bary_c(
-                                    PL[tt, 4],
-                                    PL[tt, 5],
-                                    PL[tt, 6],
-                                    PL[tt, 7],
-                                    PL[tt, 8],
-                                    PL[tt, 9],
-                                    PL[tt, 10],
-                                    PL[tt, 11],
-                                    xw,
-                                    yw,
-                                    z,
-                                    True,
-                                )
-                                vx = xw
-                                vy = yw
-                                trow[k] = t
-                                drow[k] = z
-                                mrow[k] = hit
-                                prow[k, 0] = (o0 + vx * rx + vy * ux + z * fx) if hit else np.nan
-                                prow[k, 1] = (o1 + vx * ry + vy * uy + z * fy) if hit else np.nan
-                                prow[k, 2] = (o2 + vx * rz + vy * uz + z * fz) if hit else np.nan
-                                nrow[k, 0] = NW[tt, 0] if hit else np.nan
-                                nrow[k, 1] = NW[tt, 1] if hit else np.nan
-                                nrow[k, 2] = NW[tt, 2] if hit else np.nan
-                                brow[k, 0] = b1 if hit else np.nan
-                                brow[k, 1] = b2 if hit else np.nan
-                        else:
-                            for k in range(drow.shape[0]):
-                                t = tr[k]
-                                hit = t >= 0
-                                tt = max(t, 0)  # PL, NW have a row 0 (read, then discarded, where no hit)
-                                z = zr[k]  # +inf where no hit
-                                xw = wl + ((x0 + k) + 0.5) * wsx
-                                b1, b2 = _bary_c(
-                                    PL[tt, 4],
-                                    PL[tt, 5],
-                                    PL[tt, 6],
-                                    PL[tt, 7],
-                                    PL[tt, 8],
-                                    PL[tt, 9],
-                                    PL[tt, 10],
-                                    PL[tt, 11],
-                                    xw,
-                                    yw,
-                                    z,
-                                    False,
-                                )
-                                vx = xw * z
-                                vy = yw * z
-                                trow[k] = t
-                                drow[k] = z
-                                mrow[k] = hit
-                                prow[k, 0] = (o0 + vx * rx + vy * ux + z * fx) if hit else np.nan
-                                prow[k, 1] = (o1 + vx * ry + vy * uy + z * fy) if hit else np.nan
-                                prow[k, 2] = (o2 + vx * rz + vy * uz + z * fz) if hit else np.nan
-                                nrow[k, 0] = NW[tt, 0] if hit else np.nan
-                                nrow[k, 1] = NW[tt, 1] if hit else np.nan
-                                nrow[k, 2] = NW[tt, 2] if hit else np.nan
-                                brow[k, 0] = b1 if hit else np.nan
-                                brow[k, 1] = b2 if hit else np.nan
-                elif mode == 2:
-                    fcount[tile] = nfrag
-                elif mode == 4:
-                    bstats[tile, 0] += na
-                    bstats[tile, 1] += nb
-                    bstats[tile, 2] += ka
-                    bstats[tile, 3] += kb
-                    bstats[tile, 4] += nculled
-                    bstats[tile, 5] += nvculled
-                    for i in range(y0, y1 + 1):
-                        zr = zb[i - y0]
-                        brow = blend[i, x0 : x1 + 1]
-                        for k in range(brow.shape[0]):
-                            brow[k] = zr[k]
+                            lo, hi = _next_span(scan, hi, j1, e0, e1, e2, r0, r1, r2)
+                bstats[tile, 0] += na
+                bstats[tile, 1] += nb
+                bstats[tile, 2] += ka
+                bstats[tile, 3] += kb
+                bstats[tile, 4] += nculled
+                bstats[tile, 5] += nvculled
+                for i in range(y0, y1 + 1):
+                    brow = blend[i, x0 : x1 + 1]
+                    for k in range(brow.shape[0]):
+                        brow[k] = zb[i - y0, k]
 
     return tiles
 
 
-_KERNELS = {(m, 0): _make_tiles_kernel(m) for m in range(4)}  # indexed by (mode, program)
-_KERNELS.update({(_M_MINBLEND, p): _make_tiles_kernel(_M_MINBLEND, p) for p in PROGRAMS})
+_MIN_BLEND_KERNELS = {p: _make_min_blend_kernel(p) for p in PROGRAMS}
 
 
 # ----------------------------------------------------------------------------------------------
@@ -1331,16 +1407,61 @@ def _prepare(view, vertices, faces, cull):
     return vp, W, H, verts, fcs, code, near
 
 
-def _front_end(vp, W, H, verts, fcs, code, near, mask=None):
-    """setup + binning: returns the arrays the tile kernel reads. ``mask`` (H,W) uint8: bin a piece
-    only to the tiles where its bounding box holds a set texel (min-blend's texel mask)."""
+class FrontEnd(NamedTuple):
+    """What the front end (setup + binning, :func:`_front_end`) hands the tile kernels."""
+
+    vp: np.ndarray  #: View.params() (indexed with the VP_* constants)
+    tile: int  #: tile size T in pixels (= TILE: the vector row loops run over TILE columns)
+    ntx: int  #: tiles per row
+    nty: int  #: rows of tiles
+    near: float  #: the near plane (perspective: at least _PERSPECTIVE_MIN_NEAR)
+    start: np.ndarray  #: (ntiles + 1,) int64: tile k's pieces are bins[start[k]:start[k + 1]]
+    bins: np.ndarray  #: int32 piece slots, per tile in increasing triangle index
+    box: np.ndarray  #: (2F, 4) int32 pieces' pixel boxes, columns BOX_*
+    edges: np.ndarray  #: (2F, 3, E_WIDTH) float64 pieces' edges, columns E_*
+    zinfo: np.ndarray  #: (2F, 3) float64 pieces' depth ranges and robustness, columns Z_*
+    planes: np.ndarray  #: (max(F, 1), PL_WIDTH) float64 triangles' planes and dual vectors, columns PL_*
+    normals: np.ndarray  #: (max(F, 1), 3) float32 triangles' unit world normals
+    rowbits: np.ndarray  #: (ntiles, T) int64 texel-mask bits per tile row (min-blend), or empty
+
+
+class _Scratch(NamedTuple):
+    """Per-thread scratch of the tile kernels (first index: numba.get_thread_id())."""
+
+    depth: np.ndarray  #: (n, T, T) float64: the tile's nearest depths / min-blend values
+    tri: np.ndarray  #: (n, T, T) int32: the tile's nearest triangles
+    spans: np.ndarray  #: (n, 5, T) int64: per tile row, the rows _SP_* (spans, rows to visit, texels)
+    image: np.ndarray  #: (n, T, T) float32: the tile's min-blend input image
+    lanes: np.ndarray  #: (n, T) float64: min-blend lane maxima
+    nslot: int  #: slots of the kernels' prange: one per thread
+
+
+class _Blend(NamedTuple):
+    """The inputs and outputs of a min-blend pass (see :func:`rasterize_min_blend`)."""
+
+    params: np.ndarray  #: float64 uniforms of the program
+    cattr: np.ndarray  #: (F, 3) float64 corner attributes
+    image: np.ndarray  #: (H, W) float32 input image
+    out: np.ndarray  #: (H, W) float32 values, MIN-blended in place
+    stats: np.ndarray  #: (ntiles, 6) int64 counts per tile
+    split: int  #: triangles below it count as "a", the others as "b"
+    cull_discarded: bool  #: hierarchical culling
+
+
+_E2I64 = np.empty((0, 0), dtype=np.int64)
+_E1U = np.empty(0, dtype=np.uint8)
+
+
+def _front_end(vp, W, H, verts, fcs, code, near, mask=None) -> FrontEnd:
+    """setup + binning: the arrays the tile kernels read. ``mask`` (H,W) uint8: bin a piece only
+    to the tiles where its bounding box holds a set texel (min-blend's texel mask)."""
     F = len(fcs)
     NC = np.empty(F, dtype=np.int32)
-    CB = np.empty((2 * F, 4), dtype=np.int32)
-    CE = np.empty((2 * F, 3, _CE_W), dtype=np.float64)
-    CZ = np.empty((2 * F, 3), dtype=np.float64)
-    PL = np.zeros((max(F, 1), 12), dtype=np.float64)  # row 0 exists (the G-buffer pass reads it)
-    NW = np.zeros((max(F, 1), 3), dtype=np.float32)
+    box = np.empty((2 * F, 4), dtype=np.int32)
+    edges = np.empty((2 * F, 3, E_WIDTH), dtype=np.float64)
+    zinfo = np.empty((2 * F, 3), dtype=np.float64)
+    planes = np.zeros((max(F, 1), PL_WIDTH), dtype=np.float64)  # row 0 exists (the G-buffer pass reads it)
+    normals = np.zeros((max(F, 1), 3), dtype=np.float32)
     T = TILE
     ntx = (W + T - 1) // T
     nty = (H + T - 1) // T
@@ -1348,7 +1469,7 @@ def _front_end(vp, W, H, verts, fcs, code, near, mask=None):
     nchunk = int(min(max(1, F // 1024), 4 * nthreads))
     chunk = (F + nchunk - 1) // nchunk if F else 1
     cnt = np.empty((nchunk, ntx * nty), dtype=np.int64)
-    bstart = np.empty(ntx * nty + 1, dtype=np.int64)
+    start = np.empty(ntx * nty + 1, dtype=np.int64)
     if mask is not None:
         rowbits = np.empty((ntx * nty, T), dtype=np.int64)
         tile_any = np.empty(ntx * nty, dtype=np.uint8)
@@ -1357,108 +1478,25 @@ def _front_end(vp, W, H, verts, fcs, code, near, mask=None):
         rowbits = _E2I64
         tile_any = _E1U
     use = mask is not None
-    _setup_count(verts, fcs, vp, near, code, NC, CB, CE, CZ, PL, NW, T, ntx, chunk, cnt, nthreads, tile_any, use)
-    _bin_offsets(cnt, bstart)
-    bins = np.empty(int(bstart[-1]), dtype=np.int32)
-    _bin_fill(NC, CB, T, ntx, chunk, cnt, bins, nthreads, tile_any, use)
-    return T, ntx, nty, bstart, bins, CB, CE, CZ, PL, NW, near, rowbits
+    _setup_count(
+        verts, fcs, vp, near, code, NC, box, edges, zinfo, planes, normals, T, ntx, chunk, cnt, nthreads, tile_any, use
+    )
+    _bin_offsets(cnt, start)
+    bins = np.empty(int(start[-1]), dtype=np.int32)
+    _bin_fill(NC, box, T, ntx, chunk, cnt, bins, nthreads, tile_any, use)
+    return FrontEnd(vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, normals, rowbits)
 
 
-_E1 = np.empty(0, dtype=np.int64)
-_E1I = np.empty(0, dtype=np.int32)
-_E1F = np.empty(0, dtype=np.float32)
-_E2F = np.empty((0, 0), dtype=np.float32)
-_E2I = np.empty((0, 0), dtype=np.int32)
-_E2B = np.empty((0, 0), dtype=np.bool_)
-_E2I64 = np.empty((0, 0), dtype=np.int64)
-_E1U = np.empty(0, dtype=np.uint8)
-_E3F = np.empty((0, 0, 3), dtype=np.float32)
-_EFB = np.empty((0, 2), dtype=np.float32)
-
-
-_EP = np.empty(0, dtype=np.float64)
-_ECA = np.empty((0, 3), dtype=np.float64)
-_EBS = np.empty((0, 5), dtype=np.int64)
-
-
-def _run_tiles(
-    mode,
-    vp,
-    fe,
-    depth=_E2F,
-    tri=_E2I,
-    pos=_E3F,
-    nrm=_E3F,
-    bary=_E3F,
-    mask=_E2B,
-    fcount=_E1,
-    foff=_E1,
-    fpix=_E1,
-    ftri=_E1I,
-    fbary=_EFB,
-    fdepth=_E1F,
-    program=0,
-    pparams=_EP,
-    cattr=_ECA,
-    img=_E2F,
-    blend=_E2F,
-    bstats=_EBS,
-    split=0,
-    cull_discarded=False,
-):
-    T, ntx, nty, bstart, bins, CB, CE, CZ, PL, NW, near, rowbits = fe
-    nthreads = numba.config.NUMBA_NUM_THREADS
-    scratch = np.empty((nthreads, T, T), dtype=np.float64)
-    tscratch = np.empty((nthreads, T, T), dtype=np.int32)
-    iscratch = np.empty((nthreads, 5, T), dtype=np.int64)
-    fscratch = np.zeros((nthreads, T, T), dtype=np.float32)
-    xscratch = np.zeros((nthreads, T), dtype=np.float64)
-    # load balance: Numba splits a prange into equal contiguous parts, one per thread, whatever the
-    # chunk size, while the work of a tile kernel is concentrated where the geometry is. So the
-    # prange runs over one slot per thread and slot p takes every n-th tile (min-blend) or tile row
-    # (dense modes) from p on: every thread gets a share of every busy region.
-    nslot = numba.get_num_threads()
-    _KERNELS[(mode, program if mode == _M_MINBLEND else 0)](
-        vp,
-        near,
-        T,
-        ntx,
-        nty,
-        bstart,
-        bins,
-        CB,
-        CE,
-        CZ,
-        PL,
-        NW,
-        scratch,
-        tscratch,
-        iscratch,
-        fscratch,
-        xscratch,
-        depth,
-        tri,
-        pos,
-        nrm,
-        bary,
-        mask,
-        fcount,
-        foff,
-        fpix,
-        ftri,
-        fbary,
-        fdepth,
-        program,
-        pparams,
-        cattr,
-        img,
-        blend,
-        bstats,
-        split,
-        bool(cull_discarded),
-        rowbits,
-        rowbits.size > 0,
-        int(nslot),
+def _scratch(T) -> _Scratch:
+    """Scratch for every thread Numba may run (thread ids go up to NUMBA_NUM_THREADS - 1)."""
+    n = numba.config.NUMBA_NUM_THREADS
+    return _Scratch(
+        np.empty((n, T, T), dtype=np.float64),
+        np.empty((n, T, T), dtype=np.int32),
+        np.empty((n, 5, T), dtype=np.int64),
+        np.zeros((n, T, T), dtype=np.float32),
+        np.zeros((n, T), dtype=np.float64),
+        int(numba.get_num_threads()),
     )
 
 
@@ -1478,7 +1516,7 @@ def rasterize(view, vertices, faces, cull: str = "none") -> GBuffer:
     nrm = np.empty((H, W, 3), dtype=np.float32)
     bary = np.empty((H, W, 2), dtype=np.float32)
     mask = np.empty((H, W), dtype=np.bool_)
-    _run_tiles(_M_GBUF, vp, fe, depth=depth, tri=tri, pos=pos, nrm=nrm, bary=bary, mask=mask)
+    _tiles_gbuffer(fe, _scratch(fe.tile), (depth, tri, pos, nrm, bary, mask))
     return GBuffer(position=pos, normal=nrm, depth=depth, tri_id=tri, bary=bary, mask=mask)
 
 
@@ -1489,8 +1527,24 @@ def rasterize_depth(view, vertices, faces, cull: str = "none") -> tuple[np.ndarr
     fe = _front_end(vp, W, H, verts, fcs, code, near)
     depth = np.empty((H, W), dtype=np.float32)
     tri = np.empty((H, W), dtype=np.int32)
-    _run_tiles(_M_DEPTH, vp, fe, depth=depth, tri=tri)
+    _tiles_depth(fe, _scratch(fe.tile), depth, tri)
     return depth, tri
+
+
+def _fragments(fe: FrontEnd, W: int, H: int) -> Fragments:
+    """The two fragment passes over a front end: count per tile, then write."""
+    sc = _scratch(fe.tile)
+    fcount = np.empty(fe.ntx * fe.nty, dtype=np.int64)
+    _tiles_count(fe, sc, fcount)
+    foff = np.zeros(len(fcount) + 1, dtype=np.int64)
+    np.cumsum(fcount, out=foff[1:])
+    K = int(foff[-1])
+    fpix = np.empty(K, dtype=np.int64)
+    ftri = np.empty(K, dtype=np.int32)
+    fbary = np.empty((K, 2), dtype=np.float32)
+    fdepth = np.empty(K, dtype=np.float32)
+    _tiles_fragments(fe, sc, foff, fpix, ftri, fbary, fdepth)
+    return Fragments(pixel=fpix, tri=ftri, bary=fbary, depth=fdepth, width=W, height=H)
 
 
 def rasterize_fragments(view, vertices, faces, cull: str = "none") -> Fragments:
@@ -1502,19 +1556,7 @@ def rasterize_fragments(view, vertices, faces, cull: str = "none") -> Fragments:
     a watertight mesh that does not overlap itself in screen space.
     """
     vp, W, H, verts, fcs, code, near = _prepare(view, vertices, faces, cull)
-    fe = _front_end(vp, W, H, verts, fcs, code, near)
-    ntiles = fe[1] * fe[2]
-    fcount = np.zeros(ntiles, dtype=np.int64)  # tiles with no bins are skipped
-    _run_tiles(_M_FCOUNT, vp, fe, fcount=fcount)
-    foff = np.zeros(ntiles + 1, dtype=np.int64)
-    np.cumsum(fcount, out=foff[1:])
-    K = int(foff[-1])
-    fpix = np.empty(K, dtype=np.int64)
-    ftri = np.empty(K, dtype=np.int32)
-    fbary = np.empty((K, 2), dtype=np.float32)
-    fdepth = np.empty(K, dtype=np.float32)
-    _run_tiles(_M_FFILL, vp, fe, fcount=fcount, foff=foff, fpix=fpix, ftri=ftri, fbary=fbary, fdepth=fdepth)
-    return Fragments(pixel=fpix, tri=ftri, bary=fbary, depth=fdepth, width=W, height=H)
+    return _fragments(_front_end(vp, W, H, verts, fcs, code, near), W, H)
 
 
 def rasterize_min_blend(
@@ -1573,21 +1615,11 @@ def rasterize_min_blend(
         )
         if mk.shape != (H, W):
             raise ValueError(f"mask must have shape {(H, W)}, got {mk.shape}")
+    kern = _MIN_BLEND_KERNELS[int(program)]
     fe = _front_end(vp, W, H, verts, fcs, code, near, mk)
-    bstats = np.zeros((fe[1] * fe[2], 6), dtype=np.int64)
-    _run_tiles(
-        _M_MINBLEND,
-        vp,
-        fe,
-        program=int(program),
-        pparams=np.asarray(params, dtype=np.float64),
-        cattr=ca,
-        img=im,
-        blend=out,
-        bstats=bstats,
-        split=int(split),
-        cull_discarded=cull_discarded,
-    )
+    bstats = np.zeros((fe.ntx * fe.nty, 6), dtype=np.int64)
+    mb = _Blend(np.asarray(params, dtype=np.float64), ca, im, out, bstats, int(split), bool(cull_discarded))
+    kern(fe, _scratch(fe.tile), mb)
     tot = bstats.sum(axis=0)
     return {
         "fragments_a": int(tot[0]),

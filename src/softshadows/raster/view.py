@@ -18,6 +18,23 @@ from dataclasses import dataclass
 
 import numpy as np
 
+# The packed view-parameter vector ``View.params()`` that every kernel reads (``vp[VP_...]``):
+# a vector's components are at its index + 0, 1, 2 (x, y, z), e.g. ``vp[VP_FORWARD + 1]``.
+VP_ORIGIN = 0  #: origin (3)
+VP_RIGHT = 3  #: right (3), unit
+VP_UP = 6  #: up (3), unit
+VP_FORWARD = 9  #: forward (3), unit: view depth is the distance along it
+VP_L = 12  #: window left (window units: x/z perspective, x orthographic)
+VP_R = 13  #: window right
+VP_B = 14  #: window bottom
+VP_T = 15  #: window top
+VP_NEAR = 16  #: near plane (view depth)
+VP_FAR = 17  #: far plane (view depth)
+VP_W = 18  #: image width in pixels
+VP_H = 19  #: image height in pixels
+VP_ORTHO = 20  #: 1.0 for an orthographic view, 0.0 for a perspective one
+VP_SIZE = 21  #: length of the vector
+
 
 def _unit(v) -> np.ndarray:
     v = np.asarray(v, dtype=np.float64)
@@ -109,7 +126,8 @@ class View:
         return p @ self.rotation().T
 
     def params(self) -> np.ndarray:
-        """Flat float64 array for kernels: origin(3) right(3) up(3) forward(3) l r b t near far W H ortho."""
+        """Flat float64 array for kernels: origin(3) right(3) up(3) forward(3) l r b t near far W H ortho,
+        indexed with the ``VP_*`` constants of this module."""
         l, r, b, t = self.window
         return np.concatenate(
             [
