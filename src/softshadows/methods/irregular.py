@@ -19,7 +19,7 @@ from numba import prange
 
 from .._jit import kernel
 from ..geometry.silhouette import build_adjacency, facing, find_silhouette
-from ..raster.view import View, light_frame, light_view
+from ..raster.view import VP_B, VP_FORWARD, VP_L, VP_ORIGIN, VP_R, VP_RIGHT, VP_T, VP_UP, View, light_frame, light_view
 from .base import Method, MethodOutput, Param, register
 
 #: a connected occluder component with at most this fraction of boundary edges is a solid (only its
@@ -43,7 +43,7 @@ class SampleGrid:
     owns one contiguous range. ``start[c]:start[c+1]`` are cell c's samples in the sorted arrays.
     """
 
-    vp: np.ndarray  # light view params (window (l, r, b, t) at vp[12:16])
+    vp: np.ndarray  # light view params (window (l, r, b, t) at vp[VP_L:VP_T + 1])
     gx: int
     gy: int
     bins: int  # cells per bin side (B)
@@ -83,14 +83,14 @@ def slice_of(d, dlo, dhi, slices):
 @kernel(parallel=True)
 def _sample_keys(pts, vp, gx, gy, B, nbx, slices, dlo, dhi, near, ix, iy, dist, key):
     n = pts.shape[0]
-    l, r, b, t = vp[12], vp[13], vp[14], vp[15]
+    l, r, b, t = vp[VP_L], vp[VP_R], vp[VP_B], vp[VP_T]
     for k in prange(n):
-        dx = pts[k, 0] - vp[0]
-        dy = pts[k, 1] - vp[1]
-        dz = pts[k, 2] - vp[2]
-        x = dx * vp[3] + dy * vp[4] + dz * vp[5]
-        y = dx * vp[6] + dy * vp[7] + dz * vp[8]
-        z = dx * vp[9] + dy * vp[10] + dz * vp[11]
+        dx = pts[k, 0] - vp[VP_ORIGIN]
+        dy = pts[k, 1] - vp[VP_ORIGIN + 1]
+        dz = pts[k, 2] - vp[VP_ORIGIN + 2]
+        x = dx * vp[VP_RIGHT] + dy * vp[VP_RIGHT + 1] + dz * vp[VP_RIGHT + 2]
+        y = dx * vp[VP_UP] + dy * vp[VP_UP + 1] + dz * vp[VP_UP + 2]
+        z = dx * vp[VP_FORWARD] + dy * vp[VP_FORWARD + 1] + dz * vp[VP_FORWARD + 2]
         d = np.sqrt(dx * dx + dy * dy + dz * dz)
         dist[k] = d
         if not (z > near):
@@ -323,17 +323,17 @@ def counted_faces(flat, center) -> tuple[np.ndarray, np.ndarray]:
 # ---------------------------------------------------------------------------------------------
 @kernel(inline=True)
 def _project(vp, x, y, z):
-    dx, dy, dz = x - vp[0], y - vp[1], z - vp[2]
-    vx = dx * vp[3] + dy * vp[4] + dz * vp[5]
-    vy = dx * vp[6] + dy * vp[7] + dz * vp[8]
-    vz = dx * vp[9] + dy * vp[10] + dz * vp[11]
+    dx, dy, dz = x - vp[VP_ORIGIN], y - vp[VP_ORIGIN + 1], z - vp[VP_ORIGIN + 2]
+    vx = dx * vp[VP_RIGHT] + dy * vp[VP_RIGHT + 1] + dz * vp[VP_RIGHT + 2]
+    vy = dx * vp[VP_UP] + dy * vp[VP_UP + 1] + dz * vp[VP_UP + 2]
+    vz = dx * vp[VP_FORWARD] + dy * vp[VP_FORWARD + 1] + dz * vp[VP_FORWARD + 2]
     return vx / vz, vy / vz, vz
 
 
 @kernel(inline=True)
 def _cell_range(x0, x1, y0, y1, vp, gx, gy):
     """Cells (cx0, cx1, cy0, cy1), inclusive, overlapped by the image-plane box; empty when cx0 > cx1."""
-    l, r, b, t = vp[12], vp[13], vp[14], vp[15]
+    l, r, b, t = vp[VP_L], vp[VP_R], vp[VP_B], vp[VP_T]
     fx0 = np.floor((x0 - l) / (r - l) * gx)
     fx1 = np.floor((x1 - l) / (r - l) * gx)
     fy0 = np.floor((t - y1) / (t - b) * gy)
@@ -795,7 +795,7 @@ def box_corner2(x0, x1, y0, y1):
 
 @kernel(inline=True)
 def _bin_box(vp, gx, gy, B, bx, by):
-    l, r, b, t = vp[12], vp[13], vp[14], vp[15]
+    l, r, b, t = vp[VP_L], vp[VP_R], vp[VP_B], vp[VP_T]
     cw = (r - l) / gx
     ch = (t - b) / gy
     x0 = l + bx * B * cw
@@ -865,7 +865,7 @@ def _fill_quad_bins(qd, radius, dmax, corner2, bin_maxd, per_bin, vp, gx, gy, B,
 
 
 def window_corner2(vp) -> float:
-    l, r, b, t = vp[12:16]
+    l, r, b, t = vp[VP_L : VP_T + 1]
     return float(max(l * l, r * r) + max(b * b, t * t))
 
 
@@ -875,7 +875,9 @@ def build_penumbra_quads(grid: SampleGrid, edges: Edges, light, light_radius: fl
     distance, :func:`quad_half_width`)."""
     shape, _b, _r, _hu, _hv, nrm_l, _u, _v = _light_params(light)
     qd = np.zeros((len(edges), 7))
-    _quad_setup(edges.a, edges.b, grid.vp, grid.vp[0:3].copy(), light_radius, shape, nrm_l, grid.dmax, qd)
+    _quad_setup(
+        edges.a, edges.b, grid.vp, grid.vp[VP_ORIGIN : VP_ORIGIN + 3].copy(), light_radius, shape, nrm_l, grid.dmax, qd
+    )
     return qd
 
 
@@ -1258,7 +1260,7 @@ def _penumbra_kernel(
     sdist,
 ):
     nb = bin_start.shape[0] - 1
-    l, r, b, t = vp[12], vp[13], vp[14], vp[15]
+    l, r, b, t = vp[VP_L], vp[VP_R], vp[VP_B], vp[VP_T]
     cw = (r - l) / gx
     ch = (t - b) / gy
     for slot in prange(nslot):  # bins dealt round-robin: shadowed bins are clustered

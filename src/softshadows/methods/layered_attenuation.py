@@ -26,6 +26,7 @@ from ..errors import SoftShadowsError
 from ..geometry.light_samples import light_sample_points
 from ..raster import View, light_view, rasterize_depth
 from ..raster.kernels import view_project, view_unproject
+from ..raster.view import VP_H, VP_ORIGIN, VP_W
 from .base import Method, MethodOutput, Param, register
 
 
@@ -568,8 +569,8 @@ def lookup_ldi(vp, ldi_depth, ldi_count, ldi_n, inv_samples, pts, nrm, eps_rel, 
     its depth within eps = depth x (eps_rel + slope_eps_rel x tan(theta)); V = that layer's
     attenuation, 0 when none matches. A point outside the LDI's frustum is not shadowed (V = 1)."""
     n = pts.shape[0]
-    W = int(vp[18])
-    H = int(vp[19])
+    W = int(vp[VP_W])
+    H = int(vp[VP_H])
     out = np.empty(n, np.float32)
     for k in prange(n):
         px, py, pz = pts[k, 0], pts[k, 1], pts[k, 2]
@@ -577,7 +578,7 @@ def lookup_ldi(vp, ldi_depth, ldi_count, ldi_n, inv_samples, pts, nrm, eps_rel, 
         if not (z > 0.0) or not (np.isfinite(sx) and np.isfinite(sy)) or sx < 0 or sy < 0 or sx >= W or sy >= H:
             out[k] = 1.0
             continue
-        lx, ly, lz = vp[0] - px, vp[1] - py, vp[2] - pz
+        lx, ly, lz = vp[VP_ORIGIN] - px, vp[VP_ORIGIN + 1] - py, vp[VP_ORIGIN + 2] - pz
         ln = np.sqrt(lx * lx + ly * ly + lz * lz)
         c = abs(nrm[k, 0] * lx + nrm[k, 1] * ly + nrm[k, 2] * lz) / max(ln, 1e-30)
         c = min(max(c, 1e-3), 1.0)

@@ -250,9 +250,9 @@ def penumbra_extents_sphere(patches, rho, z_plane, svp):
     penumbra at every receiver depth. Empty when the patch is not in front of the ball."""
     n = patches.shape[0]
     out = np.empty((n, 4), np.int32)
-    l, r, b, t = svp[12], svp[13], svp[14], svp[15]
-    W = svp[18]
-    H = svp[19]
+    l, r, b, t = svp[VP_L], svp[VP_R], svp[VP_B], svp[VP_T]
+    W = svp[VP_W]
+    H = svp[VP_H]
     dxs = (r - l) / W
     dys = (t - b) / H
     for k in range(n):
@@ -428,7 +428,7 @@ def disk_frames(recv_depth, svp, rho):
     """:func:`_disk_frame` of every SSM texel's receiver point as 11 planes (11,H,W) (contiguous
     along rows, for the vectorized pass); zeros where no receiver."""
     H, W = recv_depth.shape
-    l, r, b, t = svp[12], svp[13], svp[14], svp[15]
+    l, r, b, t = svp[VP_L], svp[VP_R], svp[VP_B], svp[VP_T]
     dxs = (r - l) / W
     dys = (t - b) / H
     out = np.zeros((11, H, W))
