@@ -14,6 +14,7 @@ _MODULES = [
     "penumbra_map",
     "soft_shadow_map",
     "occlusion_textures",
+    "coherent_raytrace",
 ]
 _loaded = False
 
