@@ -110,7 +110,8 @@ def test_coherence_changes_v_by_at_most_a_small_tolerance(bunny_runs):
     m = np.isfinite(off.visibility)
     d = np.abs(off.visibility - on.visibility)[m]
     assert d.mean() <= 0.002 and d.max() <= 0.05, (d.mean(), d.max())
-    assert off.stats["rays_per_point"] == 256
+    # without coherence every cell is traced (or blocked by the point's own surface, self_sin)
+    assert off.stats["rays_per_point"] + off.stats["self_blocked_per_point"] == pytest.approx(256)
 
 
 def test_rays_per_point_below_half_and_sublinear(bunny_runs):

@@ -37,8 +37,8 @@ F_ALL = F_HIER | F_CLIP | F_CONN | F_CLEAR | F_INTERVALS | F_RANK
 F_BASELINE = F_HIER  # the paper's "no acceleration": the plain hierarchical tracer
 
 # per-tile counters
-C_RAYS, C_NODES, C_LEAVES, C_CLEAR, C_IMAGES, C_BLOCKED, C_CONNHIT = range(7)
-N_COUNTERS = 7
+C_RAYS, C_NODES, C_LEAVES, C_CLEAR, C_IMAGES, C_BLOCKED, C_CONNHIT, C_SELF = range(8)
+N_COUNTERS = 8
 
 MAX_INTERVALS = 64  # occlusion intervals kept per ray and image (more: the last one is widened)
 
@@ -615,6 +615,7 @@ def _counters(c) -> dict:
         "image_traversals": int(c[C_IMAGES]),
         "blocked": int(c[C_BLOCKED]),
         "connectedness_hits": int(c[C_CONNHIT]),
+        "self_blocked": int(c[C_SELF]),
     }
 
 
@@ -699,6 +700,8 @@ def coherent_tiles(
     pts,
     nrm,
     pix,
+    self_occ,
+    self_sin,
     order,
     tstart,
     cen,
@@ -795,12 +798,40 @@ def coherent_tiles(
                 lx = cen[0] + (sa[c] - 0.5) * u[0] + (sb[c] - 0.5) * v[0]
                 ly = cen[1] + (sa[c] - 0.5) * u[1] + (sb[c] - 0.5) * v[1]
                 lz = cen[2] + (sa[c] - 0.5) * u[2] + (sb[c] - 0.5) * v[2]
-                b, th = trace_shadow_ray(
-                    ox, oy, oz, lx, ly, lz, vps, D, MN, MX, CONN, offs, gapk, flags, stack, seg, rorder, hidA, hidB, c_
-                )
-                traced += 1
+                rx, ry, rz = lx - ox, ly - oy, lz - oz
+                if self_occ[k] and rx * nrm[k, 0] + ry * nrm[k, 1] + rz * nrm[k, 2] < -self_sin * math.sqrt(
+                    rx * rx + ry * ry + rz * rz
+                ):
+                    # the ray dives into the occluder surface it starts on: blocked by that surface
+                    b = True
+                    th = -1.0
+                    c_[C_SELF] += 1
+                else:
+                    b, th = trace_shadow_ray(
+                        ox,
+                        oy,
+                        oz,
+                        lx,
+                        ly,
+                        lz,
+                        vps,
+                        D,
+                        MN,
+                        MX,
+                        CONN,
+                        offs,
+                        gapk,
+                        flags,
+                        stack,
+                        seg,
+                        rorder,
+                        hidA,
+                        hidB,
+                        c_,
+                    )
+                    traced += 1
                 bv = 1 if b else 0
-                if b and coherence and nblk < cap:
+                if b and th >= 0.0 and coherence and nblk < cap:
                     blk[nblk, 0] = ox + th * (lx - ox)
                     blk[nblk, 1] = oy + th * (ly - oy)
                     blk[nblk, 2] = oz + th * (lz - oz)
@@ -897,6 +928,13 @@ class CoherentRaytrace(Method):
         Param("bias", 1.0, "shadow (depth) bias in texels of the reference images", min=0.0),
         Param("gap", 4.0, "gap bias in texels: adjacent depths closer than this are joined by a wall", min=0.0),
         Param("offset", 1.5, "ray origin offset along the normal, in texels at the point's depth", min=0.0),
+        Param(
+            "self_sin",
+            0.2,
+            "a ray from an occluder surface diving below its plane by more than this sine is blocked by it; 1: off",
+            min=0.0,
+            max=1.0,
+        ),
         Param("coherence", True, "coherence-based sampling of the light (Sec. 5.2); off: trace every cell"),
         Param("hierarchical", True, "hierarchical min/max overlap test (off: visit every pixel on the ray)"),
         Param("minmax_clip", True, "min/max clipping of the epipolar depth interval at every level"),
@@ -921,6 +959,7 @@ class CoherentRaytrace(Method):
         bias,
         gap,
         offset,
+        self_sin,
         coherence,
         hierarchical,
         minmax_clip,
@@ -948,6 +987,8 @@ class CoherentRaytrace(Method):
         W = ctx.eye.mask.shape[1]
         lo, hi = scene.bounds()
         diag = float(np.linalg.norm(hi - lo))
+        # points on occluder faces: a ray diving below their plane is blocked by their own surface
+        self_occ = scene.flat.occluder[np.maximum(ctx.eye.tri_id.reshape(-1)[idx], 0)]
         flags = accel_flags(hierarchical, minmax_clip, connectedness, clear_miss, occlusion_intervals, ranking)
         with ctx.timer.phase("trace"):
             order, tstart = tile_order(idx, W, tile)
@@ -961,6 +1002,8 @@ class CoherentRaytrace(Method):
                     pts,
                     nrm,
                     idx,
+                    self_occ,
+                    self_sin,
                     order,
                     tstart,
                     light.center,
@@ -1004,6 +1047,7 @@ class CoherentRaytrace(Method):
             "clear_miss_fraction": c["clear_misses"] / max(c["rays"], 1),
             "image_traversals_per_ray": c["image_traversals"] / max(c["rays"], 1),
             "connectedness_hits": c["connectedness_hits"],
+            "self_blocked_per_point": c["self_blocked"] / max(K, 1),
             "blocked_fraction": c["blocked"] / max(c["rays"], 1),
             "reference_images": len(ref.views),
             "reference_resolution": resolution,
