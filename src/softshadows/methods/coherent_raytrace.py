@@ -198,7 +198,7 @@ def reference_images(scene, count, resolution, bias, gap, margin) -> tuple[Refer
 # ------------------------------------------------------------------------------------------------
 # Tracing one shadow ray through the depth images
 # ------------------------------------------------------------------------------------------------
-@kernel
+@kernel(inline=True)
 def clip_line_to_box(ax, ay, dx, dy, x0, y0, x1, y1, u0, u1):
     """The parameter range [u0, u1] of the 2-D line A + u d inside the box [x0,x1] x [y0,y1]
     (empty when the returned u0 > u1)."""
@@ -223,7 +223,7 @@ def clip_line_to_box(ax, ay, dx, dy, x0, y0, x1, y1, u0, u1):
     return u0, u1
 
 
-@kernel
+@kernel(inline=True)
 def _clip_plane(f0, f1, s0, s1):
     """Clip s in [s0, s1] to f0 + s (f1 - f0) >= 0."""
     if f0 < 0.0 and f1 < 0.0:
@@ -266,19 +266,19 @@ def epipolar_segment(vp, ox, oy, oz, lx, ly, lz, t0, t1):
     return True, ax, ay, bx, by, za, zb, t0 + s0 * (t1 - t0), t0 + s1 * (t1 - t0)
 
 
-@kernel
+@kernel(inline=True)
 def _z_at(wA, wB, u):
     """Ray depth at screen parameter u (1/z is linear in screen space)."""
     return 1.0 / (wA + u * (wB - wA))
 
 
-@kernel
+@kernel(inline=True)
 def _t_at(z, zA, zB, tA, tB):
     """Ray parameter at depth z (depth is linear in t)."""
     return tA + (zA - z) / (zA - zB) * (tB - tA)
 
 
-@kernel
+@kernel(inline=True)
 def _add_interval(hid, nh, ta, tb):
     """Append [ta, tb] to the ordered occlusion interval list (merging touching intervals)."""
     if nh > 0 and ta <= hid[nh - 1, 1] + 1e-12:
@@ -293,7 +293,7 @@ def _add_interval(hid, nh, ta, tb):
     return nh + 1
 
 
-@kernel
+@kernel(inline=True)
 def leaf_floors_and_walls(D, k, i, j, ax, ay, dx, dy, wA, wB, gapk):
     """The exact test at a leaf pixel (i, j): the floor (the pixel's depth plane, parallel to the
     image plane) and the wall at the pixel's exit edge, present only when the next pixel's depth
