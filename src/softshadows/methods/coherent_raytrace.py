@@ -927,7 +927,7 @@ class CoherentRaytrace(Method):
         Param("resolution", 1024, "reference depth image size (pixels, square)", min=16, max=4096),
         Param("bias", 1.0, "shadow (depth) bias in texels of the reference images", min=0.0),
         Param("gap", 4.0, "gap bias in texels: adjacent depths closer than this are joined by a wall", min=0.0),
-        Param("offset", 1.5, "ray origin offset along the normal, in texels at the point's depth", min=0.0),
+        Param("offset", 1.0, "ray origin offset along the normal, in texels at the point's depth", min=0.0),
         Param(
             "self_sin",
             0.2,
