@@ -17,6 +17,7 @@ _MODULES = [
     "occlusion_textures",
     "irregular",
     "layered_attenuation",
+    "coherent_raytrace",
 ]
 _loaded = False
 _load_lock = threading.RLock()
