@@ -7,7 +7,11 @@ import softshadows as ss
 from softshadows.scene.builtin import BUILTIN
 
 # the ground truth is tested in test_ground_truth.py; here it runs with few samples to stay fast
-FAST = {"ground-truth": {"samples": 4}, "layered-attenuation": {"samples": 16, "ldi_size": 128}}
+FAST = {
+    "ground-truth": {"samples": 4},
+    "layered-attenuation": {"samples": 16, "ldi_size": 128},
+    "coherent-raytrace": {"samples": 16, "resolution": 256},
+}
 
 #: non-default settings each method must also keep finite and in [0,1] (its other code paths)
 VARIANTS = {

@@ -20,7 +20,7 @@ from numba import prange
 
 from .._jit import kernel
 from ..raster.kernels import view_coords, view_coords_to_screen
-from ..raster.view import light_view
+from ..raster.view import VP_B, VP_FAR, VP_L, VP_NEAR, VP_R, VP_T, light_view
 from ..shading import exposure
 from .base import Method, MethodOutput, Param, register
 from .ground_truth import jitter_pair
@@ -249,12 +249,12 @@ def epipolar_segment(vp, ox, oy, oz, lx, ly, lz, t0, t1):
     x0, y0, z0 = view_coords(vp, px, py, pz)
     x1, y1, z1 = view_coords(vp, qx, qy, qz)
     s0, s1 = 0.0, 1.0
-    s0, s1 = _clip_plane(z0 - vp[16], z1 - vp[16], s0, s1)
-    s0, s1 = _clip_plane(vp[17] - z0, vp[17] - z1, s0, s1)
-    s0, s1 = _clip_plane(x0 - vp[12] * z0, x1 - vp[12] * z1, s0, s1)
-    s0, s1 = _clip_plane(vp[13] * z0 - x0, vp[13] * z1 - x1, s0, s1)
-    s0, s1 = _clip_plane(y0 - vp[14] * z0, y1 - vp[14] * z1, s0, s1)
-    s0, s1 = _clip_plane(vp[15] * z0 - y0, vp[15] * z1 - y1, s0, s1)
+    s0, s1 = _clip_plane(z0 - vp[VP_NEAR], z1 - vp[VP_NEAR], s0, s1)
+    s0, s1 = _clip_plane(vp[VP_FAR] - z0, vp[VP_FAR] - z1, s0, s1)
+    s0, s1 = _clip_plane(x0 - vp[VP_L] * z0, x1 - vp[VP_L] * z1, s0, s1)
+    s0, s1 = _clip_plane(vp[VP_R] * z0 - x0, vp[VP_R] * z1 - x1, s0, s1)
+    s0, s1 = _clip_plane(y0 - vp[VP_B] * z0, y1 - vp[VP_B] * z1, s0, s1)
+    s0, s1 = _clip_plane(vp[VP_T] * z0 - y0, vp[VP_T] * z1 - y1, s0, s1)
     if not (s0 < s1):
         return False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
     xa, ya, za = x0 + s0 * (x1 - x0), y0 + s0 * (y1 - y0), z0 + s0 * (z1 - z0)
