@@ -1,6 +1,8 @@
 """The summary tables of the README and docs/results/summary.md, from one command:
 
     python benchmarks/summary.py [--out DIR] [--size 256x192] [--samples 256] [--repeats 7]
+                                 [--only errors|speed] [--scenes square,spheres,bunny]
+                                 [--speed-methods all]
 
 1. Error against ground truth of every method on square, spheres, bunny (rect and sphere light),
    through ``softshadows.compare`` (one report per scene/light under --out). Over all surface
@@ -28,7 +30,15 @@ def main():
     ap.add_argument("--size", default="256x192")
     ap.add_argument("--samples", type=int, default=256)
     ap.add_argument("--repeats", type=int, default=7)
+    ap.add_argument("--only", choices=("errors", "speed"), default=None, help="one of the two parts")
+    ap.add_argument("--scenes", default="square,spheres,bunny", help="scenes of the error table")
+    ap.add_argument(
+        "--speed-methods",
+        default="all",
+        help="methods of the frame-time tables (all, or a,b,c; hard is always measured)",
+    )
     a = ap.parse_args()
+    scenes = tuple(a.scenes.split(","))
     w, h = (int(x) for x in a.size.split("x"))
     os.makedirs(a.out, exist_ok=True)
     t0 = time.time()
@@ -39,7 +49,7 @@ def main():
     ]
     err = {}
     names = None
-    for scene in ("square", "spheres", "bunny"):
+    for scene in scenes if a.only != "speed" else ():
         for light in ("rect", "sphere"):
             r = compare(
                 scene,
@@ -54,7 +64,7 @@ def main():
             for m, met in r["metrics"].items():
                 err.setdefault(m, {})[(scene, light)] = met
             names = names or list(r["metrics"])
-    cols = [(s, l) for s in ("square", "spheres", "bunny") for l in ("rect", "sphere")]
+    cols = [(s, l) for s in scenes for l in ("rect", "sphere")]
     lines.append(
         f"Error against ground truth ({a.samples} samples), {w}x{h}: MAE / ssm_error "
         "(mean |dV| over umbra+penumbra) over all surface pixels; '-' = light shape not supported. "
@@ -76,9 +86,11 @@ def main():
                 met = err[m].get(c)
                 cells.append("-" if met is None else f"{pick(met)['mae']:.4f} / {pick(met)['ssm_error']:.3f}")
             lines.append(f"| {label} | " + " | ".join(cells) + " |")
+    if a.only == "speed":
+        lines = lines[:2]
     lines.append("")
-    for light in ("rect", "sphere"):
-        b = bench("bunny", "all", sizes=(512,), repeats=a.repeats, warmup=1, light=light, verbose=False)
+    for light in ("rect", "sphere") if a.only != "errors" else ():
+        b = bench("bunny", a.speed_methods, sizes=(512,), repeats=a.repeats, warmup=1, light=light, verbose=False)
         lines.append(f"Frame time, bunny {light} light, 512x512, median of {a.repeats} after warm-up:")
         lines.append("")
         lines.append("| method | total ms | x hard | slowest phase |")
