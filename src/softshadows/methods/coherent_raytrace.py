@@ -14,6 +14,7 @@ from __future__ import annotations
 import hashlib
 import math
 from types import SimpleNamespace
+from typing import ClassVar
 
 import numpy as np
 from numba import prange
@@ -949,6 +950,9 @@ class CoherentRaytrace(Method):
         Param("physical", False, "image = full area-light integral of Eq. 1 (V unchanged)"),
         Param("margin", 0.02, "window margin of the reference images around the occluders", min=0.0),
     )
+
+    #: what `softshadows pareto` sweeps (Method.sweep)
+    sweep: ClassVar = {"samples": [16, 64, 256], "resolution": [512, 1024]}
 
     def run(
         self,

@@ -12,6 +12,7 @@ deviations and measured limits: ``docs/methods/irregular.md``.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numba
 import numpy as np
@@ -1569,6 +1570,10 @@ class Irregular(Method):
         Param("offset", 1e-4, "sample offset along the normal, x scene diagonal (as ground-truth)", min=0.0),
         Param("overdraw_stats", False, "also count fragments/tests with each optimisation off (extra passes)"),
     )
+
+    #: what `softshadows pareto` sweeps (Method.sweep): V is exact whatever the grid; its size
+    #: trades construction against the tests per cell
+    sweep: ClassVar = {"grid": [64, 128, 256]}
 
     def run(self, ctx, grid, slices, bins, per_bin, wedge, silhouettes, folds, offset, overdraw_stats):
         pts, nrm, idx = ctx.points()

@@ -16,6 +16,7 @@ import hashlib
 import time
 from collections import OrderedDict
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 import numba
 import numpy as np
@@ -628,6 +629,10 @@ class LayeredAttenuation(Method):
     summary = "layered attenuation maps: LDI of depth images from N x N light samples, precomputed once, looked up"
     paper = "Agrawala et al. 2000 (Sections 4, 6)"
     params = PARAMS
+
+    #: what `softshadows pareto` sweeps (Method.sweep): quality is samples and LDI resolution; the
+    #: timed frame is the display (the precompute is cached across frames)
+    sweep: ClassVar = {"samples": [16, 64, 256], "ldi_size": [256, 512]}
 
     def run(self, ctx, **params):
         key = cache_key(ctx.scene, params, ctx.seed)
