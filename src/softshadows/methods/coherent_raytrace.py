@@ -24,7 +24,7 @@ from ..raster.kernels import view_coords, view_coords_to_screen
 from ..raster.view import VP_B, VP_FAR, VP_L, VP_NEAR, VP_R, VP_T, light_view
 from ..shading import exposure
 from .base import Method, MethodOutput, Param, register
-from .ground_truth import jitter_pair
+from .ground_truth import jitter_pair, point_key
 from .shadowmap import build_shadow_map
 
 # acceleration switches (bit flags passed to the kernels)
@@ -772,8 +772,9 @@ def coherent_tiles(
                 nblk = 0
                 valid = False
             px0, py0, pz0 = px, py, pz
+            key = point_key(seed, pix[k])
             for c in range(S):
-                ja, jb = jitter_pair(seed, pix[k], c)
+                ja, jb = jitter_pair(key, c)
                 sa[c] = (c // N + ja) / N
                 sb[c] = (c % N + jb) / N
             if coherence and valid:
