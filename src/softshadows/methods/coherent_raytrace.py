@@ -906,6 +906,7 @@ def _perfect_square(n):
 @register
 class CoherentRaytrace(Method):
     name = "coherent-raytrace"
+    light_view = True  # renders/projects the occluders from the light (limits: softshadows.limits)
     light_shapes = ("rect",)
     summary = "shadow rays traced through corner depth images with coherence-based light sampling"
     paper = (

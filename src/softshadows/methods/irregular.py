@@ -1540,6 +1540,7 @@ def irregular_visibility(
 @register
 class Irregular(Method):
     name = "irregular"
+    light_view = True  # renders/projects the occluders from the light (limits: softshadows.limits)
     light_shapes = ("rect", "sphere")
     summary = "soft irregular shadow mapping: exact umbra count + exact per-edge penumbra at every eye sample"
     paper = "Johnson et al. 2009"

@@ -625,6 +625,7 @@ def lookup(ldi: LayeredAttenuationMap, pts, nrm, bilinear: bool) -> np.ndarray:
 @register
 class LayeredAttenuation(Method):
     name = "layered-attenuation"
+    light_view = True  # renders/projects the occluders from the light (limits: softshadows.limits)
     light_shapes = ("rect", "sphere")
     summary = "layered attenuation maps: LDI of depth images from N x N light samples, precomputed once, looked up"
     paper = "Agrawala et al. 2000 (Sections 4, 6)"

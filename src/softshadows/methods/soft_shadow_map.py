@@ -1031,7 +1031,6 @@ def fp16_condition(z_o, z_r, hx, ov: View) -> np.ndarray:
 class SoftShadowMapMethod(Method):
     name = "soft-shadow-map"
     light_shapes = ("rect", "sphere")
-    receivers_only = True  # no self-shadowing, V = 1 on occluder-only geometry (the paper's design)
     summary = "soft shadow maps: occluder-map pixels as micro-patches, occlusion summed in a projective map"
     paper = "Atty et al. 2006, Soft Shadow Maps: Efficient Sampling of Light Source Visibility"
     light_view = True  # maps from the light's centre (limits: softshadows.limits)
