@@ -6,11 +6,10 @@ Every kernel is compiled with the same flags (``FLAGS``): cached on disk, IEEE a
 Use ``@kernel``, ``@kernel(parallel=True)``, ``@kernel(inline=True)`` or
 ``@kernel(parallel=True, nogil=True)``.
 
-``inline=True`` marks a small helper as meant to be inlined. Numba-IR inlining (``inline="always"``)
-multiplies compile time (every caller re-types and re-optimises the callee's IR) while LLVM inlines
-small functions anyway, with the same IEEE results; so it is off unless ``SOFTSHADOWS_IR_INLINE=1``
-is set (kept for measuring: docs/results/cold-start.md). Every kernel is recorded in ``KERNELS``
-(the cold-cache check and the warm-up in :mod:`softshadows._warm` use it).
+``inline=True`` inlines at the Numba IR level (``inline="always"``). That multiplies compile time,
+but dropping it (``SOFTSHADOWS_IR_INLINE=0``, kept for measuring) made the rasterizer's and
+``irregular``'s frames up to 2x slower (docs/results/cold-start.md), so it stays on. Every kernel
+is recorded in ``KERNELS`` (the cold-cache check and the warm-up in :mod:`softshadows._warm`).
 """
 
 from __future__ import annotations
@@ -20,7 +19,7 @@ import os
 from numba import njit
 
 FLAGS = dict(cache=True, fastmath=False, error_model="numpy")
-IR_INLINE = os.environ.get("SOFTSHADOWS_IR_INLINE", "") == "1"
+IR_INLINE = os.environ.get("SOFTSHADOWS_IR_INLINE", "1") != "0"
 KERNELS: list = []  # every dispatcher made by @kernel, in import order
 
 

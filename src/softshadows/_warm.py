@@ -109,8 +109,11 @@ def _main(argv) -> int:
     from . import render
     from .compare import load
 
+    parent = os.getppid()
     sc = load(job["scene"], job["light"])
     for m in job["methods"]:
+        if os.getppid() != parent:  # the main process is gone (killed): stop warming for nobody
+            return 0
         # the main process reports failures; the helper only warms the cache
         with contextlib.suppress(Exception):
             render(sc, m, job["width"], job["height"], **job["params"].get(m, {}))
