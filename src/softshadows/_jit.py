@@ -3,15 +3,24 @@
 Every kernel is compiled with the same flags (``FLAGS``): cached on disk, IEEE arithmetic
 (no fastmath, so results do not depend on the compiler's reassociation), NumPy's error model
 (division by zero gives inf/NaN instead of raising, and no zero-checks in hot loops).
-Use ``@kernel``, ``@kernel(parallel=True)``, ``@kernel(inline=True)`` (inlined into its
-callers at the Numba IR level) or ``@kernel(parallel=True, nogil=True)``.
+Use ``@kernel``, ``@kernel(parallel=True)``, ``@kernel(inline=True)`` or
+``@kernel(parallel=True, nogil=True)``.
+
+``inline=True`` inlines at the Numba IR level (``inline="always"``). That multiplies compile time,
+but dropping it (``SOFTSHADOWS_IR_INLINE=0``, kept for measuring) made the rasterizer's and
+``irregular``'s frames up to 2x slower (docs/results/cold-start.md), so it stays on. Every kernel
+is recorded in ``KERNELS`` (the cold-cache check and the warm-up in :mod:`softshadows._warm`).
 """
 
 from __future__ import annotations
 
+import os
+
 from numba import njit
 
 FLAGS = dict(cache=True, fastmath=False, error_model="numpy")
+IR_INLINE = os.environ.get("SOFTSHADOWS_IR_INLINE", "1") != "0"
+KERNELS: list = []  # every dispatcher made by @kernel, in import order
 
 
 def kernel(fn=None, *, parallel: bool = False, inline: bool = False, nogil: bool = False):
@@ -19,10 +28,16 @@ def kernel(fn=None, *, parallel: bool = False, inline: bool = False, nogil: bool
     opts = dict(FLAGS)
     if parallel:
         opts["parallel"] = True
-    if inline:
+    if inline and IR_INLINE:
         opts["inline"] = "always"
     if nogil:
         opts["nogil"] = True
+
+    def wrap(f):
+        d = njit(**opts)(f)
+        KERNELS.append(d)
+        return d
+
     if fn is None:
-        return njit(**opts)
-    return njit(**opts)(fn)
+        return wrap
+    return wrap(fn)

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 import warnings
 
@@ -173,6 +174,12 @@ def main(argv=None) -> int:
     from ._malloc import tune_malloc
 
     tune_malloc()  # the CLI owns the process: keep frame buffers in the heap (softshadows._malloc)
+    # ... and its OpenMP threads: sleep at barriers instead of spinning. Spinning workers steal the
+    # cores on a shared/loaded machine: every parallel kernel waits for a descheduled spinner
+    # (bunny 512^2 on 2 loaded cores: hard 221 -> 105 ms; docs/results/speed-targets.md). Read when
+    # the OpenMP runtime starts (the first parallel kernel), so set before anything runs; a value
+    # the user set wins. Importing the library does not do this.
+    os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
     ap = build_parser()
     # argparse errors (unknown option, bad choice) exit 2 with a usage line already
     argv = list(sys.argv[1:] if argv is None else argv)

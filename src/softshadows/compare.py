@@ -205,11 +205,7 @@ def compare(
     ``params_by_method`` = {method: {param: value}}. Returns a dict with ``out_dir``, ``report``,
     ``files``, ``metrics``/``timings``/``params``/``stats`` by method, ``skipped``, ``failed``.
     """
-    from . import render
     from .methods import get_method
-    from .metrics import compute_metrics, receiver_pixels, signed_error_map
-    from .report import colorbar_png, error_heatmap, error_limit, error_rgb, grid_image, machine_info, write_html
-    from .shading import to_srgb8, visibility_to_rgb
 
     sc = load(scene, light)
     names, skipped = resolve_methods(methods, sc.light.shape)
@@ -233,7 +229,23 @@ def compare(
         if verbose:
             print(msg, file=sys.stderr, flush=True)
 
+    from ._warm import say_if_cold, start_warmup, stop_warmup
+
     t_start = time.perf_counter()
+    say_if_cold()
+    # a cold cache: a helper process compiles the methods in reverse order while this one traces
+    # the ground truth and compiles from the front (softshadows._warm)
+    helper = start_warmup(scene, sc.light.shape, width, height, names, resolved)
+    try:
+        gt, results, failed = _render_all(sc, names, resolved, width, height, seed, progress, verbose, say)
+    finally:
+        stop_warmup(helper)
+    return _finish(sc, skipped, resolved, gt, results, failed, width, height, out_dir, command, seed, t_start)
+
+
+def _render_all(sc, names, resolved, width, height, seed, progress, verbose, say):
+    from . import render
+
     say(
         f"{sc.name} ({sc.light.shape} light) {width}x{height}: ground truth, {resolved[REFERENCE]['samples']} samples ..."
     )
@@ -253,6 +265,14 @@ def compare(
             print(f"softshadows: warning: method '{m}' failed: {failed[m]}", file=sys.stderr)
             if verbose:
                 traceback.print_exc()
+    return gt, results, failed
+
+
+def _finish(sc, skipped, resolved, gt, results, failed, width, height, out_dir, command, seed, t_start):
+    from .methods import get_method
+    from .metrics import compute_metrics, receiver_pixels, signed_error_map
+    from .report import colorbar_png, error_heatmap, error_limit, error_rgb, grid_image, machine_info, write_html
+    from .shading import to_srgb8, visibility_to_rgb
 
     # metrics and images
     # methods that by design shade only receivers: also over receiver pixels (metrics["receivers"])

@@ -728,7 +728,7 @@ def occlusion_visibility(
     flat,
     points,
     slices=16,
-    texture_size=512,
+    texture_size=256,
     filter="nbuffers",
     combine="product",
     cop_distance=0.0,
@@ -836,7 +836,13 @@ class OcclusionTextures(Method):
     light_view = True  # maps from the light's centre (limits: softshadows.limits)
     params = (
         Param("slices", 16, "number of slices parallel to the light (paper: 4-16)", min=1, max=64),
-        Param("texture_size", 512, "occlusion texture resolution (square, power of two)", choices=TEXTURE_SIZES),
+        Param(
+            "texture_size",
+            256,
+            "occlusion texture resolution (square, power of two; the paper's Fig. 10: 512, "
+            "2x slower here for no better error: docs/results/speed-targets.md)",
+            choices=TEXTURE_SIZES,
+        ),
         Param(
             "filter", "nbuffers", "prefilter: mipmap (anisotropic), nbuffers, sat (summed-area table)", choices=FILTERS
         ),
@@ -871,7 +877,7 @@ class OcclusionTextures(Method):
         self,
         ctx,
         slices=16,
-        texture_size=512,
+        texture_size=256,
         filter="nbuffers",
         combine="product",
         cop_distance=0.0,

@@ -1,0 +1,124 @@
+"""First-run help: tell the user when the JIT cache is cold, and compile in a second process.
+
+Numba holds the GIL while it compiles, so a cold ``compare`` compiles its ~100 kernels one after
+the other on one core. :func:`start_warmup` starts a helper process (``python -m softshadows._warm``)
+that renders the same methods on a small frame in the *reverse* order of the main process, which
+writes their kernels into the on-disk cache (the package's normal ``__pycache__``/user cache or
+``NUMBA_CACHE_DIR``: the helper inherits the environment and so the same locator); when the main
+process reaches a method, Numba loads what the helper already compiled instead of compiling it
+again. Nothing changes in the results (the same kernels, from the same cache). The helper is only
+started when the cache is cold, writable and there is more than one core; ``SOFTSHADOWS_WARMUP=0``
+turns it off. Measured in docs/results/cold-start.md.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import subprocess
+import sys
+
+COLD_MESSAGE = "softshadows: compiling kernels, first run only (cached afterwards) ..."
+_said = False
+
+
+def _index_ok(d) -> bool:
+    try:
+        return bool(d._cache._cache_file._load_index())
+    except Exception:  # an unreadable index is a cold one
+        return False
+
+
+def cache_state() -> tuple[bool, bool]:
+    """(cold, writable) of the kernels' on-disk cache: cold when fewer than 80% of the kernels
+    imported so far have a fresh cached overload (a few never run in a given command)."""
+    from ._jit import KERNELS
+
+    if not KERNELS:
+        return False, False
+    ok = sum(_index_ok(d) for d in KERNELS)
+    cold = ok < 0.8 * len(KERNELS)
+    try:
+        path = KERNELS[0]._cache._cache_path
+        writable = os.path.isdir(path) and os.access(path, os.W_OK)
+    except Exception:
+        writable = False
+    return cold, writable
+
+
+def say_if_cold(stream=None) -> bool:
+    """Print :data:`COLD_MESSAGE` once per process when the cache is cold; returns cold."""
+    global _said
+    cold, _ = cache_state()
+    if cold and not _said:
+        _said = True
+        print(COLD_MESSAGE, file=stream or sys.stderr, flush=True)
+    return cold
+
+
+def start_warmup(scene, light_shape: str, width: int, height: int, names, params: dict):
+    """Start the helper (a ``subprocess.Popen``) when worth it, else None. ``names`` in the main
+    process's order; the helper takes them in reverse. ``scene``: a built-in name or file path
+    (any other Scene: the built-in ``bunny``; kernel types do not depend on the scene)."""
+    if os.environ.get("SOFTSHADOWS_WARMUP", "1") == "0" or (os.cpu_count() or 1) < 2 or not names:
+        return None
+    cold, writable = cache_state()
+    if not (cold and writable):
+        return None
+    job = {
+        "scene": scene if isinstance(scene, str) else "bunny",
+        "light": light_shape,
+        "width": int(width),
+        "height": int(height),
+        "methods": list(reversed(list(names))),
+        "params": {m: params.get(m, {}) for m in names},
+    }
+    env = dict(os.environ)
+    # the helper only compiles: one thread, no OpenMP spinning that would steal the main's core
+    env.setdefault("NUMBA_NUM_THREADS", "1")
+    env.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+    pkg_root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    env["PYTHONPATH"] = pkg_root + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+    try:
+        return subprocess.Popen(
+            [sys.executable, "-m", "softshadows._warm", json.dumps(job, default=str)],
+            env=env,
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )
+    except OSError:
+        return None
+
+
+def stop_warmup(proc) -> None:
+    """End the helper started by :func:`start_warmup` (its finished kernels stay cached)."""
+    if proc is None or proc.poll() is not None:
+        return
+    proc.terminate()
+    try:
+        proc.wait(timeout=5)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()
+
+
+def _main(argv) -> int:
+    job = json.loads(argv[0])
+    from . import render
+    from .compare import load
+
+    parent = os.getppid()
+    sc = load(job["scene"], job["light"])
+    for m in job["methods"]:
+        if os.getppid() != parent:  # the main process is gone (killed): stop warming for nobody
+            return 0
+        # the main process reports failures; the helper only warms the cache
+        with contextlib.suppress(Exception):
+            render(sc, m, job["width"], job["height"], **job["params"].get(m, {}))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(_main(sys.argv[1:]))
