@@ -51,11 +51,20 @@ def occluder_faces(scene, which: str = "occluder") -> np.ndarray:
 def fit_light_view(
     scene, size: int, which: str = "occluder", ortho: bool = False, height: int | None = None, margin: float = 0.02
 ) -> View:
-    """View from the light's center covering the vertices of the selected faces (square pixels)."""
+    """View from the light's center covering the vertices of the selected faces (square pixels).
+    Computed once per geometry, light and arguments (a pass over every selected vertex; cached on
+    ``scene.flat``, whose geometry does not change)."""
     flat = scene.flat
-    mask = occluder_faces(scene, which)
-    pts = flat.vertices[flat.face_vertices(which if mask.any() else "all")]
-    return light_view(scene.light, pts, size, height or size, ortho=ortho, margin=margin, square_pixels=True)
+    light = scene.light
+    key = ("fit_light_view", light.shape, *light.center, *getattr(light, "u", ()), *getattr(light, "v", ()))
+    key += (size, which, bool(ortho), height, margin)
+    hit = flat._cache.get(key)
+    if hit is None:
+        mask = occluder_faces(scene, which)
+        pts = flat.vertices[flat.face_vertices(which if mask.any() else "all")]
+        hit = light_view(light, pts, size, height or size, ortho=ortho, margin=margin, square_pixels=True)
+        flat._cache[key] = hit
+    return hit
 
 
 def build_shadow_map(scene, view: View, faces_mask: np.ndarray | None = None, cull: str = "none") -> ShadowMap:
@@ -63,7 +72,7 @@ def build_shadow_map(scene, view: View, faces_mask: np.ndarray | None = None, cu
     flat = scene.flat
     if faces_mask is None:
         faces_mask = flat.occluder
-    faces = np.ascontiguousarray(flat.faces[faces_mask])
+    faces = flat.faces_where(faces_mask)  # cached for the role masks
     depth, tri = rasterize_depth(view, flat.vertices, faces, cull=cull)
     return ShadowMap(view, depth, tri)
 

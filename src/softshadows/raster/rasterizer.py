@@ -208,11 +208,12 @@ def _setup_piece(vp, slot, x0, y0, z0, x1, y1, z1, x2, y2, z2, far, box, edges, 
 
 
 @kernel
-def _setup_one(t, verts, faces, vp, near, cull, NC, box, edges, zinfo, planes, normals):
-    """Triangle t: NC[t] pieces in slots 2t, 2t+1 of box/edges/zinfo; planes[t] plane data; normals[t] unit normal."""
+def _setup_one(u, t, verts, faces, vp, near, cull, NC, box, edges, zinfo, planes, normals):
+    """Face t, stored as front-end triangle u: NC[u] pieces in slots 2u, 2u+1 of box/edges/zinfo;
+    planes[u] plane data; normals[u] unit normal."""
     ortho = vp[VP_ORTHO] != 0.0
     far = vp[VP_FAR]
-    NC[t] = 0
+    NC[u] = 0
     ia = faces[t, 0]
     ib = faces[t, 1]
     ic = faces[t, 2]
@@ -248,9 +249,9 @@ def _setup_one(t, verts, faces, vp, near, cull, NC, box, edges, zinfo, planes, n
             return
         if cull == 2 and not (f > 0.0):
             return
-    normals[t, 0] = nx / nn
-    normals[t, 1] = ny / nn
-    normals[t, 2] = nz / nn
+    normals[u, 0] = nx / nn
+    normals[u, 1] = ny / nn
+    normals[u, 2] = nz / nn
     # view space
     x0, y0, z0 = view_coords(vp, ax, ay, az)
     x1, y1, z1 = view_coords(vp, bx, by, bz)
@@ -276,26 +277,26 @@ def _setup_one(t, verts, faces, vp, near, cull, NC, box, edges, zinfo, planes, n
     m2x = (vny * f1z - vnz * f1y) / n2  # (n x e1) / |n|^2
     m2y = (vnz * f1x - vnx * f1z) / n2
     m2z = (vnx * f1y - vny * f1x) / n2
-    planes[t, PL_N] = vnx
-    planes[t, PL_N + 1] = vny
-    planes[t, PL_N + 2] = vnz
-    planes[t, PL_D] = vnx * x0 + vny * y0 + vnz * z0
-    planes[t, PL_M1] = m1x
-    planes[t, PL_M1 + 1] = m1y
-    planes[t, PL_M1 + 2] = m1z
-    planes[t, PL_D1] = m1x * x0 + m1y * y0 + m1z * z0
-    planes[t, PL_M2] = m2x
-    planes[t, PL_M2 + 1] = m2y
-    planes[t, PL_M2 + 2] = m2z
-    planes[t, PL_D2] = m2x * x0 + m2y * y0 + m2z * z0
+    planes[u, PL_N] = vnx
+    planes[u, PL_N + 1] = vny
+    planes[u, PL_N + 2] = vnz
+    planes[u, PL_D] = vnx * x0 + vny * y0 + vnz * z0
+    planes[u, PL_M1] = m1x
+    planes[u, PL_M1 + 1] = m1y
+    planes[u, PL_M1 + 2] = m1z
+    planes[u, PL_D1] = m1x * x0 + m1y * y0 + m1z * z0
+    planes[u, PL_M2] = m2x
+    planes[u, PL_M2 + 1] = m2y
+    planes[u, PL_M2 + 2] = m2z
+    planes[u, PL_D2] = m2x * x0 + m2y * y0 + m2z * z0
     # near-plane clipping in view space
     in0 = z0 >= near
     in1 = z1 >= near
     in2 = z2 >= near
     nin = int(in0) + int(in1) + int(in2)
-    s0 = 2 * t
+    s0 = 2 * u
     if nin == 3:
-        NC[t] = _setup_piece(vp, s0, x0, y0, z0, x1, y1, z1, x2, y2, z2, far, box, edges, zinfo)
+        NC[u] = _setup_piece(vp, s0, x0, y0, z0, x1, y1, z1, x2, y2, z2, far, box, edges, zinfo)
         return
     # rotate the corners (keeping the cyclic order) so that the odd one out comes first
     if nin == 1:
@@ -314,14 +315,14 @@ def _setup_one(t, verts, faces, vp, near, cull, NC, box, edges, zinfo, planes, n
         # P inside, Q and R outside: triangle P, PQ', PR'
         ux, uy, uz = _clip_point(px, py, pz, qx, qy, qz, near)
         wx, wy, wz = _clip_point(px, py, pz, rx, ry, rz, near)
-        NC[t] = _setup_piece(vp, s0, px, py, pz, ux, uy, uz, wx, wy, wz, far, box, edges, zinfo)
+        NC[u] = _setup_piece(vp, s0, px, py, pz, ux, uy, uz, wx, wy, wz, far, box, edges, zinfo)
     else:
         # P outside, Q and R inside: quad Q, R, RP', QP' -> (Q, R, RP') and (Q, RP', QP')
         ux, uy, uz = _clip_point(rx, ry, rz, px, py, pz, near)
         wx, wy, wz = _clip_point(qx, qy, qz, px, py, pz, near)
         k = _setup_piece(vp, s0, qx, qy, qz, rx, ry, rz, ux, uy, uz, far, box, edges, zinfo)
         k += _setup_piece(vp, s0 + k, qx, qy, qz, ux, uy, uz, wx, wy, wz, far, box, edges, zinfo)
-        NC[t] = k
+        NC[u] = k
 
 
 # ----------------------------------------------------------------------------------------------
@@ -347,25 +348,143 @@ def _tile_row_bits(mask, T, ntx, nty, bits, tile_any):
         tile_any[tile] = a != 0
 
 
+@kernel
+def _no_pieces(t, verts, faces, vp, near, cull):
+    """True if face t surely gives no piece (small-triangle rejection before setup and binning): it
+    is degenerate, culled, beyond ``far`` or behind ``near``, or it lies wholly in front of the near
+    plane and its snapped screen bounding box holds no pixel center (or its area is zero). The same
+    operations, in the same order, as :func:`_setup_one` and :func:`_setup_piece`, so the decision is
+    theirs bit for bit; the cases it does not decide (near-plane clipping, the view-space plane) are
+    left to the full setup."""
+    ortho = vp[VP_ORTHO] != 0.0
+    far = vp[VP_FAR]
+    ia = faces[t, 0]
+    ib = faces[t, 1]
+    ic = faces[t, 2]
+    ax = verts[ia, 0]
+    ay = verts[ia, 1]
+    az = verts[ia, 2]
+    bx = verts[ib, 0]
+    by = verts[ib, 1]
+    bz = verts[ib, 2]
+    cx = verts[ic, 0]
+    cy = verts[ic, 1]
+    cz = verts[ic, 2]
+    e1x = bx - ax
+    e1y = by - ay
+    e1z = bz - az
+    e2x = cx - ax
+    e2y = cy - ay
+    e2z = cz - az
+    nx = e1y * e2z - e1z * e2y
+    ny = e1z * e2x - e1x * e2z
+    nz = e1x * e2y - e1y * e2x
+    nn = math.sqrt(nx * nx + ny * ny + nz * nz)
+    if not (nn > 0.0 and math.isfinite(nn)):
+        return True
+    if cull != 0:
+        if ortho:
+            f = nx * vp[VP_FORWARD] + ny * vp[VP_FORWARD + 1] + nz * vp[VP_FORWARD + 2]
+        else:
+            f = nx * (ax - vp[VP_ORIGIN]) + ny * (ay - vp[VP_ORIGIN + 1]) + nz * (az - vp[VP_ORIGIN + 2])
+        if cull == 1 and not (f < 0.0):
+            return True
+        if cull == 2 and not (f > 0.0):
+            return True
+    x0, y0, z0 = view_coords(vp, ax, ay, az)
+    x1, y1, z1 = view_coords(vp, bx, by, bz)
+    x2, y2, z2 = view_coords(vp, cx, cy, cz)
+    if min(z0, min(z1, z2)) > far or max(z0, max(z1, z2)) < near:
+        return True
+    if not (z0 >= near and z1 >= near and z2 >= near):
+        return False  # clipped: decided by the full setup
+    W = vp[VP_W]
+    H = vp[VP_H]
+    sx0, sy0 = view_coords_to_screen(vp, x0, y0, z0)
+    sx1, sy1 = view_coords_to_screen(vp, x1, y1, z1)
+    sx2, sy2 = view_coords_to_screen(vp, x2, y2, z2)
+    sx0 = _snap(sx0)
+    sy0 = _snap(sy0)
+    sx1 = _snap(sx1)
+    sy1 = _snap(sy1)
+    sx2 = _snap(sx2)
+    sy2 = _snap(sy2)
+    xmin = min(sx0, min(sx1, sx2))
+    xmax = max(sx0, max(sx1, sx2))
+    ymin = min(sy0, min(sy1, sy2))
+    ymax = max(sy0, max(sy1, sy2))
+    fj0 = max(math.ceil(xmin - 0.5), 0.0)
+    fj1 = min(math.floor(xmax - 0.5), W - 1.0)
+    fi0 = max(math.ceil(ymin - 0.5), 0.0)
+    fi1 = min(math.floor(ymax - 0.5), H - 1.0)
+    # NaN coordinates fail both comparisons: left to the full setup (which rejects them)
+    return fj0 > fj1 or fi0 > fi1
+
+
+@kernel(parallel=True)
+def _select(verts, faces, vp, near, cull, chunk, ccount, nslot, tri):
+    """Small-triangle rejection: the faces that may give pieces (not :func:`_no_pieces`), in increasing
+    index, into ``tri`` (two passes per chunk of faces: count into ``ccount``, then, from the prefix
+    sum, fill; the chunks are dealt round-robin to ``nslot`` slots). ``tri`` is None-like (size 0) in
+    the count pass."""
+    nchunk = ccount.shape[0]
+    F = faces.shape[0]
+    fill = tri.shape[0] > 0
+    for slot in prange(nslot):
+        for c in range(slot, nchunk, nslot):
+            t1 = min(F, (c + 1) * chunk)
+            if fill:
+                w = ccount[c]
+                for t in range(c * chunk, t1):
+                    if not _no_pieces(t, verts, faces, vp, near, cull):
+                        tri[w] = t
+                        w += 1
+            else:
+                n = 0
+                for t in range(c * chunk, t1):
+                    if not _no_pieces(t, verts, faces, vp, near, cull):
+                        n += 1
+                ccount[c] = n
+
+
 @kernel(parallel=True)
 def _setup_count(
-    verts, faces, vp, near, cull, NC, box, edges, zinfo, planes, normals, T, ntx, chunk, cnt, nslot, tile_any, use_bits
+    verts,
+    faces,
+    tri,
+    vp,
+    near,
+    cull,
+    NC,
+    box,
+    edges,
+    zinfo,
+    planes,
+    normals,
+    T,
+    ntx,
+    chunk,
+    cnt,
+    nslot,
+    tile_any,
+    use_bits,
 ):
-    """Setup of every triangle (parallel over chunks of triangles, dealt round-robin to ``nslot``
-    slots: load balance, see docs/rasterizer.md) and per (chunk, tile) bin counts. With ``use_bits``, only the tiles
-    with ``tile_any`` set get pieces (min-blend's texel mask)."""
+    """Setup of the selected faces ``tri`` (front-end triangle u is face tri[u]; parallel over chunks of
+    them, dealt round-robin to ``nslot`` slots: load balance, see docs/rasterizer.md) and per (chunk,
+    tile) bin counts. With ``use_bits``, only the tiles with ``tile_any`` set get pieces (min-blend's
+    texel mask)."""
     nchunk = cnt.shape[0]
     ntiles = cnt.shape[1]
-    F = NC.shape[0]
+    U = NC.shape[0]
     for slot in prange(nslot):
         for c in range(slot, nchunk, nslot):
             for tt in range(ntiles):
                 cnt[c, tt] = 0
-            t1 = min(F, (c + 1) * chunk)
-            for t in range(c * chunk, t1):
-                _setup_one(t, verts, faces, vp, near, cull, NC, box, edges, zinfo, planes, normals)
-                for k in range(NC[t]):
-                    ct = 2 * t + k
+            t1 = min(U, (c + 1) * chunk)
+            for u in range(c * chunk, t1):
+                _setup_one(u, tri[u], verts, faces, vp, near, cull, NC, box, edges, zinfo, planes, normals)
+                for k in range(NC[u]):
+                    ct = 2 * u + k
                     for ty in range(box[ct, BOX_I0] // T, box[ct, BOX_I1] // T + 1):
                         for tx in range(box[ct, BOX_J0] // T, box[ct, BOX_J1] // T + 1):
                             tile = ty * ntx + tx
@@ -884,7 +1003,7 @@ def _view_frame(vp):
 
 
 @kernel(inline=True)
-def _gbuffer_row(out, i, li, cols, nk, yw, zb, tb, frame, planes, normals, ortho):
+def _gbuffer_row(out, i, li, cols, nk, yw, zb, tb, frame, planes, normals, tri, ortho):
     """The G-buffer ``out`` = (depth, tri, pos, nrm, bary, mask) of the nk pixels of image row i
     (tile row li) from the tile's winners (branch-free per pixel, so that it vectorizes)."""
     x0, wl, wsx = cols
@@ -905,7 +1024,7 @@ def _gbuffer_row(out, i, li, cols, nk, yw, zb, tb, frame, planes, normals, ortho
         b1, b2 = _bary(_dual(planes, tt), xw, yw, z, ortho)
         vx = xw if ortho else xw * z
         vy = yw if ortho else yw * z
-        trow[k] = t
+        trow[k] = tri[tt] if hit else -1  # the face (tb: front-end triangle)
         drow[k] = z
         mrow[k] = hit
         prow[k, 0] = (o0 + vx * rx + vy * ux + z * fx) if hit else np.nan
@@ -1067,7 +1186,7 @@ def _blend_row(prog, pparams, zb, ib, rn, span, cols, yw, zrow, pl, q, ca, zr, o
 @kernel(parallel=True)
 def _tiles_depth(fe, sc, depth_out, tri_out):
     """rasterize_depth: the nearest depth (+inf: none) and triangle (-1: none) of every pixel."""
-    vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, _normals, _rowbits = fe
+    vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, _normals, _rowbits, tri = fe
     zbuf, tbuf, spbuf, _ibuf, _lbuf, nslot = sc
     vw = _view_window(vp)
     W, H = vw[0], vw[1]
@@ -1087,13 +1206,14 @@ def _tiles_depth(fe, sc, depth_out, tri_out):
                     trow = tri_out[i, x0 : x1 + 1]
                     for k in range(drow.shape[0]):
                         drow[k] = zb[i - y0, k]
-                        trow[k] = tb[i - y0, k]
+                        tv = tb[i - y0, k]
+                        trow[k] = tri[max(tv, 0)] if tv >= 0 else -1  # the face (tb: front-end triangle)
 
 
 @kernel(parallel=True)
 def _tiles_gbuffer(fe, sc, out):
     """rasterize: the nearest surface's G-buffer ``out`` = (depth, tri, pos, nrm, bary, mask)."""
-    vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, normals, _rowbits = fe
+    vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, normals, _rowbits, tri = fe
     zbuf, tbuf, spbuf, _ibuf, _lbuf, nslot = sc
     vw = _view_window(vp)
     W, H, ortho, _far, wl, wt, wsx, wsy = vw
@@ -1112,15 +1232,15 @@ def _tiles_gbuffer(fe, sc, out):
                 for i in range(y0, y1 + 1):
                     yw = wt - (i + 0.5) * wsy
                     if ortho:
-                        _gbuffer_row(out, i, i - y0, cols, x1 - x0 + 1, yw, zb, tb, frame, planes, normals, True)
+                        _gbuffer_row(out, i, i - y0, cols, x1 - x0 + 1, yw, zb, tb, frame, planes, normals, tri, True)
                     else:
-                        _gbuffer_row(out, i, i - y0, cols, x1 - x0 + 1, yw, zb, tb, frame, planes, normals, False)
+                        _gbuffer_row(out, i, i - y0, cols, x1 - x0 + 1, yw, zb, tb, frame, planes, normals, tri, False)
 
 
 @kernel(parallel=True)
 def _tiles_count(fe, sc, fcount):
     """rasterize_fragments, first pass: fcount[tile] = the number of fragments of the tile."""
-    vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, _normals, _rowbits = fe
+    vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, _normals, _rowbits, _tri = fe
     _zbuf, _tbuf, spbuf, _ibuf, _lbuf, nslot = sc
     vw = _view_window(vp)
     W, H, ortho, far, wl, wt, wsx, wsy = vw
@@ -1163,7 +1283,7 @@ def _tiles_count(fe, sc, fcount):
 def _tiles_fragments(fe, sc, foff, fpix, ftri, fbary, fdepth):
     """rasterize_fragments, second pass: write the fragments of each tile from foff[tile] on, by
     triangle, piece and pixel (row-major)."""
-    vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, _normals, _rowbits = fe
+    vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, _normals, _rowbits, tri = fe
     _zbuf, _tbuf, spbuf, _ibuf, _lbuf, nslot = sc
     W, H, ortho, far, wl, wt, wsx, wsy = _view_window(vp)
     for slot in prange(nslot):
@@ -1200,7 +1320,7 @@ def _tiles_fragments(fe, sc, foff, fpix, ftri, fbary, fdepth):
                                     continue
                                 b1, b2 = _bary(q, xw, yw, z, ortho)
                                 fpix[w] = i * W + j
-                                ftri[w] = t
+                                ftri[w] = tri[t]
                                 fbary[w, 0] = b1
                                 fbary[w, 1] = b2
                                 fdepth[w] = z
@@ -1221,7 +1341,7 @@ def _make_min_blend_kernel(prog):
         skipped, and so are the pieces with a constant attribute whose value bound
         (``value_lower_bound``) is at least the tile's largest value: the output is the same. With a
         texel mask (``fe.rowbits``), only its texels are shaded, the others keep their value."""
-        vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, _normals, rowbits = fe
+        vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, _normals, rowbits, tri = fe
         zbuf, _tbuf, spbuf, ibuf, lbuf, nslot = sc
         pparams, cattr, img, blend, bstats, split, cull_discarded = mb
         vw = _view_window(vp)
@@ -1262,7 +1382,8 @@ def _make_min_blend_kernel(prog):
                         continue  # no texel to shade in the piece's rectangle of the tile
                     zlo, zhi = _depth_bounds(zinfo, ct, ortho, near)
                     pl = _plane(planes, t)
-                    ca = (cattr[t, 0], cattr[t, 1], cattr[t, 2])
+                    ot = tri[t]  # the face
+                    ca = (cattr[ot, 0], cattr[ot, 1], cattr[ot, 2])
                     cconst = (ca[0] == ca[1]) & (ca[0] == ca[2])
                     if cull_discarded:
                         # hierarchical culling (a GPU's coarse depth test): the nearest fragment of the
@@ -1291,7 +1412,7 @@ def _make_min_blend_kernel(prog):
                     dirty = True  # this piece will lower texels: the tile's largest value may fall
                     q = _dual(planes, t)
                     zr = (zlo, zhi, far)
-                    side_a = t < split
+                    side_a = ot < split
                     for rr in range(nrows):
                         li = SP[_SP_RW, rr]
                         i = li + y0
@@ -1423,6 +1544,7 @@ class FrontEnd(NamedTuple):
     planes: np.ndarray  #: (max(F, 1), PL_WIDTH) float64 triangles' planes and dual vectors, columns PL_*
     normals: np.ndarray  #: (max(F, 1), 3) float32 triangles' unit world normals
     rowbits: np.ndarray  #: (ntiles, T) int64 texel-mask bits per tile row (min-blend), or empty
+    tri: np.ndarray  #: (max(U, 1),) int32 the face of each front-end triangle (U of them: the faces kept by setup)
 
 
 class _Scratch(NamedTuple):
@@ -1450,24 +1572,36 @@ class _Blend(NamedTuple):
 
 _E2I64 = np.empty((0, 0), dtype=np.int64)
 _E1U = np.empty(0, dtype=np.uint8)
+_E1I32 = np.empty(0, dtype=np.int32)
 
 
 def _front_end(vp, W, H, verts, fcs, code, near, mask=None) -> FrontEnd:
     """setup + binning: the arrays the tile kernels read. ``mask`` (H,W) uint8: bin a piece only
     to the tiles where its bounding box holds a set texel (min-blend's texel mask)."""
     F = len(fcs)
-    NC = np.empty(F, dtype=np.int32)
-    box = np.empty((2 * F, 4), dtype=np.int32)
-    edges = np.empty((2 * F, 3, E_WIDTH), dtype=np.float64)
-    zinfo = np.empty((2 * F, 3), dtype=np.float64)
-    planes = np.zeros((max(F, 1), PL_WIDTH), dtype=np.float64)  # row 0 exists (the G-buffer pass reads it)
-    normals = np.zeros((max(F, 1), 3), dtype=np.float32)
+    nthreads = numba.get_num_threads()
+    # small-triangle rejection: only the faces that may cover a pixel center go on to setup
+    nchunk = int(min(max(1, F // 4096), 8 * nthreads))
+    chunk = (F + nchunk - 1) // nchunk if F else 1
+    ccount = np.zeros(nchunk, dtype=np.int64)
+    _select(verts, fcs, vp, near, code, chunk, ccount, nthreads, _E1I32)
+    U = int(ccount.sum())
+    tri = np.zeros(max(U, 1), dtype=np.int32)  # entry 0 exists (read, then discarded, where no hit)
+    if U:
+        ccount[1:] = np.cumsum(ccount)[:-1]
+        ccount[0] = 0
+        _select(verts, fcs, vp, near, code, chunk, ccount, nthreads, tri)
+    NC = np.empty(U, dtype=np.int32)
+    box = np.empty((2 * U, 4), dtype=np.int32)
+    edges = np.empty((2 * U, 3, E_WIDTH), dtype=np.float64)
+    zinfo = np.empty((2 * U, 3), dtype=np.float64)
+    planes = np.zeros((max(U, 1), PL_WIDTH), dtype=np.float64)  # row 0 exists (the G-buffer pass reads it)
+    normals = np.zeros((max(U, 1), 3), dtype=np.float32)
     T = TILE
     ntx = (W + T - 1) // T
     nty = (H + T - 1) // T
-    nthreads = numba.get_num_threads()
-    nchunk = int(min(max(1, F // 1024), 4 * nthreads))
-    chunk = (F + nchunk - 1) // nchunk if F else 1
+    nchunk = int(min(max(1, U // 1024), 4 * nthreads))
+    chunk = (U + nchunk - 1) // nchunk if U else 1
     cnt = np.empty((nchunk, ntx * nty), dtype=np.int64)
     start = np.empty(ntx * nty + 1, dtype=np.int64)
     if mask is not None:
@@ -1479,12 +1613,30 @@ def _front_end(vp, W, H, verts, fcs, code, near, mask=None) -> FrontEnd:
         tile_any = _E1U
     use = mask is not None
     _setup_count(
-        verts, fcs, vp, near, code, NC, box, edges, zinfo, planes, normals, T, ntx, chunk, cnt, nthreads, tile_any, use
+        verts,
+        fcs,
+        tri,
+        vp,
+        near,
+        code,
+        NC,
+        box,
+        edges,
+        zinfo,
+        planes,
+        normals,
+        T,
+        ntx,
+        chunk,
+        cnt,
+        nthreads,
+        tile_any,
+        use,
     )
     _bin_offsets(cnt, start)
     bins = np.empty(int(start[-1]), dtype=np.int32)
     _bin_fill(NC, box, T, ntx, chunk, cnt, bins, nthreads, tile_any, use)
-    return FrontEnd(vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, normals, rowbits)
+    return FrontEnd(vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, normals, rowbits, tri)
 
 
 def _scratch(T) -> _Scratch:
