@@ -348,103 +348,108 @@ def _tile_row_bits(mask, T, ntx, nty, bits, tile_any):
         tile_any[tile] = a != 0
 
 
+@kernel(parallel=True)
+def _vertex_screen(verts, vp, near, vs):
+    """Per vertex (structure of arrays, once per vertex instead of once per triangle corner):
+    vs[0, v] = its view depth z and, where z >= near, vs[1, v], vs[2, v] = its snapped screen
+    coordinates (NaN elsewhere). The same operations as :func:`_setup_one` / :func:`_setup_piece`
+    on a corner, so the values are theirs bit for bit."""
+    for v in prange(verts.shape[0]):
+        x, y, z = view_coords(vp, verts[v, 0], verts[v, 1], verts[v, 2])
+        vs[0, v] = z
+        if z >= near:
+            sx, sy = view_coords_to_screen(vp, x, y, z)
+            vs[1, v] = _snap(sx)
+            vs[2, v] = _snap(sy)
+        else:
+            vs[1, v] = np.nan
+            vs[2, v] = np.nan
+
+
 @kernel
-def _no_pieces(t, verts, faces, vp, near, cull):
+def _no_pieces(t, verts, faces, vp, near, cull, vs):
     """True if face t surely gives no piece (small-triangle rejection before setup and binning): it
     is degenerate, culled, beyond ``far`` or behind ``near``, or it lies wholly in front of the near
-    plane and its snapped screen bounding box holds no pixel center (or its area is zero). The same
-    operations, in the same order, as :func:`_setup_one` and :func:`_setup_piece`, so the decision is
-    theirs bit for bit; the cases it does not decide (near-plane clipping, the view-space plane) are
-    left to the full setup."""
+    plane and its snapped screen bounding box holds no pixel center. The same operations, in the
+    same order, as :func:`_setup_one` and :func:`_setup_piece` (corners from :func:`_vertex_screen`),
+    so the decision is theirs bit for bit; the cases it does not decide (near-plane clipping, the
+    view-space plane, the area) are left to the full setup."""
     ortho = vp[VP_ORTHO] != 0.0
     far = vp[VP_FAR]
     ia = faces[t, 0]
     ib = faces[t, 1]
     ic = faces[t, 2]
+    z0 = vs[0, ia]
+    z1 = vs[0, ib]
+    z2 = vs[0, ic]
+    if min(z0, min(z1, z2)) > far or max(z0, max(z1, z2)) < near:
+        return True
+    if z0 >= near and z1 >= near and z2 >= near:
+        W = vp[VP_W]
+        H = vp[VP_H]
+        sx0 = vs[1, ia]
+        sx1 = vs[1, ib]
+        sx2 = vs[1, ic]
+        sy0 = vs[2, ia]
+        sy1 = vs[2, ib]
+        sy2 = vs[2, ic]
+        fj0 = max(math.ceil(min(sx0, min(sx1, sx2)) - 0.5), 0.0)
+        fj1 = min(math.floor(max(sx0, max(sx1, sx2)) - 0.5), W - 1.0)
+        fi0 = max(math.ceil(min(sy0, min(sy1, sy2)) - 0.5), 0.0)
+        fi1 = min(math.floor(max(sy0, max(sy1, sy2)) - 0.5), H - 1.0)
+        # NaN coordinates fail both comparisons: left to the full setup (which rejects them)
+        if fj0 > fj1 or fi0 > fi1:
+            return True
+    if cull == 0:
+        return False  # the degenerate test is left to the full setup
     ax = verts[ia, 0]
     ay = verts[ia, 1]
     az = verts[ia, 2]
-    bx = verts[ib, 0]
-    by = verts[ib, 1]
-    bz = verts[ib, 2]
-    cx = verts[ic, 0]
-    cy = verts[ic, 1]
-    cz = verts[ic, 2]
-    e1x = bx - ax
-    e1y = by - ay
-    e1z = bz - az
-    e2x = cx - ax
-    e2y = cy - ay
-    e2z = cz - az
+    e1x = verts[ib, 0] - ax
+    e1y = verts[ib, 1] - ay
+    e1z = verts[ib, 2] - az
+    e2x = verts[ic, 0] - ax
+    e2y = verts[ic, 1] - ay
+    e2z = verts[ic, 2] - az
     nx = e1y * e2z - e1z * e2y
     ny = e1z * e2x - e1x * e2z
     nz = e1x * e2y - e1y * e2x
-    nn = math.sqrt(nx * nx + ny * ny + nz * nz)
-    if not (nn > 0.0 and math.isfinite(nn)):
-        return True
-    if cull != 0:
-        if ortho:
-            f = nx * vp[VP_FORWARD] + ny * vp[VP_FORWARD + 1] + nz * vp[VP_FORWARD + 2]
-        else:
-            f = nx * (ax - vp[VP_ORIGIN]) + ny * (ay - vp[VP_ORIGIN + 1]) + nz * (az - vp[VP_ORIGIN + 2])
-        if cull == 1 and not (f < 0.0):
-            return True
-        if cull == 2 and not (f > 0.0):
-            return True
-    x0, y0, z0 = view_coords(vp, ax, ay, az)
-    x1, y1, z1 = view_coords(vp, bx, by, bz)
-    x2, y2, z2 = view_coords(vp, cx, cy, cz)
-    if min(z0, min(z1, z2)) > far or max(z0, max(z1, z2)) < near:
-        return True
-    if not (z0 >= near and z1 >= near and z2 >= near):
-        return False  # clipped: decided by the full setup
-    W = vp[VP_W]
-    H = vp[VP_H]
-    sx0, sy0 = view_coords_to_screen(vp, x0, y0, z0)
-    sx1, sy1 = view_coords_to_screen(vp, x1, y1, z1)
-    sx2, sy2 = view_coords_to_screen(vp, x2, y2, z2)
-    sx0 = _snap(sx0)
-    sy0 = _snap(sy0)
-    sx1 = _snap(sx1)
-    sy1 = _snap(sy1)
-    sx2 = _snap(sx2)
-    sy2 = _snap(sy2)
-    xmin = min(sx0, min(sx1, sx2))
-    xmax = max(sx0, max(sx1, sx2))
-    ymin = min(sy0, min(sy1, sy2))
-    ymax = max(sy0, max(sy1, sy2))
-    fj0 = max(math.ceil(xmin - 0.5), 0.0)
-    fj1 = min(math.floor(xmax - 0.5), W - 1.0)
-    fi0 = max(math.ceil(ymin - 0.5), 0.0)
-    fi1 = min(math.floor(ymax - 0.5), H - 1.0)
-    # NaN coordinates fail both comparisons: left to the full setup (which rejects them)
-    return fj0 > fj1 or fi0 > fi1
+    if ortho:
+        f = nx * vp[VP_FORWARD] + ny * vp[VP_FORWARD + 1] + nz * vp[VP_FORWARD + 2]
+    else:
+        f = nx * (ax - vp[VP_ORIGIN]) + ny * (ay - vp[VP_ORIGIN + 1]) + nz * (az - vp[VP_ORIGIN + 2])
+    return (cull == 1 and not (f < 0.0)) or (cull == 2 and not (f > 0.0))
 
 
 @kernel(parallel=True)
-def _select(verts, faces, vp, near, cull, chunk, ccount, nslot, tri):
-    """Small-triangle rejection: the faces that may give pieces (not :func:`_no_pieces`), in increasing
-    index, into ``tri`` (two passes per chunk of faces: count into ``ccount``, then, from the prefix
-    sum, fill; the chunks are dealt round-robin to ``nslot`` slots). ``tri`` is None-like (size 0) in
-    the count pass."""
+def _select(verts, faces, vp, near, cull, vs, chunk, ccount, nslot, keep):
+    """Small-triangle rejection, first pass: keep[t] = 1 for the faces that may give pieces (not
+    :func:`_no_pieces`), ccount[c] = how many in chunk c of faces (chunks dealt round-robin to
+    ``nslot`` slots)."""
     nchunk = ccount.shape[0]
     F = faces.shape[0]
-    fill = tri.shape[0] > 0
     for slot in prange(nslot):
         for c in range(slot, nchunk, nslot):
-            t1 = min(F, (c + 1) * chunk)
-            if fill:
-                w = ccount[c]
-                for t in range(c * chunk, t1):
-                    if not _no_pieces(t, verts, faces, vp, near, cull):
-                        tri[w] = t
-                        w += 1
-            else:
-                n = 0
-                for t in range(c * chunk, t1):
-                    if not _no_pieces(t, verts, faces, vp, near, cull):
-                        n += 1
-                ccount[c] = n
+            n = 0
+            for t in range(c * chunk, min(F, (c + 1) * chunk)):
+                k = not _no_pieces(t, verts, faces, vp, near, cull, vs)
+                keep[t] = k
+                n += k
+            ccount[c] = n
+
+
+@kernel(parallel=True)
+def _select_fill(chunk, coff, nslot, keep, tri):
+    """Second pass: the kept faces in increasing index into ``tri`` (chunk c from coff[c])."""
+    nchunk = coff.shape[0]
+    F = keep.shape[0]
+    for slot in prange(nslot):
+        for c in range(slot, nchunk, nslot):
+            w = coff[c]
+            for t in range(c * chunk, min(F, (c + 1) * chunk)):
+                if keep[t]:
+                    tri[w] = t
+                    w += 1
 
 
 @kernel(parallel=True)
@@ -1572,7 +1577,6 @@ class _Blend(NamedTuple):
 
 _E2I64 = np.empty((0, 0), dtype=np.int64)
 _E1U = np.empty(0, dtype=np.uint8)
-_E1I32 = np.empty(0, dtype=np.int32)
 
 
 def _front_end(vp, W, H, verts, fcs, code, near, mask=None) -> FrontEnd:
@@ -1584,13 +1588,16 @@ def _front_end(vp, W, H, verts, fcs, code, near, mask=None) -> FrontEnd:
     nchunk = int(min(max(1, F // 4096), 8 * nthreads))
     chunk = (F + nchunk - 1) // nchunk if F else 1
     ccount = np.zeros(nchunk, dtype=np.int64)
-    _select(verts, fcs, vp, near, code, chunk, ccount, nthreads, _E1I32)
+    vs = np.empty((3, len(verts)), dtype=np.float64)
+    _vertex_screen(verts, vp, near, vs)
+    keep = np.empty(F, dtype=np.uint8)
+    _select(verts, fcs, vp, near, code, vs, chunk, ccount, nthreads, keep)
     U = int(ccount.sum())
     tri = np.zeros(max(U, 1), dtype=np.int32)  # entry 0 exists (read, then discarded, where no hit)
     if U:
         ccount[1:] = np.cumsum(ccount)[:-1]
         ccount[0] = 0
-        _select(verts, fcs, vp, near, code, chunk, ccount, nthreads, tri)
+        _select_fill(chunk, ccount, nthreads, keep, tri)
     NC = np.empty(U, dtype=np.int32)
     box = np.empty((2 * U, 4), dtype=np.int32)
     edges = np.empty((2 * U, 3, E_WIDTH), dtype=np.float64)
