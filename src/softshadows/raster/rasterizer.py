@@ -366,12 +366,39 @@ def _vertex_screen(verts, vp, near, vs):
             vs[2, v] = np.nan
 
 
+#: the small-triangle rejection tests the pixel centers of a bounding box holding at most this many
+_FEW_CENTERS = 4.0
+
+
+@kernel(inline=True)
+def _center_in(ax, ay, bx, by, py, j):
+    """:func:`_edge_in` of the edge a->b (of a positively oriented piece) at the pixel center (j + 0.5,
+    py), from the values :func:`_store_edge` would store (canonical endpoints, sign, top-left rule)."""
+    if ax < bx or (ax == bx and ay < by):
+        cax = ax
+        cay = ay
+        cdx = bx - ax
+        cdy = by - ay
+        sg = 1.0
+    else:
+        cax = bx
+        cay = by
+        cdx = ax - bx
+        cdy = ay - by
+        sg = -1.0
+    ddx = bx - ax
+    ddy = by - ay
+    own = ddy < 0.0 or (ddy == 0.0 and ddx > 0.0)
+    v = sg * (cdx * (py - cay) - cdy * ((j + 0.5) - cax))
+    return not (v < 0.0 or (v == 0.0 and not own))
+
+
 @kernel
 def _no_pieces(t, verts, faces, vp, near, cull, vs):
     """True if face t surely gives no piece (small-triangle rejection before setup and binning): it
     is degenerate, culled, beyond ``far`` or behind ``near``, or it lies wholly in front of the near
-    plane and its snapped screen bounding box holds no pixel center. The same operations, in the
-    same order, as :func:`_setup_one` and :func:`_setup_piece` (corners from :func:`_vertex_screen`),
+    plane and its snapped screen bounding box holds no pixel center, or holds a few
+    (``_FEW_CENTERS``) and the triangle covers none of them. The same operations, in the same order, as :func:`_setup_one` and :func:`_setup_piece` (corners from :func:`_vertex_screen`),
     so the decision is theirs bit for bit; the cases it does not decide (near-plane clipping, the
     view-space plane, the area) are left to the full setup."""
     ortho = vp[VP_ORTHO] != 0.0
@@ -399,6 +426,25 @@ def _no_pieces(t, verts, faces, vp, near, cull, vs):
         fi1 = min(math.floor(max(sy0, max(sy1, sy2)) - 0.5), H - 1.0)
         # NaN coordinates fail both comparisons: left to the full setup (which rejects them)
         if fj0 > fj1 or fi0 > fi1:
+            return True
+        if (fj1 - fj0 + 1.0) * (fi1 - fi0 + 1.0) <= _FEW_CENTERS:
+            # a small triangle: test its few candidate pixel centers with the tile kernels' own
+            # per-pixel coverage test (_edge_in on the edges _store_edge would store)
+            area = (sx1 - sx0) * (sy2 - sy0) - (sy1 - sy0) * (sx2 - sx0)
+            if not (area != 0.0 and math.isfinite(area)):
+                return True
+            if area < 0.0:
+                sx1, sx2 = sx2, sx1
+                sy1, sy2 = sy2, sy1
+            for i in range(int(fi0), int(fi1) + 1):
+                py = i + 0.5
+                for j in range(int(fj0), int(fj1) + 1):
+                    if (
+                        _center_in(sx0, sy0, sx1, sy1, py, j)
+                        and _center_in(sx1, sy1, sx2, sy2, py, j)
+                        and _center_in(sx2, sy2, sx0, sy0, py, j)
+                    ):
+                        return False
             return True
     if cull == 0:
         return False  # the degenerate test is left to the full setup
