@@ -158,7 +158,7 @@ def _edge_test_coverage(view, V, F):
             r = dx * (py - ay)
             e = sg * (r - dy * (px - ax))
             cov &= ~((e < 0) | ((e == 0) & (inc == 0)))
-        t = fe.tri[ct >> 1]  # the face of the front-end triangle
+        t = fe.tri[ct >> fe.shift]  # the face of the front-end triangle
         pairs += [(t, p) for p in (i[cov] * W + j[cov])]
     return sorted(pairs)
 
@@ -692,7 +692,7 @@ def test_small_triangle_rejection_agrees_with_full_setup(ortho):
         vp, W_, H_, verts, fcs, code, near = R._prepare(view, V, F, cull)
         fe = R._front_end(vp, W_, H_, verts, fcs, code, near)
         kept = np.zeros(n, bool)
-        kept[fe.tri[: fe.box.shape[0] // 2]] = True  # fe.box: two piece slots per front-end triangle
+        kept[fe.tri[: fe.box.shape[0] >> fe.shift]] = True  # fe.box: 1 << shift piece slots per front-end triangle
         dropped = np.nonzero(~kept)[0]
         assert n // 4 < len(dropped) < n  # the rejection does work here (most faces are sub-pixel)
         NC = np.empty(1, np.int32)
@@ -702,7 +702,7 @@ def test_small_triangle_rejection_agrees_with_full_setup(ortho):
         planes = np.zeros((1, R.PL_WIDTH))
         normals = np.zeros((1, 3), np.float32)
         for t in dropped:
-            R._setup_one(0, t, verts, fcs, vp, near, code, NC, box, edges, zinfo, planes, normals)
+            R._setup_one(0, t, verts, fcs, vp, near, code, NC, box, edges, zinfo, planes, normals, 1)
             for ct in range(NC[0]):  # pieces of a dropped face cover no pixel center (per-pixel test)
                 i0, i1, j0, j1 = box[ct, [R.BOX_I0, R.BOX_I1, R.BOX_J0, R.BOX_J1]]
                 i, j = np.mgrid[i0 : i1 + 1, j0 : j1 + 1]

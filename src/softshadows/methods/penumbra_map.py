@@ -116,7 +116,7 @@ def shadow_map_pass(scene, map_size: int, light_radius: float, base_view: View |
     ``Z_P`` is the nearer of the occluder map and the receivers."""
     hv, view, border, clipped = penumbra_map_view(scene, map_size, light_radius, base_view)
     flat = scene.flat
-    occ_faces = np.ascontiguousarray(flat.faces[flat.occluder])
+    occ_faces = flat.faces_where(flat.occluder)  # once per geometry
     d_occ, _ = rasterize_depth(hv, flat.vertices, occ_faces, cull="none")
     only_recv = flat.receiver & ~flat.occluder
     if only_recv.any():

@@ -51,7 +51,8 @@ _VALUE_RECOMPUTE = 0.05
 
 # ----------------------------------------------------------------------------------------------
 # the setup arrays' columns. A triangle t has two piece slots, 2t and 2t + 1 (clipping by the near
-# plane may cut it into two pieces); ``bins`` lists slots, and ``slot >> 1`` is the triangle.
+# plane may cut it into two pieces, when some face crosses it: FrontEnd.shift = 1; else one slot u);
+# ``bins`` lists slots, and ``slot >> shift`` is the front-end triangle (FrontEnd.tri: its face).
 # ----------------------------------------------------------------------------------------------
 #: box[slot, BOX_*] (int32): the rows i0..i1 and columns j0..j1 of the pixel centers inside the
 #: piece's bounding box (clamped to the image)
@@ -208,9 +209,10 @@ def _setup_piece(vp, slot, x0, y0, z0, x1, y1, z1, x2, y2, z2, far, box, edges, 
 
 
 @kernel
-def _setup_one(u, t, verts, faces, vp, near, cull, NC, box, edges, zinfo, planes, normals):
-    """Face t, stored as front-end triangle u: NC[u] pieces in slots 2u, 2u+1 of box/edges/zinfo;
-    planes[u] plane data; normals[u] unit normal."""
+def _setup_one(u, t, verts, faces, vp, near, cull, NC, box, edges, zinfo, planes, normals, sh):
+    """Face t, stored as front-end triangle u: NC[u] pieces in slots u << sh (and the next one: sh = 1
+    when some face crosses the near plane) of box/edges/zinfo; planes[u] plane data; normals[u] unit
+    normal."""
     ortho = vp[VP_ORTHO] != 0.0
     far = vp[VP_FAR]
     NC[u] = 0
@@ -294,7 +296,7 @@ def _setup_one(u, t, verts, faces, vp, near, cull, NC, box, edges, zinfo, planes
     in1 = z1 >= near
     in2 = z2 >= near
     nin = int(in0) + int(in1) + int(in2)
-    s0 = 2 * u
+    s0 = u << sh
     if nin == 3:
         NC[u] = _setup_piece(vp, s0, x0, y0, z0, x1, y1, z1, x2, y2, z2, far, box, edges, zinfo)
         return
@@ -470,7 +472,7 @@ def _no_pieces(t, verts, faces, vp, near, cull, vs):
 @kernel(parallel=True)
 def _select(verts, faces, vp, near, cull, vs, chunk, ccount, nslot, keep):
     """Small-triangle rejection, first pass: keep[t] = 1 for the faces that may give pieces (not
-    :func:`_no_pieces`), ccount[c] = how many in chunk c of faces (chunks dealt round-robin to
+    :func:`_no_pieces`; 2 if they cross the near plane), ccount[c] = how many in chunk c of faces (chunks dealt round-robin to
     ``nslot`` slots)."""
     nchunk = ccount.shape[0]
     F = faces.shape[0]
@@ -478,9 +480,16 @@ def _select(verts, faces, vp, near, cull, vs, chunk, ccount, nslot, keep):
         for c in range(slot, nchunk, nslot):
             n = 0
             for t in range(c * chunk, min(F, (c + 1) * chunk)):
-                k = not _no_pieces(t, verts, faces, vp, near, cull, vs)
+                k = 0
+                if not _no_pieces(t, verts, faces, vp, near, cull, vs):
+                    # 2: the face crosses the near plane (it may be clipped into two pieces)
+                    k = (
+                        1
+                        if (vs[0, faces[t, 0]] >= near and vs[0, faces[t, 1]] >= near and vs[0, faces[t, 2]] >= near)
+                        else 2
+                    )
                 keep[t] = k
-                n += k
+                n += k != 0
             ccount[c] = n
 
 
@@ -519,6 +528,7 @@ def _setup_count(
     nslot,
     tile_any,
     use_bits,
+    sh,
 ):
     """Setup of the selected faces ``tri`` (front-end triangle u is face tri[u]; parallel over chunks of
     them, dealt round-robin to ``nslot`` slots: load balance, see docs/rasterizer.md) and per (chunk,
@@ -533,9 +543,9 @@ def _setup_count(
                 cnt[c, tt] = 0
             t1 = min(U, (c + 1) * chunk)
             for u in range(c * chunk, t1):
-                _setup_one(u, tri[u], verts, faces, vp, near, cull, NC, box, edges, zinfo, planes, normals)
+                _setup_one(u, tri[u], verts, faces, vp, near, cull, NC, box, edges, zinfo, planes, normals, sh)
                 for k in range(NC[u]):
-                    ct = 2 * u + k
+                    ct = (u << sh) + k
                     for ty in range(box[ct, BOX_I0] // T, box[ct, BOX_I1] // T + 1):
                         for tx in range(box[ct, BOX_J0] // T, box[ct, BOX_J1] // T + 1):
                             tile = ty * ntx + tx
@@ -561,7 +571,7 @@ def _bin_offsets(cnt, bstart):
 
 
 @kernel(parallel=True)
-def _bin_fill(NC, box, T, ntx, chunk, off, bins, nslot, tile_any, use_bits):
+def _bin_fill(NC, box, T, ntx, chunk, off, bins, nslot, tile_any, use_bits, sh):
     nchunk = off.shape[0]
     F = NC.shape[0]
     for slot in prange(nslot):
@@ -569,7 +579,7 @@ def _bin_fill(NC, box, T, ntx, chunk, off, bins, nslot, tile_any, use_bits):
             t1 = min(F, (c + 1) * chunk)
             for t in range(c * chunk, t1):
                 for k in range(NC[t]):
-                    ct = 2 * t + k
+                    ct = (t << sh) + k
                     for ty in range(box[ct, BOX_I0] // T, box[ct, BOX_I1] // T + 1):
                         for tx in range(box[ct, BOX_J0] // T, box[ct, BOX_J1] // T + 1):
                             tile = ty * ntx + tx
@@ -983,7 +993,7 @@ def _depth_test_row(zb, tb, t, span, cols, pl, zrow, zr, ortho):
 
 
 @kernel(inline=True)
-def _depth_pass(vw, near, tile, rect, start, bins, box, edges, zinfo, planes, zb, tb, SP):
+def _depth_pass(vw, near, tile, rect, start, bins, box, edges, zinfo, planes, zb, tb, SP, sh):
     """The nearest depth ``zb`` and triangle ``tb`` (-1: none) of every pixel of the tile ``rect`` =
     (y0, y1, x0, x1), from the pieces binned to it (the dense modes: depth and G-buffer)."""
     W, H, ortho, far, wl, wt, wsx, wsy = vw
@@ -995,7 +1005,7 @@ def _depth_pass(vw, near, tile, rect, start, bins, box, edges, zinfo, planes, zb
             tb[li, k] = -1
     for bi in range(start[tile], start[tile + 1]):
         ct = bins[bi]
-        t = ct >> 1
+        t = ct >> sh
         prect = _piece_rect(box, ct, rect)
         i0, i1, j0, j1 = prect
         if i0 > i1 or j0 > j1:
@@ -1237,7 +1247,7 @@ def _blend_row(prog, pparams, zb, ib, rn, span, cols, yw, zrow, pl, q, ca, zr, o
 @kernel(parallel=True)
 def _tiles_depth(fe, sc, depth_out, tri_out):
     """rasterize_depth: the nearest depth (+inf: none) and triangle (-1: none) of every pixel."""
-    vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, _normals, _rowbits, tri = fe
+    vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, _normals, _rowbits, sh, tri = fe
     zbuf, tbuf, spbuf, _ibuf, _lbuf, nslot = sc
     vw = _view_window(vp)
     W, H = vw[0], vw[1]
@@ -1249,7 +1259,7 @@ def _tiles_depth(fe, sc, depth_out, tri_out):
         for ty in range(slot, nty, nslot):  # tile rows dealt round-robin: contiguous output rows
             for tx in range(ntx):
                 rect = _tile_rect(ty, tx, T, W, H)
-                _depth_pass(vw, near, ty * ntx + tx, rect, start, bins, box, edges, zinfo, planes, zb, tb, SP)
+                _depth_pass(vw, near, ty * ntx + tx, rect, start, bins, box, edges, zinfo, planes, zb, tb, SP, sh)
                 y0, y1, x0, x1 = rect
                 for i in range(y0, y1 + 1):
                     # row views: their indices are known non-negative (no wrap-around selects)
@@ -1264,7 +1274,7 @@ def _tiles_depth(fe, sc, depth_out, tri_out):
 @kernel(parallel=True)
 def _tiles_gbuffer(fe, sc, out):
     """rasterize: the nearest surface's G-buffer ``out`` = (depth, tri, pos, nrm, bary, mask)."""
-    vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, normals, _rowbits, tri = fe
+    vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, normals, _rowbits, sh, tri = fe
     zbuf, tbuf, spbuf, _ibuf, _lbuf, nslot = sc
     vw = _view_window(vp)
     W, H, ortho, _far, wl, wt, wsx, wsy = vw
@@ -1277,7 +1287,7 @@ def _tiles_gbuffer(fe, sc, out):
         for ty in range(slot, nty, nslot):
             for tx in range(ntx):
                 rect = _tile_rect(ty, tx, T, W, H)
-                _depth_pass(vw, near, ty * ntx + tx, rect, start, bins, box, edges, zinfo, planes, zb, tb, SP)
+                _depth_pass(vw, near, ty * ntx + tx, rect, start, bins, box, edges, zinfo, planes, zb, tb, SP, sh)
                 y0, y1, x0, x1 = rect
                 cols = (x0, wl, wsx)
                 for i in range(y0, y1 + 1):
@@ -1291,7 +1301,7 @@ def _tiles_gbuffer(fe, sc, out):
 @kernel(parallel=True)
 def _tiles_count(fe, sc, fcount):
     """rasterize_fragments, first pass: fcount[tile] = the number of fragments of the tile."""
-    vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, _normals, _rowbits, _tri = fe
+    vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, _normals, _rowbits, sh, _tri = fe
     _zbuf, _tbuf, spbuf, _ibuf, _lbuf, nslot = sc
     vw = _view_window(vp)
     W, H, ortho, far, wl, wt, wsx, wsy = vw
@@ -1312,7 +1322,7 @@ def _tiles_count(fe, sc, fcount):
                         continue
                     zlo, zhi = _depth_bounds(zinfo, ct, ortho, near)
                     zr = (zlo, zhi, far)
-                    pl = _plane(planes, ct >> 1)
+                    pl = _plane(planes, ct >> sh)
                     e0, e1, e2, scan, nrows = _piece_rows(edges, zinfo, ct, prect, y0, x0, W, H, SP, False)
                     for rr in range(nrows):
                         li = SP[_SP_RW, rr]
@@ -1334,7 +1344,7 @@ def _tiles_count(fe, sc, fcount):
 def _tiles_fragments(fe, sc, foff, fpix, ftri, fbary, fdepth):
     """rasterize_fragments, second pass: write the fragments of each tile from foff[tile] on, by
     triangle, piece and pixel (row-major)."""
-    vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, _normals, _rowbits, tri = fe
+    vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, _normals, _rowbits, sh, tri = fe
     _zbuf, _tbuf, spbuf, _ibuf, _lbuf, nslot = sc
     W, H, ortho, far, wl, wt, wsx, wsy = _view_window(vp)
     for slot in prange(nslot):
@@ -1347,7 +1357,7 @@ def _tiles_fragments(fe, sc, foff, fpix, ftri, fbary, fdepth):
                 w = foff[tile]
                 for bi in range(start[tile], start[tile + 1]):
                     ct = bins[bi]
-                    t = ct >> 1
+                    t = ct >> sh
                     prect = _piece_rect(box, ct, rect)
                     i0, i1, j0, j1 = prect
                     if i0 > i1 or j0 > j1:
@@ -1392,7 +1402,7 @@ def _make_min_blend_kernel(prog):
         skipped, and so are the pieces with a constant attribute whose value bound
         (``value_lower_bound``) is at least the tile's largest value: the output is the same. With a
         texel mask (``fe.rowbits``), only its texels are shaded, the others keep their value."""
-        vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, _normals, rowbits, tri = fe
+        vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, _normals, rowbits, sh, tri = fe
         zbuf, _tbuf, spbuf, ibuf, lbuf, nslot = sc
         pparams, cattr, img, blend, bstats, split, cull_discarded = mb
         vw = _view_window(vp)
@@ -1424,7 +1434,7 @@ def _make_min_blend_kernel(prog):
                 nvculled = 0
                 for bi in range(start[tile], start[tile + 1]):
                     ct = bins[bi]
-                    t = ct >> 1
+                    t = ct >> sh
                     prect = _piece_rect(box, ct, rect)
                     i0, i1, j0, j1 = prect
                     if i0 > i1 or j0 > j1:
@@ -1595,6 +1605,7 @@ class FrontEnd(NamedTuple):
     planes: np.ndarray  #: (max(F, 1), PL_WIDTH) float64 triangles' planes and dual vectors, columns PL_*
     normals: np.ndarray  #: (max(F, 1), 3) float32 triangles' unit world normals
     rowbits: np.ndarray  #: (ntiles, T) int64 texel-mask bits per tile row (min-blend), or empty
+    shift: int  #: piece slot ct belongs to front-end triangle ct >> shift (1: two slots per triangle)
     tri: np.ndarray  #: (max(U, 1),) int32 the face of each front-end triangle (U of them: the faces kept by setup)
 
 
@@ -1644,10 +1655,12 @@ def _front_end(vp, W, H, verts, fcs, code, near, mask=None) -> FrontEnd:
         ccount[1:] = np.cumsum(ccount)[:-1]
         ccount[0] = 0
         _select_fill(chunk, ccount, nthreads, keep, tri)
+    # one piece slot per front-end triangle, two (u << 1, u << 1 | 1) when a face crosses the near plane
+    sh = 1 if U and int(keep.max()) == 2 else 0
     NC = np.empty(U, dtype=np.int32)
-    box = np.empty((2 * U, 4), dtype=np.int32)
-    edges = np.empty((2 * U, 3, E_WIDTH), dtype=np.float64)
-    zinfo = np.empty((2 * U, 3), dtype=np.float64)
+    box = np.empty((U << sh, 4), dtype=np.int32)
+    edges = np.empty((U << sh, 3, E_WIDTH), dtype=np.float64)
+    zinfo = np.empty((U << sh, 3), dtype=np.float64)
     planes = np.zeros((max(U, 1), PL_WIDTH), dtype=np.float64)  # row 0 exists (the G-buffer pass reads it)
     normals = np.zeros((max(U, 1), 3), dtype=np.float32)
     T = TILE
@@ -1685,11 +1698,12 @@ def _front_end(vp, W, H, verts, fcs, code, near, mask=None) -> FrontEnd:
         nthreads,
         tile_any,
         use,
+        sh,
     )
     _bin_offsets(cnt, start)
     bins = np.empty(int(start[-1]), dtype=np.int32)
-    _bin_fill(NC, box, T, ntx, chunk, cnt, bins, nthreads, tile_any, use)
-    return FrontEnd(vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, normals, rowbits, tri)
+    _bin_fill(NC, box, T, ntx, chunk, cnt, bins, nthreads, tile_any, use, sh)
+    return FrontEnd(vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, normals, rowbits, sh, tri)
 
 
 def _scratch(T) -> _Scratch:
