@@ -25,6 +25,7 @@ from .._jit import kernel
 from ..raster import View, rasterize_depth
 from ..raster.kernels import view_project
 from ..raster.view import VP_L, VP_ORIGIN, VP_ORTHO, VP_R, VP_W, light_view
+from ..scene.types import light_key
 
 
 @dataclass
@@ -56,15 +57,13 @@ def fit_light_view(
     ``scene.flat``, whose geometry does not change)."""
     flat = scene.flat
     light = scene.light
-    key = ("fit_light_view", light.shape, *light.center, *getattr(light, "u", ()), *getattr(light, "v", ()))
-    key += (size, which, bool(ortho), height, margin)
-    hit = flat._cache.get(key)
-    if hit is None:
+
+    def compute():
         mask = occluder_faces(scene, which)
         pts = flat.vertices[flat.face_vertices(which if mask.any() else "all")]
-        hit = light_view(light, pts, size, height or size, ortho=ortho, margin=margin, square_pixels=True)
-        flat._cache[key] = hit
-    return hit
+        return light_view(light, pts, size, height or size, ortho=ortho, margin=margin, square_pixels=True)
+
+    return flat.cached(("fit_light_view", light_key(light), size, which, bool(ortho), height, margin), compute)
 
 
 def build_shadow_map(scene, view: View, faces_mask: np.ndarray | None = None, cull: str = "none") -> ShadowMap:

@@ -29,6 +29,7 @@ from ..errors import SoftShadowsError
 from ..raster import View, rasterize_depth, rasterize_fragments
 from ..raster.kernels import sample_bilinear, view_project
 from ..raster.view import VP_B, VP_H, VP_L, VP_R, VP_T, VP_W, light_view
+from ..scene.types import light_key
 from .base import Method, MethodOutput, Param, register
 
 BAND_ROWS = 2  # SSM rows per accumulation band (one thread sums one band)
@@ -64,7 +65,13 @@ def _face_vertices(flat, which: str) -> np.ndarray:
 
 def compute_map_views(scene, map_size: int, ssm_size: int, margin: float = 0.02) -> tuple[View, View]:
     """(occluder-map view, SSM/receiver-map view), both from the light center along its normal,
-    axis-aligned with the light and of its aspect ratio (square maps of N x N pixels)."""
+    axis-aligned with the light and of its aspect ratio (square maps of N x N pixels). Computed once
+    per geometry, light and sizes (passes over every vertex; cached on ``scene.flat``)."""
+    key = ("ssm_map_views", light_key(scene.light), int(map_size), int(ssm_size), float(margin))
+    return scene.flat.cached(key, lambda: _compute_map_views(scene, map_size, ssm_size, margin))
+
+
+def _compute_map_views(scene, map_size: int, ssm_size: int, margin: float) -> tuple[View, View]:
     light, flat = scene.light, scene.flat
     occ_pts = _face_vertices(flat, "occluder")
     rec_pts = _face_vertices(flat, "receiver")

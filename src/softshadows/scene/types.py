@@ -233,6 +233,12 @@ class Camera:
         return f"Camera(eye={self.eye.tolist()}, target={self.target.tolist()}, fov_y={self.fov_y})"
 
 
+def light_key(light) -> tuple:
+    """The values that define a light (a cache key: equal lights give equal keys)."""
+    vals = [light.center, getattr(light, "u", ()), getattr(light, "v", ()), [getattr(light, "radius", 0.0)]]
+    return (light.shape, light.intensity, *(float(x) for a in vals for x in np.ravel(a)))
+
+
 @dataclass
 class FlatGeometry:
     """All meshes of a scene concatenated: what kernels consume (plain arrays)."""
@@ -266,6 +272,14 @@ class FlatGeometry:
         if hit is None:
             hit = self._cache[("faces_where", which)] = np.ascontiguousarray(self.faces[mask])
             hit.flags.writeable = False
+        return hit
+
+    def cached(self, key: tuple, compute):
+        """``compute()``, once per geometry and ``key`` (per-frame scene preparation that depends
+        only on the geometry and on what ``key`` names, e.g. :func:`light_key` and map sizes)."""
+        hit = self._cache.get(key)
+        if hit is None:
+            hit = self._cache[key] = compute()
         return hit
 
     def subset(self, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
