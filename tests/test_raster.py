@@ -158,7 +158,7 @@ def _edge_test_coverage(view, V, F):
             r = dx * (py - ay)
             e = sg * (r - dy * (px - ax))
             cov &= ~((e < 0) | ((e == 0) & (inc == 0)))
-        t = ct >> 1
+        t = fe.tri[ct >> fe.shift]  # the face of the front-end triangle
         pairs += [(t, p) for p in (i[cov] * W + j[cov])]
     return sorted(pairs)
 
@@ -662,3 +662,53 @@ def test_outputs_do_not_depend_on_the_thread_count():
         numba.set_num_threads(n)
     for a, b in zip(one, run()):
         assert np.array_equal(a, b, equal_nan=a.dtype.kind == "f")
+
+
+@pytest.mark.parametrize("ortho", [True, False])
+def test_small_triangle_rejection_agrees_with_full_setup(ortho):
+    """The front end drops, before setup and binning, the faces that surely give no fragment (sub-pixel
+    triangles between pixel centers, culled, beyond far, behind near). Every dropped face must be
+    one whose full setup (``_setup_one``) gives no piece or pieces that cover no pixel center (the
+    kernels' per-pixel test): then the outputs are those of a setup of every face, bit for bit (the
+    setup of a face does not depend on the others)."""
+    from softshadows.raster import rasterizer as R
+
+    rng = np.random.default_rng(7)
+    W, H, n = 64, 48, 3000
+    # tiny triangles (about 0.05..0.6 px), some on pixel centers, plus larger ones and ones behind near
+    c = rng.uniform(-2, W + 2, size=(n, 1, 2))
+    xy = c + rng.uniform(-0.3, 0.3, size=(n, 3, 2)) * rng.choice([0.2, 1.0, 8.0], size=(n, 1, 1))
+    xy[: n // 10] = np.round(xy[: n // 10] * 2) / 2
+    z = rng.uniform(0.2, 3.0, size=(n, 3))
+    xy, z = xy.reshape(-1, 2), z.reshape(-1)
+    if ortho:
+        V = np.stack([-xy[:, 0], H - xy[:, 1], z], 1)
+        view = View.frame([0, 0, 0], [0, 0, 1], [0, 1, 0], (0, W, 0, H), 0.5, 2.5, W, H, ortho=True)
+    else:
+        V = np.stack([(1 - 2 * xy[:, 0] / W) * z, (1 - 2 * xy[:, 1] / H) * z, z], 1)
+        view = View.frame([0, 0, 0], [0, 0, 1], [0, 1, 0], (-1, 1, -1, 1), 0.5, 2.5, W, H)
+    F = np.arange(len(V), dtype=np.int64).reshape(-1, 3)
+    for cull in ("none", "back"):
+        vp, W_, H_, verts, fcs, code, near = R._prepare(view, V, F, cull)
+        fe = R._front_end(vp, W_, H_, verts, fcs, code, near)
+        kept = np.zeros(n, bool)
+        kept[fe.tri[: fe.box.shape[0] >> fe.shift]] = True  # fe.box: 1 << shift piece slots per front-end triangle
+        dropped = np.nonzero(~kept)[0]
+        assert n // 4 < len(dropped) < n  # the rejection does work here (most faces are sub-pixel)
+        NC = np.empty(1, np.int32)
+        box = np.empty((2, 4), np.int32)
+        edges = np.empty((2, 3, R.E_WIDTH))
+        zinfo = np.empty((2, 3))
+        planes = np.zeros((1, R.PL_WIDTH))
+        normals = np.zeros((1, 3), np.float32)
+        for t in dropped:
+            R._setup_one(0, t, verts, fcs, vp, near, code, NC, box, edges, zinfo, planes, normals, 1)
+            for ct in range(NC[0]):  # pieces of a dropped face cover no pixel center (per-pixel test)
+                i0, i1, j0, j1 = box[ct, [R.BOX_I0, R.BOX_I1, R.BOX_J0, R.BOX_J1]]
+                i, j = np.mgrid[i0 : i1 + 1, j0 : j1 + 1]
+                cov = np.ones(i.shape, bool)
+                for k in range(3):
+                    ax, ay, dx, dy, sg, inc = edges[ct, k, [R.E_AX, R.E_AY, R.E_DX, R.E_DY, R.E_SG, R.E_OWN]]
+                    e = sg * (dx * ((i + 0.5) - ay) - dy * ((j + 0.5) - ax))
+                    cov &= ~((e < 0) | ((e == 0) & (inc == 0)))
+                assert not cov.any(), t

@@ -47,7 +47,7 @@ def shade(scene, gbuf, visibility: np.ndarray, shadowed: np.ndarray | None = Non
     light = scene.light
     rect = light.shape == "rect"
     ln = light.normal if rect else np.zeros(3)
-    pix_albedo = flat.albedo[flat.mesh_id].astype(np.float32)  # per triangle
+    albedo = flat.albedo.astype(np.float32)  # per mesh (a per-triangle table would grow with the triangles)
     use_shadowed = shadowed is not None
     sh = np.asarray(shadowed, np.float64) if use_shadowed else np.zeros((1, 1))
     return _shade_kernel(
@@ -55,7 +55,8 @@ def shade(scene, gbuf, visibility: np.ndarray, shadowed: np.ndarray | None = Non
         gbuf.normal,
         gbuf.tri_id,
         visibility,
-        pix_albedo,
+        albedo,
+        flat.mesh_id,
         np.asarray(light.center, np.float64),
         ln,
         rect,
@@ -68,7 +69,9 @@ def shade(scene, gbuf, visibility: np.ndarray, shadowed: np.ndarray | None = Non
 
 
 @kernel(parallel=True)
-def _shade_kernel(position, normal, tri_id, vis, tri_albedo, c, ln, rect, scale, eye, ambient, use_shadowed, shadowed):
+def _shade_kernel(
+    position, normal, tri_id, vis, albedo, mesh_id, c, ln, rect, scale, eye, ambient, use_shadowed, shadowed
+):
     H, W = vis.shape
     img = np.zeros((H, W, 3), np.float32)
     for i in prange(H):
@@ -100,8 +103,9 @@ def _shade_kernel(position, normal, tri_id, vis, tri_albedo, c, ln, rect, scale,
                 if not np.isfinite(v):
                     v = 0.0
                 lit = scale * cp / r2 * v
+            m = mesh_id[t]
             for ch in range(3):
-                img[i, j, ch] = tri_albedo[t, ch] * (lit + ambient)
+                img[i, j, ch] = albedo[m, ch] * (lit + ambient)
     return img
 
 

@@ -28,6 +28,7 @@ from .._jit import kernel
 from ..geometry.silhouette import Silhouette, cached_adjacency, silhouette_adjacency, silhouette_brute
 from ..raster import View, rasterize_depth, rasterize_min_blend
 from ..raster.programs import PROGRAM_PENUMBRA, penumbra_intensity, smoothstep_bernstein  # noqa: F401
+from ..scene.types import light_key
 from .base import Method, MethodOutput, Param, register
 from .shadowmap import biased_light_depth, fit_light_view
 
@@ -114,9 +115,13 @@ def shadow_map_pass(scene, map_size: int, light_radius: float, base_view: View |
     depth ``Z_P`` of the foremost surface per texel of the bordered view. Every occluder lies
     inside ``hard``'s window, so the border only holds receiver-only faces; inside the window
     ``Z_P`` is the nearer of the occluder map and the receivers."""
-    hv, view, border, clipped = penumbra_map_view(scene, map_size, light_radius, base_view)
+    if base_view is None:  # a pass over every vertex: once per geometry, light and sizes
+        key = ("penumbra_map_view", light_key(scene.light), int(map_size), float(light_radius))
+        hv, view, border, clipped = scene.flat.cached(key, lambda: penumbra_map_view(scene, map_size, light_radius))
+    else:
+        hv, view, border, clipped = penumbra_map_view(scene, map_size, light_radius, base_view)
     flat = scene.flat
-    occ_faces = np.ascontiguousarray(flat.faces[flat.occluder])
+    occ_faces = flat.faces_where(flat.occluder)  # once per geometry
     d_occ, _ = rasterize_depth(hv, flat.vertices, occ_faces, cull="none")
     only_recv = flat.receiver & ~flat.occluder
     if only_recv.any():
@@ -136,9 +141,10 @@ def find_silhouettes(scene, point, method: str = "brute") -> tuple[Silhouette, f
     """Pass 2a: silhouette of the occluder faces seen from ``point`` (the light center).
     Returns (silhouette, seconds spent building the edge adjacency this call, 0 if cached)."""
     flat = scene.flat
-    faces = flat.faces if flat.occluder.all() else np.ascontiguousarray(flat.faces[flat.occluder])
-    if method == "brute":
-        return silhouette_brute(flat.vertices, faces, point), 0.0
+    if method == "brute":  # a pass over every occluder face: once per geometry and light point
+        key = ("silhouette_brute", *(float(x) for x in point))
+        faces = flat.faces if flat.occluder.all() else flat.faces_where(flat.occluder)
+        return flat.cached(key, lambda: silhouette_brute(flat.vertices, faces, point)), 0.0
     # "adjacency" (the Param's choices admit nothing else)
     t0 = time.perf_counter()
     # cache on the scene's flat arrays; the occluder subset is cached per flat geometry

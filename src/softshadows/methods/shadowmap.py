@@ -25,6 +25,7 @@ from .._jit import kernel
 from ..raster import View, rasterize_depth
 from ..raster.kernels import view_project
 from ..raster.view import VP_L, VP_ORIGIN, VP_ORTHO, VP_R, VP_W, light_view
+from ..scene.types import light_key
 
 
 @dataclass
@@ -51,11 +52,18 @@ def occluder_faces(scene, which: str = "occluder") -> np.ndarray:
 def fit_light_view(
     scene, size: int, which: str = "occluder", ortho: bool = False, height: int | None = None, margin: float = 0.02
 ) -> View:
-    """View from the light's center covering the vertices of the selected faces (square pixels)."""
+    """View from the light's center covering the vertices of the selected faces (square pixels).
+    Computed once per geometry, light and arguments (a pass over every selected vertex; cached on
+    ``scene.flat``, whose geometry does not change)."""
     flat = scene.flat
-    mask = occluder_faces(scene, which)
-    pts = flat.vertices[flat.face_vertices(which if mask.any() else "all")]
-    return light_view(scene.light, pts, size, height or size, ortho=ortho, margin=margin, square_pixels=True)
+    light = scene.light
+
+    def compute():
+        mask = occluder_faces(scene, which)
+        pts = flat.vertices[flat.face_vertices(which if mask.any() else "all")]
+        return light_view(light, pts, size, height or size, ortho=ortho, margin=margin, square_pixels=True)
+
+    return flat.cached(("fit_light_view", light_key(light), size, which, bool(ortho), height, margin), compute)
 
 
 def build_shadow_map(scene, view: View, faces_mask: np.ndarray | None = None, cull: str = "none") -> ShadowMap:
@@ -63,7 +71,7 @@ def build_shadow_map(scene, view: View, faces_mask: np.ndarray | None = None, cu
     flat = scene.flat
     if faces_mask is None:
         faces_mask = flat.occluder
-    faces = np.ascontiguousarray(flat.faces[faces_mask])
+    faces = flat.faces_where(faces_mask)  # cached for the role masks
     depth, tri = rasterize_depth(view, flat.vertices, faces, cull=cull)
     return ShadowMap(view, depth, tri)
 

@@ -29,6 +29,7 @@ from ..errors import SoftShadowsError
 from ..raster import View, rasterize_depth, rasterize_fragments
 from ..raster.kernels import sample_bilinear, view_project
 from ..raster.view import VP_B, VP_H, VP_L, VP_R, VP_T, VP_W, light_view
+from ..scene.types import light_key
 from .base import Method, MethodOutput, Param, register
 
 BAND_ROWS = 2  # SSM rows per accumulation band (one thread sums one band)
@@ -58,16 +59,22 @@ def _with_aspect(window, aspect: float) -> tuple:
     return (cx - w / 2, cx + w / 2, cy - h / 2, cy + h / 2)
 
 
-def _face_vertices(flat, mask) -> np.ndarray:
-    return flat.vertices[np.unique(flat.faces[mask])]
+def _face_vertices(flat, which: str) -> np.ndarray:
+    return flat.vertices[flat.face_vertices(which)]  # the indices: once per geometry
 
 
 def compute_map_views(scene, map_size: int, ssm_size: int, margin: float = 0.02) -> tuple[View, View]:
     """(occluder-map view, SSM/receiver-map view), both from the light center along its normal,
-    axis-aligned with the light and of its aspect ratio (square maps of N x N pixels)."""
+    axis-aligned with the light and of its aspect ratio (square maps of N x N pixels). Computed once
+    per geometry, light and sizes (passes over every vertex; cached on ``scene.flat``)."""
+    key = ("ssm_map_views", light_key(scene.light), int(map_size), int(ssm_size), float(margin))
+    return scene.flat.cached(key, lambda: _compute_map_views(scene, map_size, ssm_size, margin))
+
+
+def _compute_map_views(scene, map_size: int, ssm_size: int, margin: float) -> tuple[View, View]:
     light, flat = scene.light, scene.flat
-    occ_pts = _face_vertices(flat, flat.occluder)
-    rec_pts = _face_vertices(flat, flat.receiver)
+    occ_pts = _face_vertices(flat, "occluder")
+    rec_pts = _face_vertices(flat, "receiver")
     ov = light_view(light, occ_pts, map_size, map_size, margin=margin)
     hx, hy = light_half_extents(light, ov)
     aspect = hx / hy
@@ -105,7 +112,7 @@ def compute_receiver_depth_map(scene, view: View) -> tuple[np.ndarray, np.ndarra
     """(depth (H,W) float32 +inf where empty, mesh id (H,W) int32 -1 where empty) of receivers."""
     flat = scene.flat
     idx = np.flatnonzero(flat.receiver)
-    depth, tri = rasterize_depth(view, flat.vertices, np.ascontiguousarray(flat.faces[idx]), cull="none")
+    depth, tri = rasterize_depth(view, flat.vertices, flat.faces_where(flat.receiver), cull="none")
     mesh = np.where(tri >= 0, flat.mesh_id[idx][np.maximum(tri, 0)], -1).astype(np.int32)
     return np.ascontiguousarray(depth, dtype=np.float32), mesh
 
@@ -133,7 +140,7 @@ def compute_occluder_depth_map(scene, view: View, side: str = "nearest") -> tupl
     front-facing faces) or ``back`` (furthest back-facing faces), the two maps of Sec. 3.5."""
     flat = scene.flat
     idx = np.flatnonzero(flat.occluder)
-    faces = np.ascontiguousarray(flat.faces[idx])
+    faces = flat.faces_where(flat.occluder)  # once per geometry
     if side == "back":
         fr = rasterize_fragments(view, flat.vertices, faces, cull="front")
         d, tri = _max_depth_per_pixel(

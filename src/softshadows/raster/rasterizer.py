@@ -51,7 +51,8 @@ _VALUE_RECOMPUTE = 0.05
 
 # ----------------------------------------------------------------------------------------------
 # the setup arrays' columns. A triangle t has two piece slots, 2t and 2t + 1 (clipping by the near
-# plane may cut it into two pieces); ``bins`` lists slots, and ``slot >> 1`` is the triangle.
+# plane may cut it into two pieces, when some face crosses it: FrontEnd.shift = 1; else one slot u);
+# ``bins`` lists slots, and ``slot >> shift`` is the front-end triangle (FrontEnd.tri: its face).
 # ----------------------------------------------------------------------------------------------
 #: box[slot, BOX_*] (int32): the rows i0..i1 and columns j0..j1 of the pixel centers inside the
 #: piece's bounding box (clamped to the image)
@@ -208,11 +209,13 @@ def _setup_piece(vp, slot, x0, y0, z0, x1, y1, z1, x2, y2, z2, far, box, edges, 
 
 
 @kernel
-def _setup_one(t, verts, faces, vp, near, cull, NC, box, edges, zinfo, planes, normals):
-    """Triangle t: NC[t] pieces in slots 2t, 2t+1 of box/edges/zinfo; planes[t] plane data; normals[t] unit normal."""
+def _setup_one(u, t, verts, faces, vp, near, cull, NC, box, edges, zinfo, planes, normals, sh):
+    """Face t, stored as front-end triangle u: NC[u] pieces in slots u << sh (and the next one: sh = 1
+    when some face crosses the near plane) of box/edges/zinfo; planes[u] plane data; normals[u] unit
+    normal."""
     ortho = vp[VP_ORTHO] != 0.0
     far = vp[VP_FAR]
-    NC[t] = 0
+    NC[u] = 0
     ia = faces[t, 0]
     ib = faces[t, 1]
     ic = faces[t, 2]
@@ -248,9 +251,9 @@ def _setup_one(t, verts, faces, vp, near, cull, NC, box, edges, zinfo, planes, n
             return
         if cull == 2 and not (f > 0.0):
             return
-    normals[t, 0] = nx / nn
-    normals[t, 1] = ny / nn
-    normals[t, 2] = nz / nn
+    normals[u, 0] = nx / nn
+    normals[u, 1] = ny / nn
+    normals[u, 2] = nz / nn
     # view space
     x0, y0, z0 = view_coords(vp, ax, ay, az)
     x1, y1, z1 = view_coords(vp, bx, by, bz)
@@ -276,26 +279,26 @@ def _setup_one(t, verts, faces, vp, near, cull, NC, box, edges, zinfo, planes, n
     m2x = (vny * f1z - vnz * f1y) / n2  # (n x e1) / |n|^2
     m2y = (vnz * f1x - vnx * f1z) / n2
     m2z = (vnx * f1y - vny * f1x) / n2
-    planes[t, PL_N] = vnx
-    planes[t, PL_N + 1] = vny
-    planes[t, PL_N + 2] = vnz
-    planes[t, PL_D] = vnx * x0 + vny * y0 + vnz * z0
-    planes[t, PL_M1] = m1x
-    planes[t, PL_M1 + 1] = m1y
-    planes[t, PL_M1 + 2] = m1z
-    planes[t, PL_D1] = m1x * x0 + m1y * y0 + m1z * z0
-    planes[t, PL_M2] = m2x
-    planes[t, PL_M2 + 1] = m2y
-    planes[t, PL_M2 + 2] = m2z
-    planes[t, PL_D2] = m2x * x0 + m2y * y0 + m2z * z0
+    planes[u, PL_N] = vnx
+    planes[u, PL_N + 1] = vny
+    planes[u, PL_N + 2] = vnz
+    planes[u, PL_D] = vnx * x0 + vny * y0 + vnz * z0
+    planes[u, PL_M1] = m1x
+    planes[u, PL_M1 + 1] = m1y
+    planes[u, PL_M1 + 2] = m1z
+    planes[u, PL_D1] = m1x * x0 + m1y * y0 + m1z * z0
+    planes[u, PL_M2] = m2x
+    planes[u, PL_M2 + 1] = m2y
+    planes[u, PL_M2 + 2] = m2z
+    planes[u, PL_D2] = m2x * x0 + m2y * y0 + m2z * z0
     # near-plane clipping in view space
     in0 = z0 >= near
     in1 = z1 >= near
     in2 = z2 >= near
     nin = int(in0) + int(in1) + int(in2)
-    s0 = 2 * t
+    s0 = u << sh
     if nin == 3:
-        NC[t] = _setup_piece(vp, s0, x0, y0, z0, x1, y1, z1, x2, y2, z2, far, box, edges, zinfo)
+        NC[u] = _setup_piece(vp, s0, x0, y0, z0, x1, y1, z1, x2, y2, z2, far, box, edges, zinfo)
         return
     # rotate the corners (keeping the cyclic order) so that the odd one out comes first
     if nin == 1:
@@ -314,14 +317,14 @@ def _setup_one(t, verts, faces, vp, near, cull, NC, box, edges, zinfo, planes, n
         # P inside, Q and R outside: triangle P, PQ', PR'
         ux, uy, uz = _clip_point(px, py, pz, qx, qy, qz, near)
         wx, wy, wz = _clip_point(px, py, pz, rx, ry, rz, near)
-        NC[t] = _setup_piece(vp, s0, px, py, pz, ux, uy, uz, wx, wy, wz, far, box, edges, zinfo)
+        NC[u] = _setup_piece(vp, s0, px, py, pz, ux, uy, uz, wx, wy, wz, far, box, edges, zinfo)
     else:
         # P outside, Q and R inside: quad Q, R, RP', QP' -> (Q, R, RP') and (Q, RP', QP')
         ux, uy, uz = _clip_point(rx, ry, rz, px, py, pz, near)
         wx, wy, wz = _clip_point(qx, qy, qz, px, py, pz, near)
         k = _setup_piece(vp, s0, qx, qy, qz, rx, ry, rz, ux, uy, uz, far, box, edges, zinfo)
         k += _setup_piece(vp, s0 + k, qx, qy, qz, ux, uy, uz, wx, wy, wz, far, box, edges, zinfo)
-        NC[t] = k
+        NC[u] = k
 
 
 # ----------------------------------------------------------------------------------------------
@@ -348,24 +351,201 @@ def _tile_row_bits(mask, T, ntx, nty, bits, tile_any):
 
 
 @kernel(parallel=True)
+def _vertex_screen(verts, vp, near, vs):
+    """Per vertex (structure of arrays, once per vertex instead of once per triangle corner):
+    vs[0, v] = its view depth z and, where z >= near, vs[1, v], vs[2, v] = its snapped screen
+    coordinates (NaN elsewhere). The same operations as :func:`_setup_one` / :func:`_setup_piece`
+    on a corner, so the values are theirs bit for bit."""
+    for v in prange(verts.shape[0]):
+        x, y, z = view_coords(vp, verts[v, 0], verts[v, 1], verts[v, 2])
+        vs[0, v] = z
+        if z >= near:
+            sx, sy = view_coords_to_screen(vp, x, y, z)
+            vs[1, v] = _snap(sx)
+            vs[2, v] = _snap(sy)
+        else:
+            vs[1, v] = np.nan
+            vs[2, v] = np.nan
+
+
+#: the small-triangle rejection tests the pixel centers of a bounding box holding at most this many
+_FEW_CENTERS = 4.0
+
+
+@kernel(inline=True)
+def _center_in(ax, ay, bx, by, py, j):
+    """:func:`_edge_in` of the edge a->b (of a positively oriented piece) at the pixel center (j + 0.5,
+    py), from the values :func:`_store_edge` would store (canonical endpoints, sign, top-left rule)."""
+    if ax < bx or (ax == bx and ay < by):
+        cax = ax
+        cay = ay
+        cdx = bx - ax
+        cdy = by - ay
+        sg = 1.0
+    else:
+        cax = bx
+        cay = by
+        cdx = ax - bx
+        cdy = ay - by
+        sg = -1.0
+    ddx = bx - ax
+    ddy = by - ay
+    own = ddy < 0.0 or (ddy == 0.0 and ddx > 0.0)
+    v = sg * (cdx * (py - cay) - cdy * ((j + 0.5) - cax))
+    return not (v < 0.0 or (v == 0.0 and not own))
+
+
+@kernel
+def _no_pieces(t, verts, faces, vp, near, cull, vs):
+    """True if face t surely gives no piece (small-triangle rejection before setup and binning): it
+    is degenerate, culled, beyond ``far`` or behind ``near``, or it lies wholly in front of the near
+    plane and its snapped screen bounding box holds no pixel center, or holds a few
+    (``_FEW_CENTERS``) and the triangle covers none of them. The same operations, in the same order, as :func:`_setup_one` and :func:`_setup_piece` (corners from :func:`_vertex_screen`),
+    so the decision is theirs bit for bit; the cases it does not decide (near-plane clipping, the
+    view-space plane, the area) are left to the full setup."""
+    ortho = vp[VP_ORTHO] != 0.0
+    far = vp[VP_FAR]
+    ia = faces[t, 0]
+    ib = faces[t, 1]
+    ic = faces[t, 2]
+    z0 = vs[0, ia]
+    z1 = vs[0, ib]
+    z2 = vs[0, ic]
+    if min(z0, min(z1, z2)) > far or max(z0, max(z1, z2)) < near:
+        return True
+    if z0 >= near and z1 >= near and z2 >= near:
+        W = vp[VP_W]
+        H = vp[VP_H]
+        sx0 = vs[1, ia]
+        sx1 = vs[1, ib]
+        sx2 = vs[1, ic]
+        sy0 = vs[2, ia]
+        sy1 = vs[2, ib]
+        sy2 = vs[2, ic]
+        fj0 = max(math.ceil(min(sx0, min(sx1, sx2)) - 0.5), 0.0)
+        fj1 = min(math.floor(max(sx0, max(sx1, sx2)) - 0.5), W - 1.0)
+        fi0 = max(math.ceil(min(sy0, min(sy1, sy2)) - 0.5), 0.0)
+        fi1 = min(math.floor(max(sy0, max(sy1, sy2)) - 0.5), H - 1.0)
+        # NaN coordinates fail both comparisons: left to the full setup (which rejects them)
+        if fj0 > fj1 or fi0 > fi1:
+            return True
+        if (fj1 - fj0 + 1.0) * (fi1 - fi0 + 1.0) <= _FEW_CENTERS:
+            # a small triangle: test its few candidate pixel centers with the tile kernels' own
+            # per-pixel coverage test (_edge_in on the edges _store_edge would store)
+            area = (sx1 - sx0) * (sy2 - sy0) - (sy1 - sy0) * (sx2 - sx0)
+            if not (area != 0.0 and math.isfinite(area)):
+                return True
+            if area < 0.0:
+                sx1, sx2 = sx2, sx1
+                sy1, sy2 = sy2, sy1
+            for i in range(int(fi0), int(fi1) + 1):
+                py = i + 0.5
+                for j in range(int(fj0), int(fj1) + 1):
+                    if (
+                        _center_in(sx0, sy0, sx1, sy1, py, j)
+                        and _center_in(sx1, sy1, sx2, sy2, py, j)
+                        and _center_in(sx2, sy2, sx0, sy0, py, j)
+                    ):
+                        return False
+            return True
+    if cull == 0:
+        return False  # the degenerate test is left to the full setup
+    ax = verts[ia, 0]
+    ay = verts[ia, 1]
+    az = verts[ia, 2]
+    e1x = verts[ib, 0] - ax
+    e1y = verts[ib, 1] - ay
+    e1z = verts[ib, 2] - az
+    e2x = verts[ic, 0] - ax
+    e2y = verts[ic, 1] - ay
+    e2z = verts[ic, 2] - az
+    nx = e1y * e2z - e1z * e2y
+    ny = e1z * e2x - e1x * e2z
+    nz = e1x * e2y - e1y * e2x
+    if ortho:
+        f = nx * vp[VP_FORWARD] + ny * vp[VP_FORWARD + 1] + nz * vp[VP_FORWARD + 2]
+    else:
+        f = nx * (ax - vp[VP_ORIGIN]) + ny * (ay - vp[VP_ORIGIN + 1]) + nz * (az - vp[VP_ORIGIN + 2])
+    return (cull == 1 and not (f < 0.0)) or (cull == 2 and not (f > 0.0))
+
+
+@kernel(parallel=True)
+def _select(verts, faces, vp, near, cull, vs, chunk, ccount, nslot, keep):
+    """Small-triangle rejection, first pass: keep[t] = 1 for the faces that may give pieces (not
+    :func:`_no_pieces`; 2 if they cross the near plane), ccount[c] = how many in chunk c of faces (chunks dealt round-robin to
+    ``nslot`` slots)."""
+    nchunk = ccount.shape[0]
+    F = faces.shape[0]
+    for slot in prange(nslot):
+        for c in range(slot, nchunk, nslot):
+            n = 0
+            for t in range(c * chunk, min(F, (c + 1) * chunk)):
+                k = 0
+                if not _no_pieces(t, verts, faces, vp, near, cull, vs):
+                    # 2: the face crosses the near plane (it may be clipped into two pieces)
+                    k = (
+                        1
+                        if (vs[0, faces[t, 0]] >= near and vs[0, faces[t, 1]] >= near and vs[0, faces[t, 2]] >= near)
+                        else 2
+                    )
+                keep[t] = k
+                n += k != 0
+            ccount[c] = n
+
+
+@kernel(parallel=True)
+def _select_fill(chunk, coff, nslot, keep, tri):
+    """Second pass: the kept faces in increasing index into ``tri`` (chunk c from coff[c])."""
+    nchunk = coff.shape[0]
+    F = keep.shape[0]
+    for slot in prange(nslot):
+        for c in range(slot, nchunk, nslot):
+            w = coff[c]
+            for t in range(c * chunk, min(F, (c + 1) * chunk)):
+                if keep[t]:
+                    tri[w] = t
+                    w += 1
+
+
+@kernel(parallel=True)
 def _setup_count(
-    verts, faces, vp, near, cull, NC, box, edges, zinfo, planes, normals, T, ntx, chunk, cnt, nslot, tile_any, use_bits
+    verts,
+    faces,
+    tri,
+    vp,
+    near,
+    cull,
+    NC,
+    box,
+    edges,
+    zinfo,
+    planes,
+    normals,
+    T,
+    ntx,
+    chunk,
+    cnt,
+    nslot,
+    tile_any,
+    use_bits,
+    sh,
 ):
-    """Setup of every triangle (parallel over chunks of triangles, dealt round-robin to ``nslot``
-    slots: load balance, see docs/rasterizer.md) and per (chunk, tile) bin counts. With ``use_bits``, only the tiles
-    with ``tile_any`` set get pieces (min-blend's texel mask)."""
+    """Setup of the selected faces ``tri`` (front-end triangle u is face tri[u]; parallel over chunks of
+    them, dealt round-robin to ``nslot`` slots: load balance, see docs/rasterizer.md) and per (chunk,
+    tile) bin counts. With ``use_bits``, only the tiles with ``tile_any`` set get pieces (min-blend's
+    texel mask)."""
     nchunk = cnt.shape[0]
     ntiles = cnt.shape[1]
-    F = NC.shape[0]
+    U = NC.shape[0]
     for slot in prange(nslot):
         for c in range(slot, nchunk, nslot):
             for tt in range(ntiles):
                 cnt[c, tt] = 0
-            t1 = min(F, (c + 1) * chunk)
-            for t in range(c * chunk, t1):
-                _setup_one(t, verts, faces, vp, near, cull, NC, box, edges, zinfo, planes, normals)
-                for k in range(NC[t]):
-                    ct = 2 * t + k
+            t1 = min(U, (c + 1) * chunk)
+            for u in range(c * chunk, t1):
+                _setup_one(u, tri[u], verts, faces, vp, near, cull, NC, box, edges, zinfo, planes, normals, sh)
+                for k in range(NC[u]):
+                    ct = (u << sh) + k
                     for ty in range(box[ct, BOX_I0] // T, box[ct, BOX_I1] // T + 1):
                         for tx in range(box[ct, BOX_J0] // T, box[ct, BOX_J1] // T + 1):
                             tile = ty * ntx + tx
@@ -391,7 +571,7 @@ def _bin_offsets(cnt, bstart):
 
 
 @kernel(parallel=True)
-def _bin_fill(NC, box, T, ntx, chunk, off, bins, nslot, tile_any, use_bits):
+def _bin_fill(NC, box, T, ntx, chunk, off, bins, nslot, tile_any, use_bits, sh):
     nchunk = off.shape[0]
     F = NC.shape[0]
     for slot in prange(nslot):
@@ -399,7 +579,7 @@ def _bin_fill(NC, box, T, ntx, chunk, off, bins, nslot, tile_any, use_bits):
             t1 = min(F, (c + 1) * chunk)
             for t in range(c * chunk, t1):
                 for k in range(NC[t]):
-                    ct = 2 * t + k
+                    ct = (t << sh) + k
                     for ty in range(box[ct, BOX_I0] // T, box[ct, BOX_I1] // T + 1):
                         for tx in range(box[ct, BOX_J0] // T, box[ct, BOX_J1] // T + 1):
                             tile = ty * ntx + tx
@@ -813,7 +993,7 @@ def _depth_test_row(zb, tb, t, span, cols, pl, zrow, zr, ortho):
 
 
 @kernel(inline=True)
-def _depth_pass(vw, near, tile, rect, start, bins, box, edges, zinfo, planes, zb, tb, SP):
+def _depth_pass(vw, near, tile, rect, start, bins, box, edges, zinfo, planes, zb, tb, SP, sh):
     """The nearest depth ``zb`` and triangle ``tb`` (-1: none) of every pixel of the tile ``rect`` =
     (y0, y1, x0, x1), from the pieces binned to it (the dense modes: depth and G-buffer)."""
     W, H, ortho, far, wl, wt, wsx, wsy = vw
@@ -825,7 +1005,7 @@ def _depth_pass(vw, near, tile, rect, start, bins, box, edges, zinfo, planes, zb
             tb[li, k] = -1
     for bi in range(start[tile], start[tile + 1]):
         ct = bins[bi]
-        t = ct >> 1
+        t = ct >> sh
         prect = _piece_rect(box, ct, rect)
         i0, i1, j0, j1 = prect
         if i0 > i1 or j0 > j1:
@@ -884,7 +1064,7 @@ def _view_frame(vp):
 
 
 @kernel(inline=True)
-def _gbuffer_row(out, i, li, cols, nk, yw, zb, tb, frame, planes, normals, ortho):
+def _gbuffer_row(out, i, li, cols, nk, yw, zb, tb, frame, planes, normals, tri, ortho):
     """The G-buffer ``out`` = (depth, tri, pos, nrm, bary, mask) of the nk pixels of image row i
     (tile row li) from the tile's winners (branch-free per pixel, so that it vectorizes)."""
     x0, wl, wsx = cols
@@ -905,7 +1085,7 @@ def _gbuffer_row(out, i, li, cols, nk, yw, zb, tb, frame, planes, normals, ortho
         b1, b2 = _bary(_dual(planes, tt), xw, yw, z, ortho)
         vx = xw if ortho else xw * z
         vy = yw if ortho else yw * z
-        trow[k] = t
+        trow[k] = tri[tt] if hit else -1  # the face (tb: front-end triangle)
         drow[k] = z
         mrow[k] = hit
         prow[k, 0] = (o0 + vx * rx + vy * ux + z * fx) if hit else np.nan
@@ -1067,7 +1247,7 @@ def _blend_row(prog, pparams, zb, ib, rn, span, cols, yw, zrow, pl, q, ca, zr, o
 @kernel(parallel=True)
 def _tiles_depth(fe, sc, depth_out, tri_out):
     """rasterize_depth: the nearest depth (+inf: none) and triangle (-1: none) of every pixel."""
-    vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, _normals, _rowbits = fe
+    vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, _normals, _rowbits, sh, tri = fe
     zbuf, tbuf, spbuf, _ibuf, _lbuf, nslot = sc
     vw = _view_window(vp)
     W, H = vw[0], vw[1]
@@ -1079,7 +1259,7 @@ def _tiles_depth(fe, sc, depth_out, tri_out):
         for ty in range(slot, nty, nslot):  # tile rows dealt round-robin: contiguous output rows
             for tx in range(ntx):
                 rect = _tile_rect(ty, tx, T, W, H)
-                _depth_pass(vw, near, ty * ntx + tx, rect, start, bins, box, edges, zinfo, planes, zb, tb, SP)
+                _depth_pass(vw, near, ty * ntx + tx, rect, start, bins, box, edges, zinfo, planes, zb, tb, SP, sh)
                 y0, y1, x0, x1 = rect
                 for i in range(y0, y1 + 1):
                     # row views: their indices are known non-negative (no wrap-around selects)
@@ -1087,13 +1267,14 @@ def _tiles_depth(fe, sc, depth_out, tri_out):
                     trow = tri_out[i, x0 : x1 + 1]
                     for k in range(drow.shape[0]):
                         drow[k] = zb[i - y0, k]
-                        trow[k] = tb[i - y0, k]
+                        tv = tb[i - y0, k]
+                        trow[k] = tri[max(tv, 0)] if tv >= 0 else -1  # the face (tb: front-end triangle)
 
 
 @kernel(parallel=True)
 def _tiles_gbuffer(fe, sc, out):
     """rasterize: the nearest surface's G-buffer ``out`` = (depth, tri, pos, nrm, bary, mask)."""
-    vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, normals, _rowbits = fe
+    vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, normals, _rowbits, sh, tri = fe
     zbuf, tbuf, spbuf, _ibuf, _lbuf, nslot = sc
     vw = _view_window(vp)
     W, H, ortho, _far, wl, wt, wsx, wsy = vw
@@ -1106,21 +1287,21 @@ def _tiles_gbuffer(fe, sc, out):
         for ty in range(slot, nty, nslot):
             for tx in range(ntx):
                 rect = _tile_rect(ty, tx, T, W, H)
-                _depth_pass(vw, near, ty * ntx + tx, rect, start, bins, box, edges, zinfo, planes, zb, tb, SP)
+                _depth_pass(vw, near, ty * ntx + tx, rect, start, bins, box, edges, zinfo, planes, zb, tb, SP, sh)
                 y0, y1, x0, x1 = rect
                 cols = (x0, wl, wsx)
                 for i in range(y0, y1 + 1):
                     yw = wt - (i + 0.5) * wsy
                     if ortho:
-                        _gbuffer_row(out, i, i - y0, cols, x1 - x0 + 1, yw, zb, tb, frame, planes, normals, True)
+                        _gbuffer_row(out, i, i - y0, cols, x1 - x0 + 1, yw, zb, tb, frame, planes, normals, tri, True)
                     else:
-                        _gbuffer_row(out, i, i - y0, cols, x1 - x0 + 1, yw, zb, tb, frame, planes, normals, False)
+                        _gbuffer_row(out, i, i - y0, cols, x1 - x0 + 1, yw, zb, tb, frame, planes, normals, tri, False)
 
 
 @kernel(parallel=True)
 def _tiles_count(fe, sc, fcount):
     """rasterize_fragments, first pass: fcount[tile] = the number of fragments of the tile."""
-    vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, _normals, _rowbits = fe
+    vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, _normals, _rowbits, sh, _tri = fe
     _zbuf, _tbuf, spbuf, _ibuf, _lbuf, nslot = sc
     vw = _view_window(vp)
     W, H, ortho, far, wl, wt, wsx, wsy = vw
@@ -1141,7 +1322,7 @@ def _tiles_count(fe, sc, fcount):
                         continue
                     zlo, zhi = _depth_bounds(zinfo, ct, ortho, near)
                     zr = (zlo, zhi, far)
-                    pl = _plane(planes, ct >> 1)
+                    pl = _plane(planes, ct >> sh)
                     e0, e1, e2, scan, nrows = _piece_rows(edges, zinfo, ct, prect, y0, x0, W, H, SP, False)
                     for rr in range(nrows):
                         li = SP[_SP_RW, rr]
@@ -1163,7 +1344,7 @@ def _tiles_count(fe, sc, fcount):
 def _tiles_fragments(fe, sc, foff, fpix, ftri, fbary, fdepth):
     """rasterize_fragments, second pass: write the fragments of each tile from foff[tile] on, by
     triangle, piece and pixel (row-major)."""
-    vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, _normals, _rowbits = fe
+    vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, _normals, _rowbits, sh, tri = fe
     _zbuf, _tbuf, spbuf, _ibuf, _lbuf, nslot = sc
     W, H, ortho, far, wl, wt, wsx, wsy = _view_window(vp)
     for slot in prange(nslot):
@@ -1176,7 +1357,7 @@ def _tiles_fragments(fe, sc, foff, fpix, ftri, fbary, fdepth):
                 w = foff[tile]
                 for bi in range(start[tile], start[tile + 1]):
                     ct = bins[bi]
-                    t = ct >> 1
+                    t = ct >> sh
                     prect = _piece_rect(box, ct, rect)
                     i0, i1, j0, j1 = prect
                     if i0 > i1 or j0 > j1:
@@ -1200,7 +1381,7 @@ def _tiles_fragments(fe, sc, foff, fpix, ftri, fbary, fdepth):
                                     continue
                                 b1, b2 = _bary(q, xw, yw, z, ortho)
                                 fpix[w] = i * W + j
-                                ftri[w] = t
+                                ftri[w] = tri[t]
                                 fbary[w, 0] = b1
                                 fbary[w, 1] = b2
                                 fdepth[w] = z
@@ -1221,7 +1402,7 @@ def _make_min_blend_kernel(prog):
         skipped, and so are the pieces with a constant attribute whose value bound
         (``value_lower_bound``) is at least the tile's largest value: the output is the same. With a
         texel mask (``fe.rowbits``), only its texels are shaded, the others keep their value."""
-        vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, _normals, rowbits = fe
+        vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, _normals, rowbits, sh, tri = fe
         zbuf, _tbuf, spbuf, ibuf, lbuf, nslot = sc
         pparams, cattr, img, blend, bstats, split, cull_discarded = mb
         vw = _view_window(vp)
@@ -1253,7 +1434,7 @@ def _make_min_blend_kernel(prog):
                 nvculled = 0
                 for bi in range(start[tile], start[tile + 1]):
                     ct = bins[bi]
-                    t = ct >> 1
+                    t = ct >> sh
                     prect = _piece_rect(box, ct, rect)
                     i0, i1, j0, j1 = prect
                     if i0 > i1 or j0 > j1:
@@ -1262,7 +1443,8 @@ def _make_min_blend_kernel(prog):
                         continue  # no texel to shade in the piece's rectangle of the tile
                     zlo, zhi = _depth_bounds(zinfo, ct, ortho, near)
                     pl = _plane(planes, t)
-                    ca = (cattr[t, 0], cattr[t, 1], cattr[t, 2])
+                    ot = tri[t]  # the face
+                    ca = (cattr[ot, 0], cattr[ot, 1], cattr[ot, 2])
                     cconst = (ca[0] == ca[1]) & (ca[0] == ca[2])
                     if cull_discarded:
                         # hierarchical culling (a GPU's coarse depth test): the nearest fragment of the
@@ -1291,7 +1473,7 @@ def _make_min_blend_kernel(prog):
                     dirty = True  # this piece will lower texels: the tile's largest value may fall
                     q = _dual(planes, t)
                     zr = (zlo, zhi, far)
-                    side_a = t < split
+                    side_a = ot < split
                     for rr in range(nrows):
                         li = SP[_SP_RW, rr]
                         i = li + y0
@@ -1423,6 +1605,8 @@ class FrontEnd(NamedTuple):
     planes: np.ndarray  #: (max(F, 1), PL_WIDTH) float64 triangles' planes and dual vectors, columns PL_*
     normals: np.ndarray  #: (max(F, 1), 3) float32 triangles' unit world normals
     rowbits: np.ndarray  #: (ntiles, T) int64 texel-mask bits per tile row (min-blend), or empty
+    shift: int  #: piece slot ct belongs to front-end triangle ct >> shift (1: two slots per triangle)
+    tri: np.ndarray  #: (max(U, 1),) int32 the face of each front-end triangle (U of them: the faces kept by setup)
 
 
 class _Scratch(NamedTuple):
@@ -1456,18 +1640,34 @@ def _front_end(vp, W, H, verts, fcs, code, near, mask=None) -> FrontEnd:
     """setup + binning: the arrays the tile kernels read. ``mask`` (H,W) uint8: bin a piece only
     to the tiles where its bounding box holds a set texel (min-blend's texel mask)."""
     F = len(fcs)
-    NC = np.empty(F, dtype=np.int32)
-    box = np.empty((2 * F, 4), dtype=np.int32)
-    edges = np.empty((2 * F, 3, E_WIDTH), dtype=np.float64)
-    zinfo = np.empty((2 * F, 3), dtype=np.float64)
-    planes = np.zeros((max(F, 1), PL_WIDTH), dtype=np.float64)  # row 0 exists (the G-buffer pass reads it)
-    normals = np.zeros((max(F, 1), 3), dtype=np.float32)
+    nthreads = numba.get_num_threads()
+    # small-triangle rejection: only the faces that may cover a pixel center go on to setup
+    nchunk = int(min(max(1, F // 4096), 8 * nthreads))
+    chunk = (F + nchunk - 1) // nchunk if F else 1
+    ccount = np.zeros(nchunk, dtype=np.int64)
+    vs = np.empty((3, len(verts)), dtype=np.float64)
+    _vertex_screen(verts, vp, near, vs)
+    keep = np.empty(F, dtype=np.uint8)
+    _select(verts, fcs, vp, near, code, vs, chunk, ccount, nthreads, keep)
+    U = int(ccount.sum())
+    tri = np.zeros(max(U, 1), dtype=np.int32)  # entry 0 exists (read, then discarded, where no hit)
+    if U:
+        ccount[1:] = np.cumsum(ccount)[:-1]
+        ccount[0] = 0
+        _select_fill(chunk, ccount, nthreads, keep, tri)
+    # one piece slot per front-end triangle, two (u << 1, u << 1 | 1) when a face crosses the near plane
+    sh = 1 if U and int(keep.max()) == 2 else 0
+    NC = np.empty(U, dtype=np.int32)
+    box = np.empty((U << sh, 4), dtype=np.int32)
+    edges = np.empty((U << sh, 3, E_WIDTH), dtype=np.float64)
+    zinfo = np.empty((U << sh, 3), dtype=np.float64)
+    planes = np.zeros((max(U, 1), PL_WIDTH), dtype=np.float64)  # row 0 exists (the G-buffer pass reads it)
+    normals = np.zeros((max(U, 1), 3), dtype=np.float32)
     T = TILE
     ntx = (W + T - 1) // T
     nty = (H + T - 1) // T
-    nthreads = numba.get_num_threads()
-    nchunk = int(min(max(1, F // 1024), 4 * nthreads))
-    chunk = (F + nchunk - 1) // nchunk if F else 1
+    nchunk = int(min(max(1, U // 1024), 4 * nthreads))
+    chunk = (U + nchunk - 1) // nchunk if U else 1
     cnt = np.empty((nchunk, ntx * nty), dtype=np.int64)
     start = np.empty(ntx * nty + 1, dtype=np.int64)
     if mask is not None:
@@ -1479,12 +1679,31 @@ def _front_end(vp, W, H, verts, fcs, code, near, mask=None) -> FrontEnd:
         tile_any = _E1U
     use = mask is not None
     _setup_count(
-        verts, fcs, vp, near, code, NC, box, edges, zinfo, planes, normals, T, ntx, chunk, cnt, nthreads, tile_any, use
+        verts,
+        fcs,
+        tri,
+        vp,
+        near,
+        code,
+        NC,
+        box,
+        edges,
+        zinfo,
+        planes,
+        normals,
+        T,
+        ntx,
+        chunk,
+        cnt,
+        nthreads,
+        tile_any,
+        use,
+        sh,
     )
     _bin_offsets(cnt, start)
     bins = np.empty(int(start[-1]), dtype=np.int32)
-    _bin_fill(NC, box, T, ntx, chunk, cnt, bins, nthreads, tile_any, use)
-    return FrontEnd(vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, normals, rowbits)
+    _bin_fill(NC, box, T, ntx, chunk, cnt, bins, nthreads, tile_any, use, sh)
+    return FrontEnd(vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, normals, rowbits, sh, tri)
 
 
 def _scratch(T) -> _Scratch:

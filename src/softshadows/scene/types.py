@@ -233,6 +233,12 @@ class Camera:
         return f"Camera(eye={self.eye.tolist()}, target={self.target.tolist()}, fov_y={self.fov_y})"
 
 
+def light_key(light) -> tuple:
+    """The values that define a light (a cache key: equal lights give equal keys)."""
+    vals = [light.center, getattr(light, "u", ()), getattr(light, "v", ()), [getattr(light, "radius", 0.0)]]
+    return (light.shape, light.intensity, *(float(x) for a in vals for x in np.ravel(a)))
+
+
 @dataclass
 class FlatGeometry:
     """All meshes of a scene concatenated: what kernels consume (plain arrays)."""
@@ -253,6 +259,27 @@ class FlatGeometry:
             mask = {"occluder": self.occluder, "receiver": self.receiver}.get(which)
             hit = np.unique(self.faces if mask is None else self.faces[mask])
             self._cache[("face_vertices", which)] = hit
+        return hit
+
+    def faces_where(self, mask: np.ndarray) -> np.ndarray:
+        """Contiguous ``faces[mask]``; computed once per geometry when ``mask`` is one of the role masks
+        (``occluder``, ``receiver``: the shadow maps' faces, every frame) — a copy of every selected
+        face otherwise."""
+        which = "occluder" if mask is self.occluder else "receiver" if mask is self.receiver else None
+        if which is None:
+            return np.ascontiguousarray(self.faces[mask])
+        hit = self._cache.get(("faces_where", which))
+        if hit is None:
+            hit = self._cache[("faces_where", which)] = np.ascontiguousarray(self.faces[mask])
+            hit.flags.writeable = False
+        return hit
+
+    def cached(self, key: tuple, compute):
+        """``compute()``, once per geometry and ``key`` (per-frame scene preparation that depends
+        only on the geometry and on what ``key`` names, e.g. :func:`light_key` and map sizes)."""
+        hit = self._cache.get(key)
+        if hit is None:
+            hit = self._cache[key] = compute()
         return hit
 
     def subset(self, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -319,8 +346,12 @@ class Scene:
         return any(m.role != "both" for m in self.meshes)
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        v = self.flat.vertices
-        return v.min(axis=0), v.max(axis=0)
+        flat = self.flat
+        hit = flat._cache.get("bounds")  # once per geometry (a pass over every vertex)
+        if hit is None:
+            v = flat.vertices
+            hit = flat._cache["bounds"] = (v.min(axis=0), v.max(axis=0))
+        return hit[0].copy(), hit[1].copy()
 
     def normalized(self) -> tuple[Scene, np.ndarray, float]:
         """``(scene', shift, scale)`` with ``scene' = (scene - shift) * scale`` (a similarity, so V is
@@ -351,10 +382,11 @@ class Scene:
         return self._norm[:3]
 
     def with_light(self, light) -> Scene:
-        return Scene(self.meshes, light, self.camera, self.name)
+        # same meshes: the flattened geometry and what is cached on it are shared
+        return Scene(self.meshes, light, self.camera, self.name, _flat=self._flat)
 
     def with_camera(self, camera) -> Scene:
-        return Scene(self.meshes, self.light, camera, self.name)
+        return Scene(self.meshes, self.light, camera, self.name, _flat=self._flat)
 
 
 #: recentre a scene whose bounding-box centre is further than this x its extent from the origin
