@@ -95,23 +95,22 @@ _U = 2.0**-53  # unit roundoff of float64
 _ROBUST = 1e150  # coordinates below this never overflow the edge functions (no inf - inf = NaN)
 
 
+@kernel(inline=True)
+def _canonical_edge(ax, ay, bx, by):
+    """The edge a->b from its canonically ordered endpoints (lexicographically smaller first), so
+    that both triangles sharing it evaluate it identically: (start x, start y, dx, dy, sign), with
+    sign -1 when the order was swapped."""
+    if ax < bx or (ax == bx and ay < by):
+        return ax, ay, bx - ax, by - ay, 1.0
+    return bx, by, ax - bx, ay - by, -1.0
+
+
 @kernel
 def _store_edge(edges, slot, k, ax, ay, bx, by, ext_x, ext_y):
     """Directed edge a->b of a positively oriented piece; inside is E >= 0 with
     E(p) = cross(b - a, p - a), evaluated from the canonically ordered endpoints.
     ext_x, ext_y: the extents of the piece's bounding box (for the span-search margin)."""
-    if ax < bx or (ax == bx and ay < by):
-        cax = ax
-        cay = ay
-        cdx = bx - ax
-        cdy = by - ay
-        sg = 1.0
-    else:
-        cax = bx
-        cay = by
-        cdx = ax - bx
-        cdy = ay - by
-        sg = -1.0
+    cax, cay, cdx, cdy, sg = _canonical_edge(ax, ay, bx, by)
     edges[slot, k, E_AX] = cax
     edges[slot, k, E_AY] = cay
     edges[slot, k, E_DX] = cdx
@@ -376,18 +375,7 @@ _FEW_CENTERS = 4.0
 def _center_in(ax, ay, bx, by, py, j):
     """:func:`_edge_in` of the edge a->b (of a positively oriented piece) at the pixel center (j + 0.5,
     py), from the values :func:`_store_edge` would store (canonical endpoints, sign, top-left rule)."""
-    if ax < bx or (ax == bx and ay < by):
-        cax = ax
-        cay = ay
-        cdx = bx - ax
-        cdy = by - ay
-        sg = 1.0
-    else:
-        cax = bx
-        cay = by
-        cdx = ax - bx
-        cdy = ay - by
-        sg = -1.0
+    cax, cay, cdx, cdy, sg = _canonical_edge(ax, ay, bx, by)
     ddx = bx - ax
     ddy = by - ay
     own = ddy < 0.0 or (ddy == 0.0 and ddx > 0.0)
