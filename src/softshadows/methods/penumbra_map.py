@@ -328,8 +328,10 @@ def build_sheets(
     if zmax_pyramid is not None and n_objects:
         ucut = _reject_sheets(view, V0, V1, F0, F1, zz0, zz1, z_far, zmax_pyramid)
         keep = ucut > 0.0
-        if needed_pyramid is not None:  # and none at a texel shaded (the others keep their ucut)
-            keep &= _reject_sheets(view, V0, V1, F0, F1, zz0, zz1, z_far, needed_pyramid) > 0.0
+        if needed_pyramid is not None and keep.any():  # and none at a texel shaded (the others keep their ucut)
+            ki = np.flatnonzero(keep)
+            um = _reject_sheets(view, V0[ki], V1[ki], F0[ki], F1[ki], zz0[ki], zz1[ki], z_far, needed_pyramid)
+            keep[ki[um <= 0.0]] = False
         # the sub-sheet u in [0, ucut] of every ruling: the same ruled surface, shorter
         F0 = V0 + (F0 - V0) * ucut[:, None]
         F1 = V1 + (F1 - V1) * ucut[:, None]
@@ -573,22 +575,22 @@ def _pyramid_level1(zp_flat, H, W, data, w2):
 @kernel(parallel=True)
 def _pyramid_level1_pair(zp_flat, needed_flat, H, W, data, mdata, w2):
     """Level 1 (2x2 max) of ``Z_P`` into ``data`` and of ``Z_P`` where ``needed`` is set (0
-    elsewhere) into ``mdata``, from one read of the map, rows in parallel."""
+    elsewhere) into ``mdata``, from one read of the map, rows in parallel (as ``_max_down_row``:
+    non-finite and negative values count as 0; an odd last row or column is its own pair)."""
     for i in prange((H + 1) // 2):
+        r0 = 2 * i * W
+        r1 = min(2 * i + 1, H - 1) * W
         for j in range(w2):
+            c0 = 2 * j
+            c1 = min(2 * j + 1, W - 1)
             m = 0.0
             mm = 0.0
-            for di in range(2):
-                ii = 2 * i + di
-                if ii < H:
-                    for dj in range(2):
-                        jj = 2 * j + dj
-                        if jj < W:
-                            v = zp_flat[ii * W + jj]
-                            if v > m and v < np.inf:
-                                m = v
-                            if needed_flat[ii * W + jj] != 0 and v > mm and v < np.inf:
-                                mm = v
+            for o in (r0 + c0, r0 + c1, r1 + c0, r1 + c1):
+                v = zp_flat[o]
+                v = v if v < np.inf else 0.0
+                m = v if v > m else m
+                vm = v if needed_flat[o] != 0 else 0.0
+                mm = vm if vm > mm else mm
             data[i * w2 + j] = m
             mdata[i * w2 + j] = mm
 
