@@ -572,27 +572,33 @@ def _pyramid_level1(zp_flat, H, W, data, w2):
         _max_down_row(zp_flat, 0, W, H, data, 0, w2, i)
 
 
-@kernel(parallel=True)
-def _pyramid_level1_pair(zp_flat, needed_flat, H, W, data, mdata, w2):
-    """Level 1 (2x2 max) of ``Z_P`` into ``data`` and of ``Z_P`` where ``needed`` is set (0
-    elsewhere) into ``mdata``, from one read of the map, rows in parallel (as ``_max_down_row``:
-    non-finite and negative values count as 0; an odd last row or column is its own pair)."""
-    for i in prange((H + 1) // 2):
-        r0 = 2 * i * W
-        r1 = min(2 * i + 1, H - 1) * W
-        for j in range(w2):
-            c0 = 2 * j
-            c1 = min(2 * j + 1, W - 1)
-            m = 0.0
-            mm = 0.0
-            for o in (r0 + c0, r0 + c1, r1 + c0, r1 + c1):
-                v = zp_flat[o]
-                v = v if v < np.inf else 0.0
-                m = v if v > m else m
-                vm = v if needed_flat[o] != 0 else 0.0
-                mm = vm if vm > mm else mm
-            data[i * w2 + j] = m
-            mdata[i * w2 + j] = mm
+@kernel(inline=True)
+def _masked_max_run(zp_flat, needed_flat, o0, o1, W, mdata, w2):
+    """Texels o0..o1-1 (flat) of the mask: the cells of those set take their finite Z_P's max."""
+    r = o0 // W  # one division per run, then step along the row
+    c = o0 - r * W
+    for o in range(o0, o1):
+        if needed_flat[o] != 0:
+            cell = (r >> 1) * w2 + (c >> 1)
+            v = zp_flat[o]
+            if v > mdata[cell] and v < np.inf:
+                mdata[cell] = v
+        c += 1
+        if c == W:
+            c = 0
+            r += 1
+
+
+@kernel
+def _pyramid_level1_masked(zp_flat, needed_flat, words, W, mdata, w2):
+    """Level 1 (2x2 max, as ``_max_down_row``) of ``Z_P`` where ``needed`` is set (``mdata`` holds
+    zeros). The texels set are few: the mask is read 8 texels at a time (``words``, its uint64 view
+    up to the last whole word) and ``Z_P`` only where it is set."""
+    n8 = words.shape[0]
+    for w in range(n8):
+        if words[w] != 0:
+            _masked_max_run(zp_flat, needed_flat, 8 * w, 8 * w + 8, W, mdata, w2)
+    _masked_max_run(zp_flat, needed_flat, 8 * n8, needed_flat.shape[0], W, mdata, w2)
 
 
 @kernel
@@ -610,7 +616,7 @@ def build_zmax_pyramid(
     float32 data, level offsets, widths, heights. Level 0 (``Z_P`` itself) is not stored (offset
     -1): queries start at level 1. The last level is one texel, the largest finite ``Z_P``.
     With ``needed`` (H,W) uint8: (that pyramid, the pyramid of the texels set only, the others
-    counting as empty), from one pass over the map."""
+    counting as empty)."""
     h, w = zp.shape
     ws, hs, offs = [w], [h], [-1]
     total = 0
@@ -620,15 +626,17 @@ def build_zmax_pyramid(
         hs.append((hs[-1] + 1) // 2)
         total += ws[-1] * hs[-1]
     data = np.zeros(max(total, 1), np.float32)
-    mdata = np.zeros(max(total, 1), np.float32) if needed is not None else data
+    mdata = np.empty(max(total, 1), np.float32) if needed is not None else data
     offs, ws, hs = np.array(offs, np.int64), np.array(ws, np.int64), np.array(hs, np.int64)
     if len(offs) > 1:
         zf = np.ascontiguousarray(zp, dtype=np.float32).reshape(-1)
         if needed is None:
             _pyramid_level1(zf, h, w, data, ws[1])
         else:
+            _pyramid_level1(zf, h, w, data, ws[1])
             nf = np.ascontiguousarray(needed, dtype=np.uint8).reshape(-1)
-            _pyramid_level1_pair(zf, nf, h, w, data, mdata, ws[1])
+            mdata[: ws[1] * hs[1]] = 0.0
+            _pyramid_level1_masked(zf, nf, nf[: len(nf) // 8 * 8].view(np.uint64), w, mdata, ws[1])
             _pyramid_coarser(mdata, offs, ws, hs)
         _pyramid_coarser(data, offs, ws, hs)
     if needed is None:
