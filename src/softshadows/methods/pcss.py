@@ -18,8 +18,8 @@ import numpy as np
 from numba import prange
 
 from .._jit import kernel
-from ..raster.kernels import view_project, view_ray
-from ..raster.view import VP_FORWARD, VP_L, VP_ORIGIN, VP_R, VP_RIGHT, VP_UP, VP_W
+from ..raster.kernels import view_project
+from ..raster.view import VP_B, VP_FORWARD, VP_H, VP_L, VP_ORIGIN, VP_R, VP_RIGHT, VP_T, VP_UP, VP_W
 from .base import Method, MethodOutput, Param, register
 from .shadowmap import build_shadow_map, fit_light_view, receiver_offset
 
@@ -122,11 +122,32 @@ def _view_normal(vp, nx, ny, nz):
 
 
 @kernel(inline=True)
-def _plane_depth(vp, nr, nu, nf, npo, sx, sy, z_center):
+def _exact_inverse(n):
+    """1/n where dividing by n is the same as multiplying by it (n a power of two: both are exact
+    scalings), else 0.0 (divide)."""
+    k = int(n)
+    if k == n and k > 0 and (k & (k - 1)) == 0:
+        return 1.0 / n
+    return 0.0
+
+
+@kernel(inline=True)
+def _ray_xy(vp, sx, sy, iw, ih):
+    """``view_ray`` (continuous texel coordinates -> window coordinates), bit for bit, with its two
+    divisions by the map's width and height replaced by multiplications where ``iw``/``ih`` (from
+    :func:`_exact_inverse`) make them exact."""
+    fx = sx * iw if iw != 0.0 else sx / vp[VP_W]
+    fy = sy * ih if ih != 0.0 else sy / vp[VP_H]
+    return vp[VP_L] + fx * (vp[VP_R] - vp[VP_L]), vp[VP_T] - fy * (vp[VP_T] - vp[VP_B])
+
+
+@kernel(inline=True)
+def _plane_depth(vp, nr, nu, nf, npo, sx, sy, z_center, iw, ih):
     """Depth of the receiver's tangent plane along the map ray through (sx, sy) (perspective map):
     plane n.(X - o) = npo, ray X = o + s (x' right + y' up + forward), depth = s. Falls back to
-    ``z_center`` where the ray grazes the plane or the depth leaves [z/2, 2z]."""
-    xp, yp = view_ray(vp, sx, sy)
+    ``z_center`` where the ray grazes the plane or the depth leaves [z/2, 2z]. ``iw``, ``ih``: see
+    :func:`_ray_xy`."""
+    xp, yp = _ray_xy(vp, sx, sy, iw, ih)
     den = nr * xp + nu * yp + nf
     if abs(den) < 1e-6:
         return z_center
@@ -196,6 +217,8 @@ def blocker_search_kernel(
     H, W = depth_map.shape
     S = pattern.shape[0]
     texel1 = (vp[VP_R] - vp[VP_L]) / vp[VP_W]  # texel size at depth 1 (perspective)
+    iw = _exact_inverse(vp[VP_W])
+    ih = _exact_inverse(vp[VP_H])
     nblock = (n + 63) // 64  # blocks of 64 dealt round-robin to one slot per thread
     for slot in prange(nslot):
         for blk in range(slot, nblock, nslot):
@@ -246,7 +269,7 @@ def blocker_search_kernel(
                     d = depth_map[row, col]
                     zc = zt
                     if plane:
-                        zc = _plane_depth(vp, nr, nu, nf, npo, tx, ty, z) - off
+                        zc = _plane_depth(vp, nr, nu, nf, npo, tx, ty, z, iw, ih) - off
                     if d < zc:
                         total += d
                         cnt += 1
@@ -292,6 +315,8 @@ def filtering_kernel(
     n = pts.shape[0]
     S = pattern.shape[0]
     texel1 = (vp[VP_R] - vp[VP_L]) / vp[VP_W]  # texel size at depth 1 (perspective map)
+    iw = _exact_inverse(vp[VP_W])
+    ih = _exact_inverse(vp[VP_H])
     nblock = (n + 63) // 64  # blocks of 64 dealt round-robin to one slot per thread
     for slot in prange(nslot):
         for blk in range(slot, nblock, nslot):
@@ -333,7 +358,7 @@ def filtering_kernel(
                     ty = sy - oy * ry
                     zc = zt
                     if plane:
-                        zc = _plane_depth(vp, nr, nu, nf, npo, tx, ty, z) - off
+                        zc = _plane_depth(vp, nr, nu, nf, npo, tx, ty, z, iw, ih) - off
                     if bilinear:
                         acc += _cmp_bilinear(depth_map, tx, ty, zc)
                     else:
