@@ -456,13 +456,13 @@ def _sheet_quads(V, faces, edges, edge_faces, o, r, u, f, near, z_far, lr):
     return V0, V1, F0, F1, zz0, zz1, n_two
 
 
-@kernel(parallel=True)
+@kernel
 def _triangles_reach(sx, sy, z, tri, data, offs, ws, hs, eps, out):
     """Per triangle (vertices at pixel coordinates sx, sy and view depth z, all in front of the
     near plane): whether the largest Z_P (pyramid ``data``) under its pixel box reaches beyond its
     nearest vertex; where it does not, every fragment of the triangle lies at or behind Z_P and
     the fragment program discards it."""
-    for t in prange(tri.shape[0]):
+    for t in range(tri.shape[0]):
         a = tri[t, 0]
         b = tri[t, 1]
         c = tri[t, 2]
@@ -883,7 +883,7 @@ def _reject_cones(view, q, zv, bx, by, z_far, pyr, mpyr=None):
     return lam, keep, tkeep
 
 
-@kernel(parallel=True)
+@kernel
 def _sheet_reject_kernel(sx, sy, zc, z_far, iters, pieces, eps, data, offs, ws, hs, ucut):
     """Per sheet: the fraction ``ucut`` of every ruling (from the edge, u = 0, to the far line,
     u = 1) that can carry kept fragments; 0 drops the sheet. ``sx, sy`` (n, 4) pixel coordinates of
@@ -894,7 +894,7 @@ def _sheet_reject_kernel(sx, sy, zc, z_far, iters, pieces, eps, data, offs, ws, 
     for the cones: bound the whole sheet ``iters`` times, then cut it in ``pieces`` slices and end
     after the last slice whose max Z_P lies behind its nearest depth (and not behind that max)."""
     n = sx.shape[0]
-    for i in prange(n):
+    for i in range(n):
         zmin = min(zc[i, 0], zc[i, 1])
         u = 1.0
         for _ in range(iters):
@@ -1026,10 +1026,11 @@ def penumbra_fragment_program(
     }
 
 
-@kernel(parallel=True)
+@kernel
 def _count_below(a, v):
+    # serial, as the other small kernels here: on a busy 2-core machine a parallel region costs more than it saves
     n = 0
-    for i in prange(a.shape[0]):
+    for i in range(a.shape[0]):
         for j in range(a.shape[1]):
             n += a[i, j] < v
     return n
