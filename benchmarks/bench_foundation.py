@@ -9,6 +9,7 @@ All numbers are medians after JIT warm-up, measured in this one process.
 from __future__ import annotations
 
 import argparse
+import itertools
 import statistics
 import time
 
@@ -71,10 +72,9 @@ def main():
     off = gtm.BOUND_SAFETY * (err_point + err_embree)
     grazing = gtm.BOUND_SAFETY * grazing
     shape, center, u, v, radius = gtm.light_arrays(scene.light)
-    per = gtm.chunk_points(len(pts), S, nthreads)
+    bounds = gtm.chunk_bounds(len(pts), S, nthreads)
     batches = []
-    for start in range(0, len(pts), per):
-        stop = min(len(pts), start + per)
+    for start, stop in itertools.pairwise(bounds):
         m = stop - start
         org = np.empty((m * S, 3), np.float32)
         dirs = np.empty((m * S, 3), np.float32)

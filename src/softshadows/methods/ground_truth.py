@@ -12,6 +12,7 @@ Steps, parameters, deviations and known limits: ``docs/methods/ground-truth.md``
 
 from __future__ import annotations
 
+import itertools
 from typing import ClassVar
 
 import numpy as np
@@ -324,14 +325,17 @@ def generate_light_rays(
                 tz[s] = rz * ri
                 dist[base + s] = rl * (1.0 - 1e-6)
                 geo[base + s] = 0.0
+            # unsigned indices: no negative-index wrap-around, so this loop vectorises too
+            ub = np.uint64(base)
             for s in range(S):
-                q = base + s
+                us = np.uint64(s)
+                q = ub + us
                 org[q, 0] = ox32
                 org[q, 1] = oy32
                 org[q, 2] = oz32
-                dirs[q, 0] = tx[s]
-                dirs[q, 1] = ty[s]
-                dirs[q, 2] = tz[s]
+                dirs[q, 0] = tx[us]
+                dirs[q, 1] = ty[us]
+                dirs[q, 2] = tz[us]
             continue
         check = own_blocks[k] and cls != 1
         g = grazing[k]
@@ -367,27 +371,38 @@ def generate_light_rays(
 
 
 @kernel(nogil=True)
-def reduce_visibility(hits, geo, S, vis, irr, offset):
-    """vis[k] = unoccluded fraction; irr[k] = sum of geo over unoccluded samples / S (samples with
-    geo < 0 are blocked without tracing, see :func:`generate_light_rays`)."""
+def reduce_visibility(hits, geo, S, vis, irr, offset, need_geo):
+    """vis[k] = unoccluded fraction; irr[k] = sum of geo over unoccluded samples / S when
+    ``need_geo`` (else 0: geo is 0 on every traced ray). Samples with geo < 0 are blocked without
+    tracing, see :func:`generate_light_rays`. The count is a branch-free (vectorised) loop; the
+    irradiance sum keeps its sample order."""
     n = hits.shape[0] // S
     for k in range(n):
         c = 0
-        e = 0.0
-        for s in range(S):
-            if hits[k * S + s] < 0 and geo[k * S + s] >= 0.0:  # embree: -1 = not occluded; geo -1: blocked
-                c += 1
-                e += geo[k * S + s]
+        for s in range(S):  # embree: -1 = not occluded; geo -1: blocked
+            c += (hits[k * S + s] < 0) & (geo[k * S + s] >= 0.0)
         vis[offset + k] = c / S
+        e = 0.0
+        if need_geo:
+            for s in range(S):
+                if hits[k * S + s] < 0 and geo[k * S + s] >= 0.0:
+                    e += geo[k * S + s]
         irr[offset + k] = e / S
 
 
-def chunk_points(K: int, S: int, nthreads: int) -> int:
-    """Points per chunk for K points x S samples on ``nthreads`` tracing threads: about CHUNK_RAYS
-    rays (embreex's ``run`` costs a few microseconds per call, the Python around a chunk some tens:
-    under 1% of a chunk's milliseconds of tracing), and at least 8 chunks per thread so that the
-    threads finish together."""
-    return max(1, min(max(1, CHUNK_RAYS // S), -(-K // (8 * nthreads))))
+def chunk_bounds(K: int, S: int, nthreads: int) -> list[int]:
+    """Point indices where the chunks of K points x S samples start, and K at the end, for
+    ``nthreads`` threads taking chunks in turn. Guided sizes: about CHUNK_RAYS rays (embreex's
+    ``run`` costs a few microseconds per call and the Python around a chunk some tens, under 1% of
+    a chunk's milliseconds of tracing), shrinking to the remaining rays / (2 nthreads) toward the
+    end, but not below CHUNK_RAYS / 16, so that the threads finish together."""
+    big = max(1, CHUNK_RAYS // S)
+    small = max(1, CHUNK_RAYS // (16 * S))
+    bounds = [0]
+    while bounds[-1] < K:
+        left = K - bounds[-1]
+        bounds.append(bounds[-1] + min(left, max(small, min(big, left // (2 * nthreads)))))
+    return bounds
 
 
 def run_on_threads(nthreads: int, n_items: int, work) -> None:
@@ -440,10 +455,10 @@ def trace_in_pipeline(
     K = len(pts)
     shape, center, u, v, radius = light_arrays(light)
     nthreads = max(1, numba.get_num_threads())
-    per_chunk = chunk_points(K, S, nthreads)
-    n_chunks = -(-K // per_chunk)
-    nthreads = min(nthreads, n_chunks)
-    rows = per_chunk * S
+    bounds = chunk_bounds(K, S, nthreads)
+    n_chunks = len(bounds) - 1
+    nthreads = max(1, min(nthreads, n_chunks))
+    rows = max(b - a for a, b in itertools.pairwise(bounds)) * S if n_chunks else 0
     bufs = [
         (
             np.empty((rows, 3), np.float32),
@@ -463,8 +478,7 @@ def trace_in_pipeline(
 
     def chunk(c, slot):
         t0 = time.perf_counter()
-        start = c * per_chunk
-        stop = min(K, start + per_chunk)
+        start, stop = bounds[c], bounds[c + 1]
         n = (stop - start) * S
         org, dirs, dist, geo = (b[:n] for b in bufs[slot])
         generate_light_rays(
@@ -490,7 +504,7 @@ def trace_in_pipeline(
         t1 = time.perf_counter()
         hits = esc.run(org, dirs, dists=dist, query="OCCLUDED")
         t2 = time.perf_counter()
-        reduce_visibility(hits, geo, S, vis, irr, start)
+        reduce_visibility(hits, geo, S, vis, irr, start, physical)
         t3 = time.perf_counter()
         tt = times[slot]
         tt[0] += t1 - t0
