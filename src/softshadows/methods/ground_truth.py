@@ -21,7 +21,7 @@ from .._jit import kernel
 from ..shading import exposure
 from .base import Method, MethodOutput, Param, register
 
-#: rays per chunk of trace_in_pipeline (see chunk_points)
+#: rays per chunk of trace_in_pipeline (see chunk_bounds)
 CHUNK_RAYS = 1 << 18
 
 
@@ -116,13 +116,27 @@ def _mix32(x):
 
 
 @kernel(inline=True)
+def _sample_salts(sample):
+    """The per-sample halves of :func:`jitter_pair`'s hash (tabled once per call by
+    :func:`generate_light_rays`)."""
+    s = np.uint64(sample)
+    return (s * np.uint64(0x9E3779B9)) & _M32, (s * np.uint64(0x85EBCA6B) + np.uint64(0x632BE59B)) & _M32
+
+
+@kernel(inline=True)
+def _salted_pair(key, salt_a, salt_b):
+    """:func:`jitter_pair` from the point key and the sample's salts (:func:`_sample_salts`)."""
+    ha = _mix32((key & _M32) ^ salt_a)
+    hb = _mix32((key >> np.uint64(32)) ^ salt_b)
+    return (ha >> np.uint64(8)) * (1.0 / 16777216.0), (hb >> np.uint64(8)) * (1.0 / 16777216.0)
+
+
+@kernel(inline=True)
 def jitter_pair(key, sample):
     """Two uniforms in [0,1) for (point key, sample): counter-based, so results do not depend
     on how pixels are split into chunks or threads. ``key`` = :func:`point_key` (seed, pixel)."""
-    s = np.uint64(sample)
-    ha = _mix32((key & _M32) ^ ((s * np.uint64(0x9E3779B9)) & _M32))
-    hb = _mix32((key >> np.uint64(32)) ^ ((s * np.uint64(0x85EBCA6B) + np.uint64(0x632BE59B)) & _M32))
-    return (ha >> np.uint64(8)) * (1.0 / 16777216.0), (hb >> np.uint64(8)) * (1.0 / 16777216.0)
+    salt_a, salt_b = _sample_salts(sample)
+    return _salted_pair(key, salt_a, salt_b)
 
 
 #: unit roundoff of float32 (Embree's arithmetic) and float64 (our hit points)
@@ -284,9 +298,7 @@ def generate_light_rays(
             s = i * n_side + j
             cell_a[s] = i
             cell_b[s] = j
-            su = np.uint64(s)
-            salt_a[s] = (su * np.uint64(0x9E3779B9)) & _M32
-            salt_b[s] = (su * np.uint64(0x85EBCA6B) + np.uint64(0x632BE59B)) & _M32
+            salt_a[s], salt_b[s] = _sample_salts(s)
     nsf = float(n_side)
     ja = np.empty(S)
     jb = np.empty(S)
@@ -326,13 +338,10 @@ def generate_light_rays(
             continue
         # the stratified, jittered point (a, b) of every sample (jitter_pair, vectorised)
         key = point_key(seed, pix[k])
-        klo = key & _M32
-        khi = key >> np.uint64(32)
         for s in range(S):
-            ha = _mix32(klo ^ salt_a[s])
-            hb = _mix32(khi ^ salt_b[s])
-            ja[s] = (cell_a[s] + (ha >> np.uint64(8)) * (1.0 / 16777216.0)) / nsf
-            jb[s] = (cell_b[s] + (hb >> np.uint64(8)) * (1.0 / 16777216.0)) / nsf
+            fa, fb = _salted_pair(key, salt_a[s], salt_b[s])
+            ja[s] = (cell_a[s] + fa) / nsf
+            jb[s] = (cell_b[s] + fb) / nsf
         if shape == 1:  # sphere: disk facing p
             wx, wy, wz, e1x, e1y, e1z, e2x, e2y, e2z = _disk_frame(px, py, pz, center)
             lnx, lny, lnz = wx, wy, wz
