@@ -15,6 +15,7 @@ from __future__ import annotations
 import itertools
 from typing import ClassVar
 
+import numba
 import numpy as np
 
 from .._jit import kernel
@@ -147,6 +148,62 @@ U64 = 2.0**-53
 BOUND_SAFETY = 2.0
 
 
+@kernel(inline=True)
+def _vertex32(vertices, i):
+    """Vertex i as Embree stores it (float32), in float64."""
+    return (
+        np.float64(np.float32(vertices[i, 0])),
+        np.float64(np.float32(vertices[i, 1])),
+        np.float64(np.float32(vertices[i, 2])),
+    )
+
+
+@kernel(parallel=True)
+def _hit_points_kernel(vertices, faces, tri, bary, nrm, safety, p, n, err_point, err_embree, grazing):
+    """The per-point arithmetic of :func:`hit_points`, in its order of operations (sums left to
+    right, as NumPy's over an axis of 3), one point per iteration."""
+    g5 = 5 * U64 / (1 - 5 * U64)
+    tiny = np.finfo(np.float64).tiny
+    for k in numba.prange(tri.shape[0]):
+        t = tri[k]
+        ax, ay, az = _vertex32(vertices, faces[t, 0])
+        bx, by, bz = _vertex32(vertices, faces[t, 1])
+        cx, cy, cz = _vertex32(vertices, faces[t, 2])
+        b1 = np.float64(bary[k, 0])
+        b2 = np.float64(bary[k, 1])
+        b0 = 1.0 - b1 - b2
+        px = b0 * ax + b1 * bx + b2 * cx
+        py = b0 * ay + b1 * by + b2 * cy
+        pz = b0 * az + b1 * bz + b2 * cz
+        e1x, e1y, e1z = bx - ax, by - ay, bz - az
+        e2x, e2y, e2z = cx - ax, cy - ay, cz - az
+        crx, cry, crz = e1y * e2z - e1z * e2y, e1z * e2x - e1x * e2z, e1x * e2y - e1y * e2x
+        twice_area = np.sqrt(crx * crx + cry * cry + crz * crz)
+        d = max(twice_area, tiny)
+        nx, ny, nz = crx / d, cry / d, crz / d
+        if nx * nrm[k, 0] + ny * nrm[k, 1] + nz * nrm[k, 2] < 0.0:
+            nx, ny, nz = -nx, -ny, -nz
+        ex = abs(nx) * (g5 * (abs(b0 * ax) + abs(b1 * bx) + abs(b2 * cx) + abs(ax)) + U32 * abs(px))
+        ey = abs(ny) * (g5 * (abs(b0 * ay) + abs(b1 * by) + abs(b2 * cy) + abs(ay)) + U32 * abs(py))
+        ez = abs(nz) * (g5 * (abs(b0 * az) + abs(b1 * bz) + abs(b2 * cz) + abs(az)) + U32 * abs(pz))
+        ep = ex + ey + ez
+        area = max(0.5 * twice_area, tiny)
+        ra = np.sqrt((ax - px) * (ax - px) + (ay - py) * (ay - py) + (az - pz) * (az - pz))
+        rb = np.sqrt((bx - px) * (bx - px) + (by - py) * (by - py) + (bz - pz) * (bz - pz))
+        rc = np.sqrt((cx - px) * (cx - px) + (cy - py) * (cy - py) + (cz - pz) * (cz - pz))
+        R = max(ra, max(rb, rc))
+        q = R * R / area
+        grazing[k] = U32 * (16.0 * q + 3.0)
+        ee = U32 * R * (4.0 + 16.0 * q)
+        # the origin sits err_* above p: R grows by that much (one fixed-point step is enough, it is tiny)
+        R = R + safety * (ep + ee)
+        q = R * R / area
+        p[k, 0], p[k, 1], p[k, 2] = px, py, pz
+        n[k, 0], n[k, 1], n[k, 2] = nx, ny, nz
+        err_point[k] = ep
+        err_embree[k] = U32 * R * (4.0 + 16.0 * q)
+
+
 def hit_points(flat, eye, idx, nrm):
     """Hit points recomputed in float64 and their error bounds (docs/methods/ground-truth.md).
 
@@ -170,28 +227,12 @@ def hit_points(flat, eye, idx, nrm):
     Also ``own_blocks``: the pixel's triangle is an occluder (it is in the BVH), so a ray leaving
     its back side is blocked by it."""
     tri = eye.tri_id.ravel()[idx]
-    bary = eye.bary.reshape(-1, 2)[idx].astype(np.float64)
-    V = flat.vertices[flat.faces[tri]].astype(np.float32).astype(np.float64)  # (K,3,3), Embree's
-    b1, b2 = bary[:, 0:1], bary[:, 1:2]
-    b0 = 1.0 - b1 - b2
-    p = b0 * V[:, 0] + b1 * V[:, 1] + b2 * V[:, 2]
-    cr = np.cross(V[:, 1] - V[:, 0], V[:, 2] - V[:, 0])
-    twice_area = np.linalg.norm(cr, axis=1)
-    n = cr / np.maximum(twice_area, np.finfo(np.float64).tiny)[:, None]
-    n *= np.where(np.sum(n * nrm, axis=1) < 0.0, -1.0, 1.0)[:, None]
-    abs_n = np.abs(n)
-    g5 = 5 * U64 / (1 - 5 * U64)
-    perr64 = g5 * (np.abs(b0 * V[:, 0]) + np.abs(b1 * V[:, 1]) + np.abs(b2 * V[:, 2]) + np.abs(V[:, 0]))
-    err_point = np.sum(abs_n * (perr64 + U32 * np.abs(p)), axis=1)
-    area = np.maximum(0.5 * twice_area, np.finfo(np.float64).tiny)
-    R = np.max(np.linalg.norm(V - p[:, None, :], axis=2), axis=1)
-    q = R * R / area
-    grazing = U32 * (16.0 * q + 3.0)
-    err_embree = U32 * R * (4.0 + 16.0 * q)
-    # the origin sits err_* above p: R grows by that much (one fixed-point step is enough, it is tiny)
-    R = R + BOUND_SAFETY * (err_point + err_embree)
-    q = R * R / area
-    err_embree = U32 * R * (4.0 + 16.0 * q)
+    bary = eye.bary.reshape(-1, 2)[idx]
+    K = len(idx)
+    p, n = np.empty((K, 3)), np.empty((K, 3))
+    err_point, err_embree, grazing = np.empty(K), np.empty(K), np.empty(K)
+    nrm = np.ascontiguousarray(nrm, dtype=np.float64)
+    _hit_points_kernel(flat.vertices, flat.faces, tri, bary, nrm, BOUND_SAFETY, p, n, err_point, err_embree, grazing)
     own_blocks = flat.occluder[tri]
     return p, n, err_point, err_embree, grazing, own_blocks
 
