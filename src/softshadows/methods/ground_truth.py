@@ -15,7 +15,6 @@ from __future__ import annotations
 import itertools
 from typing import ClassVar
 
-import numba
 import numpy as np
 
 from .._jit import kernel
@@ -158,13 +157,13 @@ def _vertex32(vertices, i):
     )
 
 
-@kernel(parallel=True)
+@kernel
 def _hit_points_kernel(vertices, faces, tri, bary, nrm, safety, p, n, err_point, err_embree, grazing):
     """The per-point arithmetic of :func:`hit_points`, in its order of operations (sums left to
     right, as NumPy's over an axis of 3), one point per iteration."""
     g5 = 5 * U64 / (1 - 5 * U64)
     tiny = np.finfo(np.float64).tiny
-    for k in numba.prange(tri.shape[0]):
+    for k in range(tri.shape[0]):
         t = tri[k]
         ax, ay, az = _vertex32(vertices, faces[t, 0])
         bx, by, bz = _vertex32(vertices, faces[t, 1])
