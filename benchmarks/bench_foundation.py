@@ -1,7 +1,7 @@
 """Foundation benchmark (issue 2): per-phase times at 512x512 on `bunny` for `hard` and
 `ground-truth`, and ground truth's rays/s next to a raw Embree occlusion call on the same rays.
 
-    python benchmarks/bench_foundation.py [--size 512] [--samples 64] [--repeats 5]
+    python benchmarks/bench_foundation.py [--size 512] [--samples 64] [--repeats 5] [--light rect|sphere]
 
 All numbers are medians after JIT warm-up, measured in this one process.
 """
@@ -9,6 +9,7 @@ All numbers are medians after JIT warm-up, measured in this one process.
 from __future__ import annotations
 
 import argparse
+import itertools
 import statistics
 import time
 
@@ -32,8 +33,9 @@ def main():
     ap.add_argument("--size", type=int, default=512)
     ap.add_argument("--samples", type=int, default=64)
     ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--light", choices=("rect", "sphere"), default=None, help="light shape (default: the scene's)")
     a = ap.parse_args()
-    scene = ss.load_scene(a.scene)
+    scene = ss.load_scene(a.scene, light=a.light)
     n = a.size
     print(f"scene={a.scene} size={n}x{n} ({len(scene.flat.faces)} triangles)")
 
@@ -54,9 +56,8 @@ def main():
     print("hard: " + "  ".join(f"{k}={v * 1e3:.1f}ms" for k, v in ph.items()) + "  (target total <= 30 ms)")
 
     # ground truth against raw Embree on the same rays, one tracing thread per core on both sides,
-    # interleaved: raw = pre-generated chunks handed to embreex's run from nthreads Python threads
-    from concurrent.futures import ThreadPoolExecutor
-
+    # interleaved: raw = the method's chunks, generated beforehand, handed to embreex's run by the
+    # same threads (gtm.run_on_threads: one Python thread per Numba thread taking chunks in turn)
     import numba
 
     nthreads = numba.get_num_threads()
@@ -71,10 +72,9 @@ def main():
     off = gtm.BOUND_SAFETY * (err_point + err_embree)
     grazing = gtm.BOUND_SAFETY * grazing
     shape, center, u, v, radius = gtm.light_arrays(scene.light)
-    per = max(1, gtm.CHUNK_RAYS // S)
+    bounds = gtm.chunk_bounds(len(pts), S, nthreads)
     batches = []
-    for start in range(0, len(pts), per):
-        stop = min(len(pts), start + per)
+    for start, stop in itertools.pairwise(bounds):
         m = stop - start
         org = np.empty((m * S, 3), np.float32)
         dirs = np.empty((m * S, 3), np.float32)
@@ -102,27 +102,35 @@ def main():
         )
         batches.append((org, dirs, dist))
 
-    def trace(batch):
-        org, dirs, dist = batch
+    def trace(i, slot):
+        org, dirs, dist = batches[i]
         esc.run(org, dirs, dists=dist, query="OCCLUDED")
 
     ss.render(scene, "ground-truth", 32, 32, samples=a.samples)
     gts, raw = [], []
-    with ThreadPoolExecutor(max_workers=nthreads) as pool:
-        for _ in range(max(1, a.repeats // 2)):
-            gts.append(ss.render(scene, "ground-truth", n, n, samples=a.samples))
-            t0 = time.perf_counter()
-            list(pool.map(trace, batches))
-            raw.append(time.perf_counter() - t0)
+    for _ in range(max(1, a.repeats // 2)):
+        gts.append(ss.render(scene, "ground-truth", n, n, samples=a.samples))
+        t0 = time.perf_counter()
+        gtm.run_on_threads(nthreads, len(batches), trace)
+        raw.append(time.perf_counter() - t0)
     pg = med_phases(gts)
     rays = gts[0].stats["rays"]
     method_time = pg["rays"]  # generation, tracing and reduction on every core
     print("ground-truth: " + "  ".join(f"{k}={v * 1e3:.1f}ms" for k, v in pg.items()))
+    split = {
+        k: statistics.median(r.stats[k] for r in gts) / rays * 1e9
+        for k in ("ray_generation_seconds", "trace_seconds", "reduce_seconds")
+    }
+    print(
+        "  per ray, summed over threads: "
+        + "  ".join(f"{k.split('_seconds')[0]}={v:.2f}ns" for k, v in split.items())
+        + f"  (raw trace: {statistics.median(raw) * nthreads / rays * 1e9:.2f}ns)"
+    )
     raw_t = statistics.median(raw)
     print(
-        f"rays: {rays}  threads: {nthreads}  ground-truth method: {rays / method_time / 1e6:.2f} Mrays/s   "
-        f"raw Embree ({nthreads} threads): {rays / raw_t / 1e6:.2f} Mrays/s   ratio {raw_t / method_time:.2f} "
-        "(target >= 0.85)"
+        f"rays: {rays}  chunks: {len(batches)}  threads: {nthreads}  ground-truth method: "
+        f"{rays / method_time / 1e6:.2f} Mrays/s   raw Embree ({nthreads} threads): {rays / raw_t / 1e6:.2f} Mrays/s"
+        f"   ratio {raw_t / method_time:.2f} (target >= 0.85)"
     )
 
 

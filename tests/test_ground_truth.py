@@ -5,6 +5,7 @@ import pytest
 
 import softshadows as ss
 from softshadows.analytic import disk_halfplane_visibility, rect_occluder_visibility
+from softshadows.methods import ground_truth as gtm
 from softshadows.scene import builtin
 
 
@@ -207,3 +208,107 @@ def test_output_independent_of_the_thread_count():
     assert 0.0 < np.nanmean(one.visibility) < 1.0
     assert np.array_equal(one.visibility, two.visibility, equal_nan=True)
     assert np.array_equal(one.image, two.image, equal_nan=True)
+
+
+# ---- ray generation's per-point shortcuts (issue 16) ---------------------------------------------
+def _light_grid(shape, center, u, v, radius, p, m=9):
+    """Points of the light on an m x m grid of (a, b) in [0, 1]^2 (corners and edges included),
+    mapped as generate_light_rays maps its jittered samples (the disk faces p)."""
+    t = np.linspace(0.0, 1.0, m)
+    a, b = (x.ravel() for x in np.meshgrid(t, t))
+    if shape == 0:
+        return center + (a - 0.5)[:, None] * u + (b - 0.5)[:, None] * v
+    _, _, _, *e = gtm._disk_frame(p[0], p[1], p[2], center)
+    e1, e2 = np.array(e[:3]), np.array(e[3:])
+    d = np.array([gtm._concentric(x, y) for x, y in zip(a, b)])
+    return center + radius * (d[:, :1] * e1 + d[:, 1:] * e2)
+
+
+def test_facing_class_never_contradicts_a_sample():
+    # _facing_class lets generate_light_rays skip the per-sample own-triangle test (class 1: every
+    # cosine > grazing) or block the whole point (class -1: every cosine < 0). Points are drawn
+    # near the light's tangent planes so that all three classes occur; the cosine at every grid
+    # point of the light (corners and edges, where the extremes are) is computed as the kernel
+    # computes it and must agree with the class, exactly (no tolerance: a wrong class changes V).
+    rng = np.random.default_rng(5)
+    seen = {-1: 0, 0: 0, 1: 0}
+    for shape in (0, 1):
+        center = np.array([0.3, 4.0, -0.2])
+        u, v = np.array([1.2, 0.0, 0.1]), np.array([0.0, 0.3, 0.9])
+        radius = 0.7
+        for _ in range(400):
+            p = rng.normal(size=3) * 2.0
+            # a normal nearly perpendicular to the direction of the light: the plane grazes it
+            w = center - p
+            n = np.cross(w, rng.normal(size=3))
+            n = n / np.linalg.norm(n) + rng.normal(scale=0.3) * w / np.linalg.norm(w)
+            n /= np.linalg.norm(n)
+            g = float(rng.choice([1e-6, 1e-3, 0.05]))
+            cls = gtm._facing_class(p[0], p[1], p[2], n[0], n[1], n[2], g, shape, center, u, v, radius)
+            q = _light_grid(shape, center, u, v, radius, p) - p
+            cp = (n[0] * q[:, 0] + n[1] * q[:, 1] + n[2] * q[:, 2]) / np.sqrt(np.sum(q * q, axis=1))
+            seen[cls] += 1
+            if cls == 1:
+                assert np.all(cp > g), (shape, p, n, g, cp.min())
+            elif cls == -1:
+                assert np.all(cp < 0.0), (shape, p, n, g, cp.max())
+    assert min(seen.values()) > 20, seen  # every class is exercised
+
+
+@pytest.mark.parametrize("light", ["rect", "sphere"])
+def test_fast_ray_paths_match_the_per_sample_path(light):
+    # With need_geo (the physical mode) every point that is not wholly behind its tangent plane
+    # goes through the per-sample path (cosine and own-triangle test on each ray); without it most
+    # points take the vectorised path. Origins, directions, lengths and the blocked rays must be
+    # the same bits (the fast path only skips work whose outcome the class already decides).
+    from softshadows.api import eye_view
+    from softshadows.raster import rasterize
+    from softshadows.shading import facing_normals
+
+    scene = ss.load_scene("bunny", light=light)
+    flat = scene.flat
+    gb = rasterize(eye_view(scene, 64, 48), flat.vertices, flat.faces)
+    idx = np.flatnonzero(gb.mask.ravel())
+    pos = gb.position.reshape(-1, 3)[idx].astype(np.float64)
+    nrm = facing_normals(gb.normal.reshape(-1, 3)[idx].astype(np.float64), pos, scene.camera.eye)
+    pts, nrm, ep, ee, graz, own = gtm.hit_points(flat, gb, idx, nrm)
+    off, graz = gtm.BOUND_SAFETY * (ep + ee), gtm.BOUND_SAFETY * graz
+    shape, center, u, v, radius = gtm.light_arrays(scene.light)
+    classes = [gtm._facing_class(*pts[k], *nrm[k], graz[k], shape, center, u, v, radius) for k in np.flatnonzero(own)]
+    assert {-1, 0, 1} <= set(classes)  # the bunny has points of each class
+    side, S = 4, 16
+    out = {}
+    for need_geo in (False, True):
+        arr = (np.empty((len(pts) * S, 3), np.float32), np.empty((len(pts) * S, 3), np.float32))
+        arr += (np.empty(len(pts) * S, np.float32), np.empty(len(pts) * S, np.float32))
+        gtm.generate_light_rays(pts, nrm, idx, off, graz, own, 3, side, shape, center, u, v, radius, *arr, need_geo)
+        out[need_geo] = arr
+    (o0, d0, l0, g0), (o1, d1, l1, g1) = out[False], out[True]
+    blocked = g1 < 0
+    assert 0 < blocked.sum() < len(blocked)
+    assert np.array_equal(g0 < 0, blocked)
+    assert np.array_equal(o0, o1) and np.array_equal(l0, l1) and np.array_equal(d0, d1)
+    assert np.all(g0[~blocked] == 0.0) and np.all(g1[~blocked] >= 0.0)
+
+
+def test_concentric_map_matches_libm_within_rounding():
+    # _concentric evaluates sin/cos by polynomials (so the sample loop vectorises); against the same
+    # map through libm (math.cos/sin) it must agree to a few float64 ulps: both are within 1 ulp of
+    # the exact values, plus the rounding of r * cos. Corners, edges, the centre and the diagonals
+    # |x| = |y| (where the two branches meet) are included.
+    import math
+
+    rng = np.random.default_rng(2)
+    t = np.linspace(0.0, 1.0, 33)
+    grid = np.array([(a, b) for a in t for b in t])
+    ab = np.concatenate([rng.random((20000, 2)), grid, [[0.5, 0.5], [0.0, 0.0], [0.25, 0.75], [0.9, 0.1]]])
+    worst = 0.0
+    for a, b in ab:
+        dx, dy = gtm._concentric(a, b)
+        x, y = 2.0 * a - 1.0, 2.0 * b - 1.0
+        if x == 0.0 and y == 0.0:
+            assert (dx, dy) == (0.0, 0.0)
+            continue
+        r, phi = (x, math.pi / 4 * (y / x)) if abs(x) > abs(y) else (y, math.pi / 2 - math.pi / 4 * (x / y))
+        worst = max(worst, abs(dx - r * math.cos(phi)), abs(dy - r * math.sin(phi)))
+    assert worst <= 4 * 2.0**-53 * 2, worst  # 4 ulp of numbers up to 1 (measured: 1.1e-16)
