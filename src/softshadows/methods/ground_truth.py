@@ -15,6 +15,7 @@ from __future__ import annotations
 from typing import ClassVar
 
 import numpy as np
+from numba import prange
 
 from .._jit import kernel
 from ..shading import exposure
@@ -120,30 +121,60 @@ def hit_points(flat, eye, idx, nrm):
     Also ``own_blocks``: the pixel's triangle is an occluder (it is in the BVH), so a ray leaving
     its back side is blocked by it."""
     tri = eye.tri_id.ravel()[idx]
-    bary = eye.bary.reshape(-1, 2)[idx].astype(np.float64)
-    V = flat.vertices[flat.faces[tri]].astype(np.float32).astype(np.float64)  # (K,3,3), Embree's
-    b1, b2 = bary[:, 0:1], bary[:, 1:2]
-    b0 = 1.0 - b1 - b2
-    p = b0 * V[:, 0] + b1 * V[:, 1] + b2 * V[:, 2]
-    cr = np.cross(V[:, 1] - V[:, 0], V[:, 2] - V[:, 0])
-    twice_area = np.linalg.norm(cr, axis=1)
-    n = cr / np.maximum(twice_area, np.finfo(np.float64).tiny)[:, None]
-    n *= np.where(np.sum(n * nrm, axis=1) < 0.0, -1.0, 1.0)[:, None]
-    abs_n = np.abs(n)
-    g5 = 5 * U64 / (1 - 5 * U64)
-    perr64 = g5 * (np.abs(b0 * V[:, 0]) + np.abs(b1 * V[:, 1]) + np.abs(b2 * V[:, 2]) + np.abs(V[:, 0]))
-    err_point = np.sum(abs_n * (perr64 + U32 * np.abs(p)), axis=1)
-    area = np.maximum(0.5 * twice_area, np.finfo(np.float64).tiny)
-    R = np.max(np.linalg.norm(V - p[:, None, :], axis=2), axis=1)
-    q = R * R / area
-    grazing = U32 * (16.0 * q + 3.0)
-    err_embree = U32 * R * (4.0 + 16.0 * q)
-    # the origin sits err_* above p: R grows by that much (one fixed-point step is enough, it is tiny)
-    R = R + BOUND_SAFETY * (err_point + err_embree)
-    q = R * R / area
-    err_embree = U32 * R * (4.0 + 16.0 * q)
+    bary = eye.bary.reshape(-1, 2)[idx]
+    K = len(tri)
+    p, n = np.empty((K, 3)), np.empty((K, 3))
+    err_point, err_embree, grazing = np.empty(K), np.empty(K), np.empty(K)
+    _hit_points_kernel(flat.vertices, flat.faces, tri, bary, nrm, p, n, err_point, err_embree, grazing)
     own_blocks = flat.occluder[tri]
     return p, n, err_point, err_embree, grazing, own_blocks
+
+
+@kernel(parallel=True)
+def _hit_points_kernel(verts, faces, tri, bary, nrm, p, n, err_point, err_embree, grazing):
+    """:func:`hit_points` per point (one pass, no temporaries); each value is computed with the
+    operations in the order the earlier NumPy version used, so the results are the same bits."""
+    tiny = np.finfo(np.float64).tiny
+    g5 = 5 * U64 / (1 - 5 * U64)
+    for k in prange(tri.shape[0]):
+        V = np.empty((3, 3))
+        for i in range(3):
+            for c in range(3):
+                V[i, c] = np.float64(np.float32(verts[faces[tri[k], i], c]))  # Embree's float32 vertices
+        b1 = np.float64(bary[k, 0])
+        b2 = np.float64(bary[k, 1])
+        b0 = 1.0 - b1 - b2
+        e1x, e1y, e1z = V[1, 0] - V[0, 0], V[1, 1] - V[0, 1], V[1, 2] - V[0, 2]
+        e2x, e2y, e2z = V[2, 0] - V[0, 0], V[2, 1] - V[0, 1], V[2, 2] - V[0, 2]
+        cx = e1y * e2z - e1z * e2y
+        cy = e1z * e2x - e1x * e2z
+        cz = e1x * e2y - e1y * e2x
+        twice_area = np.sqrt(cx * cx + cy * cy + cz * cz)
+        dn = max(twice_area, tiny)
+        nx, ny, nz = cx / dn, cy / dn, cz / dn
+        if nx * nrm[k, 0] + ny * nrm[k, 1] + nz * nrm[k, 2] < 0.0:
+            nx, ny, nz = -nx, -ny, -nz
+        ep = 0.0
+        for c in range(3):
+            pc = b0 * V[0, c] + b1 * V[1, c] + b2 * V[2, c]
+            p[k, c] = pc
+            perr64 = g5 * (abs(b0 * V[0, c]) + abs(b1 * V[1, c]) + abs(b2 * V[2, c]) + abs(V[0, c]))
+            nc = nx if c == 0 else (ny if c == 1 else nz)
+            ep += abs(nc) * (perr64 + U32 * abs(pc))
+        n[k, 0], n[k, 1], n[k, 2] = nx, ny, nz
+        area = max(0.5 * twice_area, tiny)
+        R = 0.0
+        for i in range(3):
+            dx, dy, dz = V[i, 0] - p[k, 0], V[i, 1] - p[k, 1], V[i, 2] - p[k, 2]
+            R = max(R, np.sqrt(dx * dx + dy * dy + dz * dz))
+        q = R * R / area
+        grazing[k] = U32 * (16.0 * q + 3.0)
+        ee = U32 * R * (4.0 + 16.0 * q)
+        # the origin sits err_* above p: R grows by that much (one fixed-point step is enough, it is tiny)
+        R = R + BOUND_SAFETY * (ep + ee)
+        q = R * R / area
+        err_point[k] = ep
+        err_embree[k] = U32 * R * (4.0 + 16.0 * q)
 
 
 @kernel(nogil=True)
