@@ -130,6 +130,11 @@ def hit_points(flat, eye, idx, nrm):
     return p, n, err_point, err_embree, grazing, own_blocks
 
 
+@kernel(inline=True)
+def _f32(x):
+    return np.float64(np.float32(x))  # Embree's float32 vertex coordinate
+
+
 @kernel(parallel=True)
 def _hit_points_kernel(verts, faces, tri, bary, nrm, p, n, err_point, err_embree, grazing):
     """:func:`hit_points` per point (one pass, no temporaries); each value is computed with the
@@ -137,36 +142,37 @@ def _hit_points_kernel(verts, faces, tri, bary, nrm, p, n, err_point, err_embree
     tiny = np.finfo(np.float64).tiny
     g5 = 5 * U64 / (1 - 5 * U64)
     for k in prange(tri.shape[0]):
-        V = np.empty((3, 3))
-        for i in range(3):
-            for c in range(3):
-                V[i, c] = np.float64(np.float32(verts[faces[tri[k], i], c]))  # Embree's float32 vertices
+        i0, i1, i2 = faces[tri[k], 0], faces[tri[k], 1], faces[tri[k], 2]
+        ax, ay, az = _f32(verts[i0, 0]), _f32(verts[i0, 1]), _f32(verts[i0, 2])
+        bx, by, bz = _f32(verts[i1, 0]), _f32(verts[i1, 1]), _f32(verts[i1, 2])
+        cx, cy, cz = _f32(verts[i2, 0]), _f32(verts[i2, 1]), _f32(verts[i2, 2])
         b1 = np.float64(bary[k, 0])
         b2 = np.float64(bary[k, 1])
         b0 = 1.0 - b1 - b2
-        e1x, e1y, e1z = V[1, 0] - V[0, 0], V[1, 1] - V[0, 1], V[1, 2] - V[0, 2]
-        e2x, e2y, e2z = V[2, 0] - V[0, 0], V[2, 1] - V[0, 1], V[2, 2] - V[0, 2]
-        cx = e1y * e2z - e1z * e2y
-        cy = e1z * e2x - e1x * e2z
-        cz = e1x * e2y - e1y * e2x
-        twice_area = np.sqrt(cx * cx + cy * cy + cz * cz)
+        e1x, e1y, e1z = bx - ax, by - ay, bz - az
+        e2x, e2y, e2z = cx - ax, cy - ay, cz - az
+        crx = e1y * e2z - e1z * e2y
+        cry = e1z * e2x - e1x * e2z
+        crz = e1x * e2y - e1y * e2x
+        twice_area = np.sqrt(crx * crx + cry * cry + crz * crz)
         dn = max(twice_area, tiny)
-        nx, ny, nz = cx / dn, cy / dn, cz / dn
+        nx, ny, nz = crx / dn, cry / dn, crz / dn
         if nx * nrm[k, 0] + ny * nrm[k, 1] + nz * nrm[k, 2] < 0.0:
             nx, ny, nz = -nx, -ny, -nz
-        ep = 0.0
-        for c in range(3):
-            pc = b0 * V[0, c] + b1 * V[1, c] + b2 * V[2, c]
-            p[k, c] = pc
-            perr64 = g5 * (abs(b0 * V[0, c]) + abs(b1 * V[1, c]) + abs(b2 * V[2, c]) + abs(V[0, c]))
-            nc = nx if c == 0 else (ny if c == 1 else nz)
-            ep += abs(nc) * (perr64 + U32 * abs(pc))
+        px = b0 * ax + b1 * bx + b2 * cx
+        py = b0 * ay + b1 * by + b2 * cy
+        pz = b0 * az + b1 * bz + b2 * cz
+        ex = g5 * (abs(b0 * ax) + abs(b1 * bx) + abs(b2 * cx) + abs(ax))
+        ey = g5 * (abs(b0 * ay) + abs(b1 * by) + abs(b2 * cy) + abs(ay))
+        ez = g5 * (abs(b0 * az) + abs(b1 * bz) + abs(b2 * cz) + abs(az))
+        ep = abs(nx) * (ex + U32 * abs(px)) + abs(ny) * (ey + U32 * abs(py)) + abs(nz) * (ez + U32 * abs(pz))
+        p[k, 0], p[k, 1], p[k, 2] = px, py, pz
         n[k, 0], n[k, 1], n[k, 2] = nx, ny, nz
         area = max(0.5 * twice_area, tiny)
-        R = 0.0
-        for i in range(3):
-            dx, dy, dz = V[i, 0] - p[k, 0], V[i, 1] - p[k, 1], V[i, 2] - p[k, 2]
-            R = max(R, np.sqrt(dx * dx + dy * dy + dz * dz))
+        ra = np.sqrt((ax - px) * (ax - px) + (ay - py) * (ay - py) + (az - pz) * (az - pz))
+        rb = np.sqrt((bx - px) * (bx - px) + (by - py) * (by - py) + (bz - pz) * (bz - pz))
+        rc = np.sqrt((cx - px) * (cx - px) + (cy - py) * (cy - py) + (cz - pz) * (cz - pz))
+        R = max(ra, rb, rc)
         q = R * R / area
         grazing[k] = U32 * (16.0 * q + 3.0)
         ee = U32 * R * (4.0 + 16.0 * q)
