@@ -918,26 +918,30 @@ def bin_penumbra_quads(grid: SampleGrid, qd: np.ndarray, light_radius: float, pe
 def segment_area(d, w0, w1):
     """Eq. 3: normalised area between a chord segment and the arc of the unit circle, inside the angle
     the segment [w0, w1] (positions along the chord line, at distance d >= 0 from the centre,
-    already clipped to the circle) subtends at the centre: (theta - d (w1 - w0)) / (2 pi)."""
-    den = np.sqrt((d * d + w0 * w0) * (d * d + w1 * w1))
-    if den == 0.0:
-        return 0.0
-    c = (d * d + w0 * w1) / den
-    c = min(max(c, -1.0), 1.0)
-    theta = np.arccos(c)
+    already clipped to the circle) subtends at the centre: (theta - d (w1 - w0)) / (2 pi). theta,
+    the paper's acos((d^2 + w0 w1) / sqrt((d^2 + w0^2)(d^2 + w1^2))), is taken as the angle between
+    (w0, d) and (w1, d) by atan2 (same angle, no square root or division, and accurate near 0 where
+    acos loses half the digits)."""
+    theta = np.arctan2(d * (w1 - w0), d * d + w0 * w1)
     return (theta - d * (w1 - w0)) / (2.0 * np.pi)
 
 
 @kernel(inline=True)
 def _clip_poly(buf, src, n, a, b, c, dst):
-    """Clip the polygon in rows (2 src, 2 src + 1) of ``buf`` (x, y; n vertices) to
-    a*x + b*y + c >= 0 into rows (2 dst, 2 dst + 1); returns the new count."""
+    """Clip the polygon in rows (2 src, 2 src + 1) of ``buf`` (x, y; n >= 1 vertices) to
+    a*x + b*y + c >= 0 into rows (2 dst, 2 dst + 1); returns the new count. Each vertex's value of
+    the half-plane function is computed once."""
     sx, sy, dx, dy = 2 * src, 2 * src + 1, 2 * dst, 2 * dst + 1
     m = 0
+    f0 = a * buf[sx, 0] + b * buf[sy, 0] + c
+    fi = f0
     for i in range(n):
-        j = (i + 1) % n
-        fi = a * buf[sx, i] + b * buf[sy, i] + c
-        fj = a * buf[sx, j] + b * buf[sy, j] + c
+        j = i + 1
+        if j < n:
+            fj = a * buf[sx, j] + b * buf[sy, j] + c
+        else:
+            j = 0
+            fj = f0
         if fi >= 0.0:
             buf[dx, m] = buf[sx, i]
             buf[dy, m] = buf[sy, i]
@@ -947,6 +951,7 @@ def _clip_poly(buf, src, n, a, b, c, dst):
             buf[dx, m] = buf[sx, i] + t * (buf[sx, j] - buf[sx, i])
             buf[dy, m] = buf[sy, i] + t * (buf[sy, j] - buf[sy, i])
             m += 1
+        fi = fj
     return m
 
 
@@ -1023,18 +1028,21 @@ def _disk_term(rw, j, radius, rax, ray, raz, rbx, rby, rbz, nx, ny, nz, nw, m2, 
     hb = rbx * wx + rby * wy + rbz * wz
     if ha <= 0.0 and hb <= 0.0:
         return 0.0  # the footprint radius at the edge is <= 0: the edge is behind p
-    m = np.sqrt(m2)
-    d = abs(nc) / m / radius
-    # tangent T = w x n / m (in the disk plane, along the line)
-    tx = (wy * nz - wz * ny) / m
-    ty = (wz * nx - wx * nz) / m
-    tz = (wx * ny - wy * nx) / m
+    imr = 1.0 / (np.sqrt(m2) * radius)
+    d = abs(nc) * imr
+    if d >= 1.0:
+        return 0.0
+    # tangent T = w x n / m (in the disk plane, along the line); positions along it in units of r
+    tx = wy * nz - wz * ny
+    ty = wz * nx - wx * nz
+    tz = wx * ny - wy * nx
+    k = L * imr
     sa = 0.0
     sb = 0.0
     if ha > 0.0:
-        sa = (rax * tx + ray * ty + raz * tz) * L / ha / radius
+        sa = (rax * tx + ray * ty + raz * tz) * k / ha
     if hb > 0.0:
-        sb = (rbx * tx + rby * ty + rbz * tz) * L / hb / radius
+        sb = (rbx * tx + rby * ty + rbz * tz) * k / hb
     if ha <= 0.0 or hb <= 0.0:
         # one endpoint behind p: that end of the projected edge runs to infinity
         ox, oy, oz = _far_end(rax, ray, raz, rbx, rby, rbz, ha, hb)
@@ -1138,8 +1146,8 @@ def sample_edge_term(shape, rw, j, lu, lv, radius, hu, hv, e, ea, eb, tv_start, 
     if shape == 1:
         nw = nx * rw[j, _RW] + ny * rw[j, _RW + 1] + nz * rw[j, _RW + 2]
         m2 = nx * nx + ny * ny + nz * nz - nw * nw
-        if m2 <= 0.0 or abs(nc) / np.sqrt(m2) / radius >= 1.0:
-            return 0.0
+        if m2 <= 0.0 or nc * nc >= m2 * (radius * radius):
+            return 0.0  # the line misses the disk (d >= 1)
         if not many:
             wsum = _side_sum(nx, ny, nz, p0, p1, p2, e, tv_start, tv)
             if wsum == 0.0:
@@ -1148,9 +1156,8 @@ def sample_edge_term(shape, rw, j, lu, lv, radius, hu, hv, e, ea, eb, tv_start, 
     else:
         nu = nx * lu[0] + ny * lu[1] + nz * lu[2]
         nv = nx * lv[0] + ny * lv[1] + nz * lv[2]
-        nn = np.sqrt(nu * nu + nv * nv)
-        if nn == 0.0 or abs(nc) / nn >= np.sqrt(hu * hu + hv * hv):
-            return 0.0
+        if abs(nc) >= abs(nu) * hu + abs(nv) * hv:
+            return 0.0  # the line misses the rectangle (its support in direction (nu, nv))
         if not many:
             wsum = _side_sum(nx, ny, nz, p0, p1, p2, e, tv_start, tv)
             if wsum == 0.0:
