@@ -22,7 +22,7 @@ from .._jit import kernel
 from ..geometry.silhouette import build_adjacency, facing, find_silhouette
 from ..raster.view import VP_B, VP_FORWARD, VP_L, VP_ORIGIN, VP_R, VP_RIGHT, VP_T, VP_UP, View, light_frame, light_view
 from .base import Method, MethodOutput, Param, register
-from .ground_truth import BOUND_SAFETY, hit_points
+from .ground_truth import BOUND_SAFETY, hit_point
 
 #: a connected occluder component with at most this fraction of boundary edges is a solid (only its
 #: light-facing triangles are counted); otherwise a sheet (both sides counted)
@@ -1435,8 +1435,46 @@ def compose_visibility(grid: SampleGrid, umbra, pen, n_all: int) -> np.ndarray:
     return out
 
 
+@kernel(parallel=True)
+def _error_bound_samples(verts, faces, tri_img, bary_img, idx, nrm, eps, out, bound):
+    """Ground truth's ray origins (:func:`ground_truth.hit_point`, float64): p + (BOUND_SAFETY x its
+    error bound + eps) n, n the geometric normal turned toward the eye; gathers from the G-buffer."""
+    for k in prange(idx.shape[0]):
+        q = idx[k]
+        px, py, pz, nx, ny, nz, ep, ee, _g = hit_point(
+            verts,
+            faces,
+            tri_img[q],
+            np.float64(bary_img[q, 0]),
+            np.float64(bary_img[q, 1]),
+            nrm[k, 0],
+            nrm[k, 1],
+            nrm[k, 2],
+        )
+        b = BOUND_SAFETY * (ep + ee)
+        bound[k] = b
+        off = b + eps
+        out[k, 0] = px + off * nx
+        out[k, 1] = py + off * ny
+        out[k, 2] = pz + off * nz
+
+
+def error_bound_samples(flat, eye, idx, nrm, eps):
+    """(samples (K,3), bound (K,)): the samples at ground truth's ray origins plus ``eps`` along the
+    normal; the same points as ``hit_points`` + ``offset_points``, without their temporaries."""
+    K = len(idx)
+    out = np.empty((K, 3))
+    bound = np.empty(K)
+    _error_bound_samples(
+        flat.vertices, flat.faces, eye.tri_id.ravel(), eye.bary.reshape(-1, 2), idx, nrm, eps, out, bound
+    )
+    return out, bound
+
+
 def offset_points(pts, nrm, eps, bound=None):
     """Samples moved along their normals by ``eps`` (scene units) plus, per sample, ``bound``."""
+    if bound is None and eps == 0.0:
+        return np.ascontiguousarray(pts, dtype=np.float64)
     off = eps if bound is None else bound + eps
     return np.ascontiguousarray(pts + (off[:, None] if np.ndim(off) else off) * nrm, dtype=np.float64)
 
@@ -1582,11 +1620,15 @@ class Irregular(Method):
 
     def run(self, ctx, grid, slices, bins, per_bin, wedge, silhouettes, folds, origin, offset, overdraw_stats):
         pts, nrm, idx = ctx.points()
-        bound = None
+        extra = {}
         if origin == "error-bound":
             with ctx.timer.phase("construction"):
-                pts, nrm, err_point, err_embree, _grazing, _own = hit_points(ctx.flat, ctx.eye, idx, nrm)
-                bound = BOUND_SAFETY * (err_point + err_embree)
+                lo, hi = ctx.scene.bounds()
+                eps = offset * float(np.linalg.norm(hi - lo))
+                pts, bound = error_bound_samples(ctx.flat, ctx.eye, idx, nrm, eps)
+            # the samples are in place: no further offset
+            offset = 0.0
+            extra = {"eps": eps, "origin_bound_median": float(np.median(bound)) if len(bound) else 0.0}
         v, stats = irregular_visibility(
             ctx.scene,
             pts,
@@ -1599,8 +1641,8 @@ class Irregular(Method):
             silhouettes=silhouettes,
             folds=folds,
             offset=offset,
-            origin_bound=bound,
             overdraw_stats=overdraw_stats,
             timer=ctx.timer,
         )
+        stats.update(extra)
         return MethodOutput(ctx.scatter(v, idx), stats)
