@@ -2,6 +2,7 @@
 (MAE and per region), through ``softshadows.compare``; the table of docs/results/irregular.md.
 
     PYTHONPATH=src python benchmarks/irregular_accuracy.py [--size 256x192] [--samples 256] [--out DIR]
+        [--methods all|a,b] [--set irregular.offset=1e-4]
 """
 
 from __future__ import annotations
@@ -10,7 +11,7 @@ import argparse
 import json
 import os
 
-from softshadows.compare import compare
+from softshadows.compare import compare, parse_method_sets
 from softshadows.scene.builtin import builtin_scenes
 
 
@@ -23,12 +24,23 @@ def main():
     ap.add_argument("--samples", type=int, default=256)
     ap.add_argument("--out", default="irregular-accuracy-out")
     ap.add_argument("--scenes", default=",".join(builtin_scenes()))
+    ap.add_argument("--methods", default="all", help="'all' or a,b (ground truth is always rendered)")
+    ap.add_argument("--set", action="append", default=[], metavar="METHOD.KEY=VALUE", help="method parameter")
     a = ap.parse_args()
     w, h = (int(x) for x in a.size.split("x"))
     rows = {}
     for scene in a.scenes.split(","):
         for light in ("rect", "sphere"):
-            r = compare(scene, "all", w, h, os.path.join(a.out, f"{scene}-{light}"), gt_samples=a.samples, light=light)
+            r = compare(
+                scene,
+                a.methods,
+                w,
+                h,
+                os.path.join(a.out, f"{scene}-{light}"),
+                parse_method_sets(a.set),
+                gt_samples=a.samples,
+                light=light,
+            )
             for m, met in r["metrics"].items():
                 rows.setdefault(m, {})[f"{scene} {light}"] = met
             print(scene, light, {m: round(met["mae"], 4) for m, met in r["metrics"].items()}, flush=True)

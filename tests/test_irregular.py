@@ -7,7 +7,7 @@ import pytest
 from softshadows.analytic import disk_halfplane_visibility
 from softshadows.api import eye_view, render
 from softshadows.methods.base import FrameContext, Timer
-from softshadows.methods.ground_truth import build_embree_scene
+from softshadows.methods.ground_truth import BOUND_SAFETY, build_embree_scene, hit_points
 from softshadows.methods.irregular import counted_faces, irregular_visibility
 from softshadows.raster import rasterize
 from softshadows.scene import builtin
@@ -29,10 +29,14 @@ def _ground_points(xs, zs):
 
 
 def _eye_points(scene, w=64, h=48):
+    """The method's default samples: ground truth's ray origins (hit point in float64, geometric
+    normal, per-sample float error bound), as ``Irregular.run`` makes them."""
     view = eye_view(scene, w, h)
     g = rasterize(view, scene.flat.vertices, scene.flat.faces, cull="none")
     ctx = FrameContext(scene=scene, eye=g, eye_view=view, timer=Timer())
-    return ctx.points()
+    _p, nrm, idx = ctx.points()
+    pts, n, err_point, err_embree, _grazing, _own = hit_points(scene.flat, g, idx, nrm)
+    return pts, n, idx, BOUND_SAFETY * (err_point + err_embree)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -188,11 +192,11 @@ def test_umbra_matches_embree_ray_to_light_centre(name):
     allow 0.2% of the samples (at 64x48, 6 pixels), and require every mismatch to lie within one
     pixel of a step of our count (a sample whose eye-space neighbour has a different count)."""
     scene = builtin.build(name, "sphere")
-    pts, nrm, idx = _eye_points(scene)
-    _v, st, umbra, _pen = irregular_visibility(scene, pts, nrm, raw=True)
+    pts, nrm, idx, bound = _eye_points(scene)
+    _v, _st, umbra, _pen = irregular_visibility(scene, pts, nrm, origin_bound=bound, raw=True)
     flat = scene.flat
     esc = build_embree_scene(flat.vertices, flat.faces[flat.occluder])
-    org = (pts + st["eps"] * nrm).astype(np.float32)
+    org = (pts + bound[:, None] * nrm).astype(np.float32)  # ground truth's origins (its float32 bound)
     d = scene.light.center - org
     dist = np.linalg.norm(d, axis=1)
     hits = esc.run(org, (d / dist[:, None]).astype(np.float32), dists=dist.astype(np.float32), query="OCCLUDED")
@@ -216,11 +220,13 @@ def test_umbra_matches_embree_ray_to_light_centre(name):
 @pytest.mark.parametrize("name,shape", [("bunny", "sphere"), ("spheres", "rect"), ("fence", "sphere")])
 def test_optimisations_change_no_bit_and_cut_sample_tests(name, shape):
     scene = builtin.build(name, shape)
-    pts, nrm, _idx = _eye_points(scene)
+    pts, nrm, _idx, bound = _eye_points(scene)
     runs = {}
     for per_bin in (False, True):
         for wedge in (False, True):
-            runs[per_bin, wedge] = irregular_visibility(scene, pts, nrm, per_bin=per_bin, wedge=wedge)
+            runs[per_bin, wedge] = irregular_visibility(
+                scene, pts, nrm, origin_bound=bound, per_bin=per_bin, wedge=wedge
+            )
     v0 = runs[False, False][0]
     for k, (v, _st) in runs.items():
         assert np.array_equal(v, v0), k

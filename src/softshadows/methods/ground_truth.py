@@ -147,62 +147,6 @@ U64 = 2.0**-53
 BOUND_SAFETY = 2.0
 
 
-@kernel(inline=True)
-def _vertex32(vertices, i):
-    """Vertex i as Embree stores it (float32), in float64."""
-    return (
-        np.float64(np.float32(vertices[i, 0])),
-        np.float64(np.float32(vertices[i, 1])),
-        np.float64(np.float32(vertices[i, 2])),
-    )
-
-
-@kernel
-def _hit_points_kernel(vertices, faces, tri, bary, nrm, safety, p, n, err_point, err_embree, grazing):
-    """The per-point arithmetic of :func:`hit_points`, in its order of operations (sums left to
-    right, as NumPy's over an axis of 3), one point per iteration."""
-    g5 = 5 * U64 / (1 - 5 * U64)
-    tiny = np.finfo(np.float64).tiny
-    for k in range(tri.shape[0]):
-        t = tri[k]
-        ax, ay, az = _vertex32(vertices, faces[t, 0])
-        bx, by, bz = _vertex32(vertices, faces[t, 1])
-        cx, cy, cz = _vertex32(vertices, faces[t, 2])
-        b1 = np.float64(bary[k, 0])
-        b2 = np.float64(bary[k, 1])
-        b0 = 1.0 - b1 - b2
-        px = b0 * ax + b1 * bx + b2 * cx
-        py = b0 * ay + b1 * by + b2 * cy
-        pz = b0 * az + b1 * bz + b2 * cz
-        e1x, e1y, e1z = bx - ax, by - ay, bz - az
-        e2x, e2y, e2z = cx - ax, cy - ay, cz - az
-        crx, cry, crz = e1y * e2z - e1z * e2y, e1z * e2x - e1x * e2z, e1x * e2y - e1y * e2x
-        twice_area = np.sqrt(crx * crx + cry * cry + crz * crz)
-        d = max(twice_area, tiny)
-        nx, ny, nz = crx / d, cry / d, crz / d
-        if nx * nrm[k, 0] + ny * nrm[k, 1] + nz * nrm[k, 2] < 0.0:
-            nx, ny, nz = -nx, -ny, -nz
-        ex = abs(nx) * (g5 * (abs(b0 * ax) + abs(b1 * bx) + abs(b2 * cx) + abs(ax)) + U32 * abs(px))
-        ey = abs(ny) * (g5 * (abs(b0 * ay) + abs(b1 * by) + abs(b2 * cy) + abs(ay)) + U32 * abs(py))
-        ez = abs(nz) * (g5 * (abs(b0 * az) + abs(b1 * bz) + abs(b2 * cz) + abs(az)) + U32 * abs(pz))
-        ep = ex + ey + ez
-        area = max(0.5 * twice_area, tiny)
-        ra = np.sqrt((ax - px) * (ax - px) + (ay - py) * (ay - py) + (az - pz) * (az - pz))
-        rb = np.sqrt((bx - px) * (bx - px) + (by - py) * (by - py) + (bz - pz) * (bz - pz))
-        rc = np.sqrt((cx - px) * (cx - px) + (cy - py) * (cy - py) + (cz - pz) * (cz - pz))
-        R = max(ra, max(rb, rc))
-        q = R * R / area
-        grazing[k] = U32 * (16.0 * q + 3.0)
-        ee = U32 * R * (4.0 + 16.0 * q)
-        # the origin sits err_* above p: R grows by that much (one fixed-point step is enough, it is tiny)
-        R = R + safety * (ep + ee)
-        q = R * R / area
-        p[k, 0], p[k, 1], p[k, 2] = px, py, pz
-        n[k, 0], n[k, 1], n[k, 2] = nx, ny, nz
-        err_point[k] = ep
-        err_embree[k] = U32 * R * (4.0 + 16.0 * q)
-
-
 def hit_points(flat, eye, idx, nrm):
     """Hit points recomputed in float64 and their error bounds (docs/methods/ground-truth.md).
 
@@ -227,11 +171,11 @@ def hit_points(flat, eye, idx, nrm):
     its back side is blocked by it."""
     tri = eye.tri_id.ravel()[idx]
     bary = eye.bary.reshape(-1, 2)[idx]
-    K = len(idx)
+    K = len(tri)
     p, n = np.empty((K, 3)), np.empty((K, 3))
     err_point, err_embree, grazing = np.empty(K), np.empty(K), np.empty(K)
-    nrm = np.ascontiguousarray(nrm, dtype=np.float64)
-    _hit_points_kernel(flat.vertices, flat.faces, tri, bary, nrm, BOUND_SAFETY, p, n, err_point, err_embree, grazing)
+    nrm = np.ascontiguousarray(nrm, dtype=np.float64)  # one specialisation
+    _hit_points_kernel(flat.vertices, flat.faces, tri, bary, nrm, p, n, err_point, err_embree, grazing)
     own_blocks = flat.occluder[tri]
     return p, n, err_point, err_embree, grazing, own_blocks
 
@@ -305,6 +249,69 @@ def _facing_class(px, py, pz, nx, ny, nz, g, shape, center, u, v, radius):
     if d0 + ext < -tol:
         return -1
     return 0
+
+
+@kernel(inline=True)
+def _f32(x):
+    return np.float64(np.float32(x))  # Embree's float32 vertex coordinate
+
+
+@kernel(inline=True)
+def hit_point(verts, faces, t, b1, b2, m0, m1, m2):
+    """:func:`hit_points` for one point: triangle ``t``, barycentrics (b1, b2) as float64, eye-facing
+    normal m. Returns (px, py, pz, nx, ny, nz, err_point, err_embree, grazing); each value is computed
+    with the operations in the order the earlier NumPy version used, so the results are the same
+    bits."""
+    tiny = np.finfo(np.float64).tiny
+    g5 = 5 * U64 / (1 - 5 * U64)
+    i0, i1, i2 = faces[t, 0], faces[t, 1], faces[t, 2]
+    ax, ay, az = _f32(verts[i0, 0]), _f32(verts[i0, 1]), _f32(verts[i0, 2])
+    bx, by, bz = _f32(verts[i1, 0]), _f32(verts[i1, 1]), _f32(verts[i1, 2])
+    cx, cy, cz = _f32(verts[i2, 0]), _f32(verts[i2, 1]), _f32(verts[i2, 2])
+    b0 = 1.0 - b1 - b2
+    e1x, e1y, e1z = bx - ax, by - ay, bz - az
+    e2x, e2y, e2z = cx - ax, cy - ay, cz - az
+    crx = e1y * e2z - e1z * e2y
+    cry = e1z * e2x - e1x * e2z
+    crz = e1x * e2y - e1y * e2x
+    twice_area = np.sqrt(crx * crx + cry * cry + crz * crz)
+    dn = max(twice_area, tiny)
+    nx, ny, nz = crx / dn, cry / dn, crz / dn
+    if nx * m0 + ny * m1 + nz * m2 < 0.0:
+        nx, ny, nz = -nx, -ny, -nz
+    px = b0 * ax + b1 * bx + b2 * cx
+    py = b0 * ay + b1 * by + b2 * cy
+    pz = b0 * az + b1 * bz + b2 * cz
+    ex = g5 * (abs(b0 * ax) + abs(b1 * bx) + abs(b2 * cx) + abs(ax))
+    ey = g5 * (abs(b0 * ay) + abs(b1 * by) + abs(b2 * cy) + abs(ay))
+    ez = g5 * (abs(b0 * az) + abs(b1 * bz) + abs(b2 * cz) + abs(az))
+    ep = abs(nx) * (ex + U32 * abs(px)) + abs(ny) * (ey + U32 * abs(py)) + abs(nz) * (ez + U32 * abs(pz))
+    area = max(0.5 * twice_area, tiny)
+    ra = np.sqrt((ax - px) * (ax - px) + (ay - py) * (ay - py) + (az - pz) * (az - pz))
+    rb = np.sqrt((bx - px) * (bx - px) + (by - py) * (by - py) + (bz - pz) * (bz - pz))
+    rc = np.sqrt((cx - px) * (cx - px) + (cy - py) * (cy - py) + (cz - pz) * (cz - pz))
+    R = max(ra, rb, rc)
+    q = R * R / area
+    grazing = U32 * (16.0 * q + 3.0)
+    ee = U32 * R * (4.0 + 16.0 * q)
+    # the origin sits err_* above p: R grows by that much (one fixed-point step is enough, it is tiny)
+    R = R + BOUND_SAFETY * (ep + ee)
+    q = R * R / area
+    return px, py, pz, nx, ny, nz, ep, U32 * R * (4.0 + 16.0 * q), grazing
+
+
+@kernel
+def _hit_points_kernel(verts, faces, tri, bary, nrm, p, n, err_point, err_embree, grazing):
+    # serial: a parallel version compiled twice as long and was no faster (a few ms at 512^2)
+    for k in range(tri.shape[0]):
+        px, py, pz, nx, ny, nz, ep, ee, gr = hit_point(
+            verts, faces, tri[k], np.float64(bary[k, 0]), np.float64(bary[k, 1]), nrm[k, 0], nrm[k, 1], nrm[k, 2]
+        )
+        p[k, 0], p[k, 1], p[k, 2] = px, py, pz
+        n[k, 0], n[k, 1], n[k, 2] = nx, ny, nz
+        err_point[k] = ep
+        err_embree[k] = ee
+        grazing[k] = gr
 
 
 @kernel(nogil=True)

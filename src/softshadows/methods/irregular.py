@@ -22,6 +22,7 @@ from .._jit import kernel
 from ..geometry.silhouette import build_adjacency, facing, find_silhouette
 from ..raster.view import VP_B, VP_FORWARD, VP_L, VP_ORIGIN, VP_R, VP_RIGHT, VP_T, VP_UP, View, light_frame, light_view
 from .base import Method, MethodOutput, Param, register
+from .ground_truth import BOUND_SAFETY, hit_point
 
 #: a connected occluder component with at most this fraction of boundary edges is a solid (only its
 #: light-facing triangles are counted); otherwise a sheet (both sides counted)
@@ -917,26 +918,30 @@ def bin_penumbra_quads(grid: SampleGrid, qd: np.ndarray, light_radius: float, pe
 def segment_area(d, w0, w1):
     """Eq. 3: normalised area between a chord segment and the arc of the unit circle, inside the angle
     the segment [w0, w1] (positions along the chord line, at distance d >= 0 from the centre,
-    already clipped to the circle) subtends at the centre: (theta - d (w1 - w0)) / (2 pi)."""
-    den = np.sqrt((d * d + w0 * w0) * (d * d + w1 * w1))
-    if den == 0.0:
-        return 0.0
-    c = (d * d + w0 * w1) / den
-    c = min(max(c, -1.0), 1.0)
-    theta = np.arccos(c)
+    already clipped to the circle) subtends at the centre: (theta - d (w1 - w0)) / (2 pi). theta,
+    the paper's acos((d^2 + w0 w1) / sqrt((d^2 + w0^2)(d^2 + w1^2))), is taken as the angle between
+    (w0, d) and (w1, d) by atan2 (same angle, no square root or division, and accurate near 0 where
+    acos loses half the digits)."""
+    theta = np.arctan2(d * (w1 - w0), d * d + w0 * w1)
     return (theta - d * (w1 - w0)) / (2.0 * np.pi)
 
 
 @kernel(inline=True)
 def _clip_poly(buf, src, n, a, b, c, dst):
-    """Clip the polygon in rows (2 src, 2 src + 1) of ``buf`` (x, y; n vertices) to
-    a*x + b*y + c >= 0 into rows (2 dst, 2 dst + 1); returns the new count."""
+    """Clip the polygon in rows (2 src, 2 src + 1) of ``buf`` (x, y; n >= 1 vertices) to
+    a*x + b*y + c >= 0 into rows (2 dst, 2 dst + 1); returns the new count. Each vertex's value of
+    the half-plane function is computed once."""
     sx, sy, dx, dy = 2 * src, 2 * src + 1, 2 * dst, 2 * dst + 1
     m = 0
+    f0 = a * buf[sx, 0] + b * buf[sy, 0] + c
+    fi = f0
     for i in range(n):
-        j = (i + 1) % n
-        fi = a * buf[sx, i] + b * buf[sy, i] + c
-        fj = a * buf[sx, j] + b * buf[sy, j] + c
+        j = i + 1
+        if j < n:
+            fj = a * buf[sx, j] + b * buf[sy, j] + c
+        else:
+            j = 0
+            fj = f0
         if fi >= 0.0:
             buf[dx, m] = buf[sx, i]
             buf[dy, m] = buf[sy, i]
@@ -946,151 +951,49 @@ def _clip_poly(buf, src, n, a, b, c, dst):
             buf[dx, m] = buf[sx, i] + t * (buf[sx, j] - buf[sx, i])
             buf[dy, m] = buf[sy, i] + t * (buf[sy, j] - buf[sy, i])
             m += 1
+        fi = fj
     return m
 
 
-@kernel(inline=True)
-def edge_occlusion(shape, lp, j, lu, lv, radius, hu, hv, p0, p1, p2, ax, ay, az, bx, by, bz, buf):
-    """Signed-by-geometry edge term at one sample. Returns (sO, V~): sO = sign of n.(c - p) (the side
-    of the light centre relative to the plane through p and the edge, n = (a-p) x (b-p)) and V~ = the
-    normalised area of the light's projection (from p, onto its plane) inside the angle the edge
-    subtends at the centre and beyond the edge (Fig. 4; Eq. 3 for the disk, polygon clipping for the
-    rectangle). Edge parts at or behind p's plane parallel to the light project to infinity.
-
-    lp[j]: sample j's light frame: [0:3] w (unit, p -> light plane), [3] L (distance to the plane),
-    [4:7] c - p; lu, lv: the rectangle's unit axes."""
-    rax, ray, raz = ax - p0, ay - p1, az - p2
-    rbx, rby, rbz = bx - p0, by - p1, bz - p2
-    nx = ray * rbz - raz * rby
-    ny = raz * rbx - rax * rbz
-    nz = rax * rby - ray * rbx
-    wx, wy, wz, L = lp[j, 0], lp[j, 1], lp[j, 2], lp[j, 3]
-    nw = nx * wx + ny * wy + nz * wz
-    nc = nx * lp[j, 4] + ny * lp[j, 5] + nz * lp[j, 6]  # n . (c - p)
-    if nc == 0.0:
-        return 0.0, 0.0
-    ha = rax * wx + ray * wy + raz * wz
-    hb = rbx * wx + rby * wy + rbz * wz
-    if ha <= 0.0 and hb <= 0.0:
-        return 0.0, 0.0  # the footprint radius at the edge is <= 0: the edge is behind p
-    so = 1.0 if nc > 0.0 else -1.0
-    if shape == 1:
-        # disk of radius r facing p: line = trace of the plane (p, edge) in the disk plane
-        m2 = nx * nx + ny * ny + nz * nz - nw * nw
-        if m2 <= 0.0:
-            return 0.0, 0.0
-        m = np.sqrt(m2)
-        d = abs(nc) / m / radius
-        if d >= 1.0:
-            return so, 0.0
-        # tangent T = w x n / m (in the disk plane, along the line)
-        tx = (wy * nz - wz * ny) / m
-        ty = (wz * nx - wx * nz) / m
-        tz = (wx * ny - wy * nx) / m
-        sa = 0.0
-        sb = 0.0
-        if ha > 0.0:
-            sa = (rax * tx + ray * ty + raz * tz) * L / ha / radius
-        if hb > 0.0:
-            sb = (rbx * tx + rby * ty + rbz * tz) * L / hb / radius
-        if ha <= 0.0 or hb <= 0.0:
-            # one endpoint behind p: that end of the projected edge runs to infinity
-            t0 = ha / (ha - hb)
-            ox = rax + t0 * (rbx - rax)
-            oy = ray + t0 * (rby - ray)
-            oz = raz + t0 * (rbz - raz)
-            inf = np.inf if (ox * tx + oy * ty + oz * tz) >= 0.0 else -np.inf
-            if ha <= 0.0:
-                sa = inf
-            else:
-                sb = inf
-        h = np.sqrt(1.0 - d * d)
-        w0 = max(min(sa, sb), -h)
-        w1 = min(max(sa, sb), h)
-        if not (w1 > w0):
-            return so, 0.0
-        return so, segment_area(d, w0, w1)
-    # rectangle: 2D light-plane coordinates (u, v) around the centre
-    ux, uy, uz, vx, vy, vz = lu[0], lu[1], lu[2], lv[0], lv[1], lv[2]
-    nu = nx * ux + ny * uy + nz * uz
-    nv = nx * vx + ny * vy + nz * vz
-    nn = np.sqrt(nu * nu + nv * nv)
-    if nn == 0.0 or abs(nc) / nn >= np.sqrt(hu * hu + hv * hv):
-        return so, 0.0
-    # directions (from the centre) of the projected endpoints
-    cpx, cpy, cpz = -lp[j, 4], -lp[j, 5], -lp[j, 6]  # p - c
-    dax = day = dbx = dby = 0.0
-    if ha > 0.0:
-        k = L / ha
-        dax = (cpx + rax * k) * ux + (cpy + ray * k) * uy + (cpz + raz * k) * uz
-        day = (cpx + rax * k) * vx + (cpy + ray * k) * vy + (cpz + raz * k) * vz
-    if hb > 0.0:
-        k = L / hb
-        dbx = (cpx + rbx * k) * ux + (cpy + rby * k) * uy + (cpz + rbz * k) * uz
-        dby = (cpx + rbx * k) * vx + (cpy + rby * k) * vy + (cpz + rbz * k) * vz
-    if ha <= 0.0 or hb <= 0.0:
-        t0 = ha / (ha - hb)
-        ox = rax + t0 * (rbx - rax)
-        oy = ray + t0 * (rby - ray)
-        oz = raz + t0 * (rbz - raz)
-        ix = ox * ux + oy * uy + oz * uz
-        iy = ox * vx + oy * vy + oz * vz
-        if ha <= 0.0:
-            dax, day = ix, iy
-        else:
-            dbx, dby = ix, iy
-    cr = dax * dby - day * dbx
-    if cr == 0.0:
-        return so, 0.0
-    sw = 1.0 if cr > 0.0 else -1.0
-    buf[0, 0], buf[1, 0] = -hu, -hv
-    buf[0, 1], buf[1, 1] = hu, -hv
-    buf[0, 2], buf[1, 2] = hu, hv
-    buf[0, 3], buf[1, 3] = -hu, hv
-    n = 4
-    # beyond the line: n.(c - p) + nu U + nv V has the sign opposite to n.(c - p)
-    n = _clip_poly(buf, 0, n, -so * nu, -so * nv, -so * nc, 1)
-    if n < 3:
-        return so, 0.0
-    # inside the angle: sw * cross(da, X) >= 0 and sw * cross(X, db) >= 0
-    n = _clip_poly(buf, 1, n, -sw * day, sw * dax, 0.0, 0)
-    if n < 3:
-        return so, 0.0
-    n = _clip_poly(buf, 0, n, sw * dby, -sw * dbx, 0.0, 1)
-    if n < 3:
-        return so, 0.0
-    area = 0.0
-    for i in range(n):
-        k = (i + 1) % n
-        area += buf[2, i] * buf[3, k] - buf[2, k] * buf[3, i]
-    return so, abs(area) * 0.5 / (4.0 * hu * hv)
+#: per-sample row of the penumbra pass (:func:`sample_rows`): image-plane x, y, x^2 + y^2, 1 / distance
+#: to the light centre, p (3), w (3: unit, from p toward the light's plane), L (distance to that plane),
+#: c - p (3)
+_RX, _RY, _RR2, _RINV, _RP, _RW, _RL, _RC, _ROW = 0, 1, 2, 3, 4, 7, 10, 11, 14
 
 
 @kernel(parallel=True)
-def sample_light_frames(shape, center, nrm_l, sp):
-    """Per sample: [0:3] w (unit, from p toward the light's plane: the facing disk's normal for the
-    sphere, the rectangle's normal for the rectangle), [3] L (distance to that plane), [4:7] c - p."""
+def sample_rows(shape, center, nrm_l, sp, six, siy, sdist):
+    """Per sorted sample, everything the penumbra pass reads, in one contiguous row (layout: _R*):
+    the light frame (w: the facing disk's normal for the sphere, the rectangle's normal for the
+    rectangle; L; c - p) and the image-plane terms of the per-sample bound."""
     n = sp.shape[0]
-    lp = np.empty((n, 7))
+    rows = np.empty((n, _ROW))
     for j in prange(n):
+        rows[j, _RX] = six[j]
+        rows[j, _RY] = siy[j]
+        rows[j, _RR2] = six[j] * six[j] + siy[j] * siy[j]
+        rows[j, _RINV] = 1.0 / sdist[j]
+        rows[j, _RP] = sp[j, 0]
+        rows[j, _RP + 1] = sp[j, 1]
+        rows[j, _RP + 2] = sp[j, 2]
         cx, cy, cz = center[0] - sp[j, 0], center[1] - sp[j, 1], center[2] - sp[j, 2]
-        lp[j, 4] = cx
-        lp[j, 5] = cy
-        lp[j, 6] = cz
+        rows[j, _RC] = cx
+        rows[j, _RC + 1] = cy
+        rows[j, _RC + 2] = cz
         if shape == 1:
             L = np.sqrt(cx * cx + cy * cy + cz * cz)
-            lp[j, 0] = cx / L
-            lp[j, 1] = cy / L
-            lp[j, 2] = cz / L
-            lp[j, 3] = L
+            rows[j, _RW] = cx / L
+            rows[j, _RW + 1] = cy / L
+            rows[j, _RW + 2] = cz / L
+            rows[j, _RL] = L
         else:
             L = cx * nrm_l[0] + cy * nrm_l[1] + cz * nrm_l[2]
             s = 1.0 if L >= 0.0 else -1.0
-            lp[j, 0] = s * nrm_l[0]
-            lp[j, 1] = s * nrm_l[1]
-            lp[j, 2] = s * nrm_l[2]
-            lp[j, 3] = abs(L)
-    return lp
+            rows[j, _RW] = s * nrm_l[0]
+            rows[j, _RW + 1] = s * nrm_l[1]
+            rows[j, _RW + 2] = s * nrm_l[2]
+            rows[j, _RL] = abs(L)
+    return rows
 
 
 @kernel(inline=True)
@@ -1108,64 +1011,161 @@ def _side_sum(nx, ny, nz, p0, p1, p2, e, tv_start, tv):
 
 
 @kernel(inline=True)
-def sample_edge_term(shape, lp, j, lu, lv, radius, hu, hv, p0, p1, p2, e, ea, eb, tv_start, tv, buf):
-    """Signed penumbral occlusion of edge e at one sample: sum over the edge's counted triangles of
-    (+V~ when the light centre is outside the triangle's side of the edge, -V~ inside)."""
+def _far_end(rax, ray, raz, rbx, rby, rbz, ha, hb):
+    """The point of the edge in p's plane parallel to the light (where its projection runs to
+    infinity), relative to p."""
+    t0 = ha / (ha - hb)
+    return rax + t0 * (rbx - rax), ray + t0 * (rby - ray), raz + t0 * (rbz - raz)
+
+
+@kernel(inline=True)
+def _disk_term(rw, j, radius, rax, ray, raz, rbx, rby, rbz, nx, ny, nz, nw, m2, nc):
+    """V~ of the edge for the disk of radius r facing p (Eq. 3), given the plane (p, edge): its normal
+    n, n . w and |n|^2 - (n . w)^2 (> 0), n . (c - p) (!= 0). The edge's line is the trace of the
+    plane in the disk's plane; its endpoints are projected from p onto it."""
+    wx, wy, wz, L = rw[j, _RW], rw[j, _RW + 1], rw[j, _RW + 2], rw[j, _RL]
+    ha = rax * wx + ray * wy + raz * wz
+    hb = rbx * wx + rby * wy + rbz * wz
+    if ha <= 0.0 and hb <= 0.0:
+        return 0.0  # the footprint radius at the edge is <= 0: the edge is behind p
+    imr = 1.0 / (np.sqrt(m2) * radius)
+    d = abs(nc) * imr
+    if d >= 1.0:
+        return 0.0
+    # tangent T = w x n / m (in the disk plane, along the line); positions along it in units of r
+    tx = wy * nz - wz * ny
+    ty = wz * nx - wx * nz
+    tz = wx * ny - wy * nx
+    k = L * imr
+    sa = 0.0
+    sb = 0.0
+    if ha > 0.0:
+        sa = (rax * tx + ray * ty + raz * tz) * k / ha
+    if hb > 0.0:
+        sb = (rbx * tx + rby * ty + rbz * tz) * k / hb
+    if ha <= 0.0 or hb <= 0.0:
+        # one endpoint behind p: that end of the projected edge runs to infinity
+        ox, oy, oz = _far_end(rax, ray, raz, rbx, rby, rbz, ha, hb)
+        inf = np.inf if (ox * tx + oy * ty + oz * tz) >= 0.0 else -np.inf
+        if ha <= 0.0:
+            sa = inf
+        else:
+            sb = inf
+    h = np.sqrt(1.0 - d * d)
+    w0 = max(min(sa, sb), -h)
+    w1 = min(max(sa, sb), h)
+    if not (w1 > w0):
+        return 0.0
+    return segment_area(d, w0, w1)
+
+
+@kernel(inline=True)
+def _rect_term(rw, j, lu, lv, hu, hv, rax, ray, raz, rbx, rby, rbz, nu, nv, nc, buf):
+    """V~ of the edge for the rectangle (2 hu x 2 hv, axes lu, lv): the exact area of the rectangle
+    clipped to the far side of the edge's line (n . (c - p) + nu U + nv V against the sign of
+    n . (c - p)) and to the angle the projected edge subtends at the centre (``_clip_poly``)."""
+    wx, wy, wz, L = rw[j, _RW], rw[j, _RW + 1], rw[j, _RW + 2], rw[j, _RL]
+    ha = rax * wx + ray * wy + raz * wz
+    hb = rbx * wx + rby * wy + rbz * wz
+    if ha <= 0.0 and hb <= 0.0:
+        return 0.0
+    so = 1.0 if nc > 0.0 else -1.0
+    ux, uy, uz, vx, vy, vz = lu[0], lu[1], lu[2], lv[0], lv[1], lv[2]
+    # directions (from the centre) of the projected endpoints
+    cpx, cpy, cpz = -rw[j, _RC], -rw[j, _RC + 1], -rw[j, _RC + 2]  # p - c
+    dax = day = dbx = dby = 0.0
+    if ha > 0.0:
+        k = L / ha
+        dax = (cpx + rax * k) * ux + (cpy + ray * k) * uy + (cpz + raz * k) * uz
+        day = (cpx + rax * k) * vx + (cpy + ray * k) * vy + (cpz + raz * k) * vz
+    if hb > 0.0:
+        k = L / hb
+        dbx = (cpx + rbx * k) * ux + (cpy + rby * k) * uy + (cpz + rbz * k) * uz
+        dby = (cpx + rbx * k) * vx + (cpy + rby * k) * vy + (cpz + rbz * k) * vz
+    if ha <= 0.0 or hb <= 0.0:
+        ox, oy, oz = _far_end(rax, ray, raz, rbx, rby, rbz, ha, hb)
+        ix = ox * ux + oy * uy + oz * uz
+        iy = ox * vx + oy * vy + oz * vz
+        if ha <= 0.0:
+            dax, day = ix, iy
+        else:
+            dbx, dby = ix, iy
+    cr = dax * dby - day * dbx
+    if cr == 0.0:
+        return 0.0
+    sw = 1.0 if cr > 0.0 else -1.0
+    buf[0, 0], buf[1, 0] = -hu, -hv
+    buf[0, 1], buf[1, 1] = hu, -hv
+    buf[0, 2], buf[1, 2] = hu, hv
+    buf[0, 3], buf[1, 3] = -hu, hv
+    n = 4
+    # beyond the line: n.(c - p) + nu U + nv V has the sign opposite to n.(c - p)
+    n = _clip_poly(buf, 0, n, -so * nu, -so * nv, -so * nc, 1)
+    if n < 3:
+        return 0.0
+    # inside the angle: sw * cross(da, X) >= 0 and sw * cross(X, db) >= 0
+    n = _clip_poly(buf, 1, n, -sw * day, sw * dax, 0.0, 0)
+    if n < 3:
+        return 0.0
+    n = _clip_poly(buf, 0, n, sw * dby, -sw * dbx, 0.0, 1)
+    if n < 3:
+        return 0.0
+    area = 0.0
+    for i in range(n):
+        k = i + 1 if i + 1 < n else 0
+        area += buf[2, i] * buf[3, k] - buf[2, k] * buf[3, i]
+    return abs(area) * 0.5 / (4.0 * hu * hv)
+
+
+@kernel(inline=True)
+def sample_edge_term(shape, rw, j, lu, lv, radius, hu, hv, e, ea, eb, tv_start, tv, buf):
+    """Signed penumbral occlusion of edge e at sample j (row ``rw[j]``): sum over the edge's counted
+    triangles of (+V~ when the light centre is outside the triangle's side of the edge, -V~
+    inside), V~ the normalised area of the light's projection (from p, onto its plane) inside the
+    angle the edge subtends at the centre and beyond the edge (Fig. 4): ``_disk_term`` (Eq. 3) or
+    ``_rect_term``. Edge parts at or behind p's plane parallel to the light project to infinity.
+
+    Cheap exits first, each giving the exact 0 the full term would: for fold candidates (two or
+    more counted triangles) the triangles usually cancel as seen from p (``_side_sum``); for
+    silhouettes first whether the edge's line misses the light's footprint."""
+    p0, p1, p2 = rw[j, _RP], rw[j, _RP + 1], rw[j, _RP + 2]
     rax, ray, raz = ea[e, 0] - p0, ea[e, 1] - p1, ea[e, 2] - p2
     rbx, rby, rbz = eb[e, 0] - p0, eb[e, 1] - p1, eb[e, 2] - p2
     nx = ray * rbz - raz * rby
     ny = raz * rbx - rax * rbz
     nz = rax * rby - ray * rbx
-    # cheap exits first (each gives the exact 0 the full term would): for fold candidates (two or
-    # more counted triangles) the triangles usually cancel as seen from p, so test that first; for
-    # silhouettes first whether the edge's line misses the light's footprint, with edge_occlusion's
-    # own arithmetic (so the outcome is the same)
     many = tv_start[e + 1] - tv_start[e] >= 2
     wsum = 0.0
     if many:
         wsum = _side_sum(nx, ny, nz, p0, p1, p2, e, tv_start, tv)
         if wsum == 0.0:
             return 0.0
-    nc = nx * lp[j, 4] + ny * lp[j, 5] + nz * lp[j, 6]
+    nc = nx * rw[j, _RC] + ny * rw[j, _RC + 1] + nz * rw[j, _RC + 2]  # n . (c - p)
     if nc == 0.0:
         return 0.0
     if shape == 1:
-        nw = nx * lp[j, 0] + ny * lp[j, 1] + nz * lp[j, 2]
+        nw = nx * rw[j, _RW] + ny * rw[j, _RW + 1] + nz * rw[j, _RW + 2]
         m2 = nx * nx + ny * ny + nz * nz - nw * nw
-        if m2 <= 0.0 or abs(nc) / np.sqrt(m2) / radius >= 1.0:
-            return 0.0
+        if m2 <= 0.0 or nc * nc >= m2 * (radius * radius):
+            return 0.0  # the line misses the disk (d >= 1)
+        if not many:
+            wsum = _side_sum(nx, ny, nz, p0, p1, p2, e, tv_start, tv)
+            if wsum == 0.0:
+                return 0.0  # the counted triangles at this edge cancel as seen from p
+        vt = _disk_term(rw, j, radius, rax, ray, raz, rbx, rby, rbz, nx, ny, nz, nw, m2, nc)
     else:
         nu = nx * lu[0] + ny * lu[1] + nz * lu[2]
         nv = nx * lv[0] + ny * lv[1] + nz * lv[2]
-        nn = np.sqrt(nu * nu + nv * nv)
-        if nn == 0.0 or abs(nc) / nn >= np.sqrt(hu * hu + hv * hv):
-            return 0.0
-    if not many:
-        wsum = _side_sum(nx, ny, nz, p0, p1, p2, e, tv_start, tv)
-        if wsum == 0.0:
-            return 0.0  # the counted triangles at this edge cancel as seen from p
-    so, vt = edge_occlusion(
-        shape,
-        lp,
-        j,
-        lu,
-        lv,
-        radius,
-        hu,
-        hv,
-        p0,
-        p1,
-        p2,
-        ea[e, 0],
-        ea[e, 1],
-        ea[e, 2],
-        eb[e, 0],
-        eb[e, 1],
-        eb[e, 2],
-        buf,
-    )
+        if abs(nc) >= abs(nu) * hu + abs(nv) * hv:
+            return 0.0  # the line misses the rectangle (its support in direction (nu, nv))
+        if not many:
+            wsum = _side_sum(nx, ny, nz, p0, p1, p2, e, tv_start, tv)
+            if wsum == 0.0:
+                return 0.0
+        vt = _rect_term(rw, j, lu, lv, hu, hv, rax, ray, raz, rbx, rby, rbz, nu, nv, nc, buf)
     if vt == 0.0:
         return 0.0
+    so = 1.0 if nc > 0.0 else -1.0
     return -so * wsum * vt
 
 
@@ -1222,7 +1222,6 @@ def _penumbra_kernel(
     wc2,
     col_box,
     g_start,
-    sp,
     gx,
     gy,
     B,
@@ -1234,7 +1233,7 @@ def _penumbra_kernel(
     bin_maxd,
     vp,
     shape,
-    lpa,
+    rw,
     u,
     v,
     radius,
@@ -1256,9 +1255,7 @@ def _penumbra_kernel(
     hits,
     evals,
     nslot,
-    six,
-    siy,
-    sdist,
+    max_col,
 ):
     nb = bin_start.shape[0] - 1
     l, r, b, t = vp[VP_L], vp[VP_R], vp[VP_B], vp[VP_T]
@@ -1269,6 +1266,7 @@ def _penumbra_kernel(
             by = bi // nbx
             bx = bi % nbx
             buf = np.zeros((4, 8))
+            cand = np.empty(max_col, np.int64)
             bx0, bx1, by0, by1 = _bin_box(vp, gx, gy, B, bx, by)
             bc2 = box_corner2(bx0, bx1, by0, by1)
             nf = 0
@@ -1282,7 +1280,11 @@ def _penumbra_kernel(
                     if per_bin
                     else quad_half_width(qd, e, radius, dmax, wc2)
                 )
-                dmin = qd[e, 4]
+                # per edge: its image-plane segment, stretch and the inverse of (dmin - r) of the
+                # per-sample bound below
+                qax, qay, qbx, qby, dmin, q5 = qd[e, 0], qd[e, 1], qd[e, 2], qd[e, 3], qd[e, 4], qd[e, 5]
+                dr = dmin - radius if dmin > radius else 0.0
+                inv_dr = 1.0 / dr if dr > 0.0 else 0.0
                 for cy in range(by * B, min(by * B + B, gy)):
                     y1 = t - cy * ch
                     y0 = y1 - ch
@@ -1298,53 +1300,38 @@ def _penumbra_kernel(
                             continue
                         nf += 1
                         s0 = 0
-                        dr = dmin - radius if dmin > radius else 0.0
                         if wedge and dmin > radius:
                             # the wedge enters this column at the distance where its angular radius
                             # reaches the column: r (1/(dmin - r) - 1/D) * stretch >= dist(cell, edge)
-                            dc = _seg_box_dist(qd[e, 0], qd[e, 1], qd[e, 2], qd[e, 3], x0, x1, y0, y1)
-                            inv = 1.0 / (dmin - radius) - dc / ((1.0 + max(qd[e, 5], bc2)) * radius) / (1.0 + _SLACK)
+                            dc = _seg_box_dist(qax, qay, qbx, qby, x0, x1, y0, y1)
+                            inv = 1.0 / (dmin - radius) - dc / ((1.0 + max(q5, bc2)) * radius) / (1.0 + _SLACK)
                             if inv <= 0.0:
                                 continue
                             s0 = slice_of((1.0 / inv) * (1.0 - _SLACK), dlo, dhi, S)
-                        for j in range(g_start[col + s0], g_start[col + S]):
-                            nt += 1
-                            if count_only:
-                                continue
-                            # the same bound at the sample itself: its image-plane distance to the
-                            # edge's image against the angular radius at its own distance
-                            # (stretch from the sample's own off-axis angle and the edge's endpoints)
-                            sj = 1.0 + max(qd[e, 5], six[j] * six[j] + siy[j] * siy[j])
-                            rs = (
-                                np.inf
-                                if dr <= 0.0
-                                else sj * radius * (1.0 / dr - 1.0 / sdist[j]) * (1.0 + _SLACK) + 1e-12
-                            )
-                            if (
-                                rs < 0.0
-                                or _point_seg_dist2(six[j], siy[j], qd[e, 0], qd[e, 1], qd[e, 2], qd[e, 3]) > rs * rs
-                            ):
-                                continue
-                            nev += 1
-                            c = sample_edge_term(
-                                shape,
-                                lpa,
-                                j,
-                                u,
-                                v,
-                                radius,
-                                hu,
-                                hv,
-                                sp[j, 0],
-                                sp[j, 1],
-                                sp[j, 2],
-                                e,
-                                ea,
-                                eb,
-                                tv_start,
-                                tv,
-                                buf,
-                            )
+                        j0, j1 = g_start[col + s0], g_start[col + S]
+                        nt += j1 - j0
+                        if count_only:
+                            continue
+                        # the same bound at each sample itself: its image-plane distance to the
+                        # edge's image against the angular radius at its own distance (stretch
+                        # from its own off-axis angle and the edge's endpoints); branch-free, the
+                        # survivors' indices compacted into ``cand``
+                        m = 0
+                        if dr > 0.0:
+                            for j in range(j0, j1):
+                                sj = 1.0 + max(q5, rw[j, _RR2])
+                                rs = sj * radius * (inv_dr - rw[j, _RINV]) * (1.0 + _SLACK) + 1e-12
+                                d2 = _point_seg_dist2(rw[j, _RX], rw[j, _RY], qax, qay, qbx, qby)
+                                cand[m] = j
+                                m += 1 - int((rs < 0.0) | (d2 > rs * rs))
+                        else:
+                            for j in range(j0, j1):
+                                cand[m] = j
+                                m += 1
+                        nev += m
+                        for i in range(m):
+                            j = cand[i]
+                            c = sample_edge_term(shape, rw, j, u, v, radius, hu, hv, e, ea, eb, tv_start, tv, buf)
                             if c != 0.0:
                                 nh += 1
                                 pen[j] += c
@@ -1380,12 +1367,11 @@ def accumulate_penumbrae(
     frags, tests, hits = np.zeros(nb, np.int64), np.zeros(nb, np.int64), np.zeros(nb, np.int64)
     evals = np.zeros(nb, np.int64)
     rad = radius if shape == 1 else bound_r
-    lpa = sample_light_frames(shape, np.asarray(light.center, float), nrm_l, grid.pos)
+    rw = sample_rows(shape, np.asarray(light.center, float), nrm_l, grid.pos, grid.ix, grid.iy, grid.dist)
     _penumbra_kernel(
         window_corner2(grid.vp),
         grid.col_box,
         grid.start,
-        grid.pos,
         grid.gx,
         grid.gy,
         grid.bins,
@@ -1397,7 +1383,7 @@ def accumulate_penumbrae(
         grid.bin_maxd,
         grid.vp,
         shape,
-        lpa,
+        rw,
         u,
         v,
         rad,
@@ -1419,9 +1405,7 @@ def accumulate_penumbrae(
         hits,
         evals,
         numba.get_num_threads(),
-        grid.ix,
-        grid.iy,
-        grid.dist,
+        int(np.diff(grid.start[:: grid.slices]).max()) if n else 0,
     )
     return pen, {
         "fragments": int(frags.sum()),
@@ -1451,8 +1435,48 @@ def compose_visibility(grid: SampleGrid, umbra, pen, n_all: int) -> np.ndarray:
     return out
 
 
-def offset_points(pts, nrm, eps):
-    return np.ascontiguousarray(pts + eps * nrm, dtype=np.float64)
+@kernel(parallel=True)
+def _error_bound_samples(verts, faces, tri_img, bary_img, idx, nrm, eps, out, bound):
+    """Ground truth's ray origins (:func:`ground_truth.hit_point`, float64): p + (BOUND_SAFETY x its
+    error bound + eps) n, n the geometric normal turned toward the eye; gathers from the G-buffer."""
+    for k in prange(idx.shape[0]):
+        q = idx[k]
+        px, py, pz, nx, ny, nz, ep, ee, _g = hit_point(
+            verts,
+            faces,
+            tri_img[q],
+            np.float64(bary_img[q, 0]),
+            np.float64(bary_img[q, 1]),
+            nrm[k, 0],
+            nrm[k, 1],
+            nrm[k, 2],
+        )
+        b = BOUND_SAFETY * (ep + ee)
+        bound[k] = b
+        off = b + eps
+        out[k, 0] = px + off * nx
+        out[k, 1] = py + off * ny
+        out[k, 2] = pz + off * nz
+
+
+def error_bound_samples(flat, eye, idx, nrm, eps):
+    """(samples (K,3), bound (K,)): the samples at ground truth's ray origins plus ``eps`` along the
+    normal; the same points as ``hit_points`` + ``offset_points``, without their temporaries."""
+    K = len(idx)
+    out = np.empty((K, 3))
+    bound = np.empty(K)
+    _error_bound_samples(
+        flat.vertices, flat.faces, eye.tri_id.ravel(), eye.bary.reshape(-1, 2), idx, nrm, eps, out, bound
+    )
+    return out, bound
+
+
+def offset_points(pts, nrm, eps, bound=None):
+    """Samples moved along their normals by ``eps`` (scene units) plus, per sample, ``bound``."""
+    if bound is None and eps == 0.0:
+        return np.ascontiguousarray(pts, dtype=np.float64)
+    off = eps if bound is None else bound + eps
+    return np.ascontiguousarray(pts + (off[:, None] if np.ndim(off) else off) * nrm, dtype=np.float64)
 
 
 def irregular_visibility(
@@ -1467,13 +1491,17 @@ def irregular_visibility(
     wedge=True,
     silhouettes="adjacency",
     folds=True,
-    offset=1e-4,
+    offset=0.0,
+    origin_bound=None,
     overdraw_stats=False,
     timer=None,
     raw=False,
 ):
-    """V at eye samples (K,) float32 and stats; the steps of Figure 2 in order. With ``raw``, also
-    (umbral count, penumbral sum) per input sample (NaN for samples outside the grid)."""
+    """V at eye samples (K,) float32 and stats; the steps of Figure 2 in order. Each sample is
+    moved along its normal by ``origin_bound`` (per sample, scene units: the ray-origin error bound
+    of :func:`ground_truth.hit_points`; none when None) plus ``offset`` x the scene diagonal. With
+    ``raw``, also (umbral count, penumbral sum) per input sample (NaN for samples outside the
+    grid)."""
     import contextlib
 
     def phase(name):
@@ -1485,7 +1513,7 @@ def irregular_visibility(
     eps = offset * float(np.linalg.norm(hi - lo))
     stats = {}
     with phase("construction"):
-        p = offset_points(pts, nrm, eps)
+        p = offset_points(pts, nrm, eps, origin_bound)
         g = build_sample_grid(light, p, grid, bins, slices)
     with phase("hard_kernel"):
         fc = facing_and_counted(flat, light.center)
@@ -1515,6 +1543,7 @@ def irregular_visibility(
         penumbra_evaluated_terms=st_p["evaluated_terms"],
         penumbra_nonzero_terms=st_p["nonzero_terms"],
         eps=eps,
+        origin_bound_median=float(np.median(origin_bound)) if origin_bound is not None and len(pts) else 0.0,
         **st_u,
         **st_s,
     )
@@ -1568,7 +1597,20 @@ class Irregular(Method):
             "with adjacency, also edges that fold as seen from some receiver (off: silhouettes from the light "
             "centre only, as the paper)",
         ),
-        Param("offset", 1e-4, "sample offset along the normal, x scene diagonal (as ground-truth)", min=0.0),
+        Param(
+            "origin",
+            "error-bound",
+            "sample positions: ground-truth's ray origins (hit point recomputed in float64, offset by its float "
+            "error bound), or the G-buffer's points (then only `offset` moves them)",
+            choices=("error-bound", "gbuffer"),
+        ),
+        Param(
+            "offset",
+            0.0,
+            "extra sample offset along the normal, x scene diagonal (as ground-truth's; 1e-4 with origin=gbuffer "
+            "is the rule before ground-truth's error bounds)",
+            min=0.0,
+        ),
         Param("overdraw_stats", False, "also count fragments/tests with each optimisation off (extra passes)"),
     )
 
@@ -1576,8 +1618,17 @@ class Irregular(Method):
     #: trades construction against the tests per cell
     sweep: ClassVar = {"grid": [64, 128, 256]}
 
-    def run(self, ctx, grid, slices, bins, per_bin, wedge, silhouettes, folds, offset, overdraw_stats):
+    def run(self, ctx, grid, slices, bins, per_bin, wedge, silhouettes, folds, origin, offset, overdraw_stats):
         pts, nrm, idx = ctx.points()
+        extra = {}
+        if origin == "error-bound":
+            with ctx.timer.phase("construction"):
+                lo, hi = ctx.scene.bounds()
+                eps = offset * float(np.linalg.norm(hi - lo))
+                pts, bound = error_bound_samples(ctx.flat, ctx.eye, idx, nrm, eps)
+            # the samples are in place: no further offset
+            offset = 0.0
+            extra = {"eps": eps, "origin_bound_median": float(np.median(bound)) if len(bound) else 0.0}
         v, stats = irregular_visibility(
             ctx.scene,
             pts,
@@ -1593,4 +1644,5 @@ class Irregular(Method):
             overdraw_stats=overdraw_stats,
             timer=ctx.timer,
         )
+        stats.update(extra)
         return MethodOutput(ctx.scatter(v, idx), stats)
