@@ -136,93 +136,64 @@ def _edge_disk_area(ax, ay, bx, by, r):
 
 
 @kernel(inline=True)
-def _chord_exit(ax, ay, bx, by):
-    """Where the segment a -> b leaves the unit circle (a inside or on it, b outside): the larger
-    root t of |a + t (b - a)|^2 = 1, as the point (x, y)."""
+def _small_angle(ax, ay, bx, by):
+    """(angle from a to b about the origin, ok): atan(cross / dot) by its series to x^13 (error
+    below 1e-16 for |x| <= 0.1); ok is False where |x| > 0.1 or dot <= 0 (the series is not used)."""
+    cr = ax * by - ay * bx
+    dt = ax * bx + ay * by
+    ok = (dt > 0.0) & (abs(cr) <= 0.1 * dt)
+    x = cr / dt if ok else 0.0
+    x2 = x * x
+    p = 1.0 / 13.0
+    p = 1.0 / 11.0 - x2 * p
+    p = 1.0 / 9.0 - x2 * p
+    p = 1.0 / 7.0 - x2 * p
+    p = 0.2 - x2 * p
+    p = 1.0 / 3.0 - x2 * p
+    return x - x * x2 * p, ok
+
+
+@kernel(inline=True)
+def _edge_disk_area_small(ax, ay, bx, by):
+    """:func:`_edge_disk_area` (unit disk) without branches or atan2, for a segment whose pieces
+    outside the circle subtend small angles (:func:`_small_angle`): (twice the signed area, ok)."""
     dx = bx - ax
     dy = by - ay
     qa = dx * dx + dy * dy
     hb = ax * dx + ay * dy
-    qc = ax * ax + ay * ay - 1.0  # <= 0
-    sq = math.sqrt(max(hb * hb - qa * qc, 0.0))
-    # numerically stable larger root: (-hb + sq) / qa, or qc / (-hb - sq) when hb > 0
-    t = (-hb + sq) / qa if hb <= 0.0 else qc / (-hb - sq)
-    t = min(max(t, 0.0), 1.0)
-    return ax + t * dx, ay + t * dy
+    qc = ax * ax + ay * ay - 1.0
+    disc = hb * hb - qa * qc
+    cut = (qa > 0.0) & (disc > 0.0)
+    sq = math.sqrt(disc if cut else 0.0)
+    q = -(hb + sq) if hb >= 0.0 else -(hb - sq)  # numerically stable roots q / qa and qc / q
+    q = q if cut else 1.0
+    qa1 = qa if cut else 1.0
+    r0 = q / qa1
+    r1 = qc / q
+    t0 = min(max(min(r0, r1), 0.0), 1.0)
+    t1 = min(max(max(r0, r1), 0.0), 1.0)
+    t0 = t0 if cut else 1.0  # no crossing: one outside piece [0, 1]
+    t1 = t1 if cut else 1.0
+    px = ax + t0 * dx
+    py = ay + t0 * dy
+    qx = ax + t1 * dx
+    qy = ay + t1 * dy
+    a0, ok0 = _small_angle(ax, ay, px, py)  # outside piece [0, t0]
+    a1, ok1 = _small_angle(qx, qy, bx, by)  # outside piece [t1, 1]
+    return (px * qy - py * qx) + a0 + a1, ok0 & ok1
 
 
 @kernel(inline=True)
-def segment_area(half_chord):
-    """Area of the minor circular segment of the unit disk cut off by a chord of half-length s:
-    asin(s) - s sqrt(1 - s^2), by its series (2/3 s^3 + s^5/5 + 3/28 s^7 + 5/72 s^9 + 35/704 s^11 ...,
-    error below 1e-18) for s < 0.05, where the closed form loses digits."""
-    s = min(half_chord, 1.0)
-    if s < 0.05:
-        s2 = s * s
-        return s * s2 * (2.0 / 3.0 + s2 * (0.2 + s2 * (3.0 / 28.0 + s2 * (5.0 / 72.0 + s2 * (35.0 / 704.0)))))
-    return math.asin(s) - s * math.sqrt(1.0 - s * s)
-
-
-@kernel(inline=True)
-def convex_quad_disk_area(u0, u1, u2, u3, v0, v1, v2, v3):
-    """Area of the convex quadrilateral (u_c, v_c) (either orientation) intersected with the unit
-    disk, for the common case of a small quadrilateral across the circle: the corners inside form
-    one run, so the boundary of the intersection is that run's edges, the two points where it
-    leaves and re-enters the circle, and the minor arc between them. Area: the polygon's
-    (shoelace) plus the circular segment over the chord (:func:`segment_area`). Returns -1.0 where
-    that case does not hold (no corner inside, all inside, an edge between two outside corners
-    dipping into the disk, or a quadrilateral wider than the disk's radius); the caller then takes
-    :func:`polygon_disk_area`."""
-    if max(max(u0, u1), max(u2, u3)) - min(min(u0, u1), min(u2, u3)) > 1.0:
-        return -1.0
-    if max(max(v0, v1), max(v2, v3)) - min(min(v0, v1), min(v2, v3)) > 1.0:
-        return -1.0
-    in0 = u0 * u0 + v0 * v0 <= 1.0
-    in1 = u1 * u1 + v1 * v1 <= 1.0
-    in2 = u2 * u2 + v2 * v2 <= 1.0
-    in3 = u3 * u3 + v3 * v3 <= 1.0
-    n_in = int(in0) + int(in1) + int(in2) + int(in3)
-    if n_in == 0 or n_in == 4:
-        return -1.0
-    cross = 0.0  # twice the signed area of the clipped polygon, chord included
-    ex = ey = sx = sy = 0.0
-    n_exit = 0
-    n_entry = 0
-    for c in range(4):
-        if c == 0:
-            ax, ay, bx, by, ia, ib = u0, v0, u1, v1, in0, in1
-        elif c == 1:
-            ax, ay, bx, by, ia, ib = u1, v1, u2, v2, in1, in2
-        elif c == 2:
-            ax, ay, bx, by, ia, ib = u2, v2, u3, v3, in2, in3
-        else:
-            ax, ay, bx, by, ia, ib = u3, v3, u0, v0, in3, in0
-        if ia and ib:
-            cross += ax * by - ay * bx
-        elif ia:
-            ex, ey = _chord_exit(ax, ay, bx, by)
-            cross += ax * ey - ay * ex
-            n_exit += 1
-        elif ib:
-            sx, sy = _chord_exit(bx, by, ax, ay)
-            cross += sx * by - sy * bx
-            n_entry += 1
-        else:
-            # both outside: the edge must not reach into the disk (closest point to the center)
-            dx = bx - ax
-            dy = by - ay
-            qa = dx * dx + dy * dy
-            t = -(ax * dx + ay * dy) / qa if qa > 0.0 else 0.0
-            t = min(max(t, 0.0), 1.0)
-            px = ax + t * dx
-            py = ay + t * dy
-            if px * px + py * py < 1.0:
-                return -1.0
-    if n_exit != 1 or n_entry != 1:
-        return -1.0
-    cross += ex * sy - ey * sx  # the chord from the exit point back to the entry point
-    half = 0.5 * math.sqrt((sx - ex) * (sx - ex) + (sy - ey) * (sy - ey))
-    return 0.5 * abs(cross) + segment_area(half)
+def quad_disk_area_small(u0, u1, u2, u3, v0, v1, v2, v3):
+    """(area, ok): :func:`polygon_disk_area` of the quadrilateral (u_c, v_c) and the unit disk,
+    branch-free (it vectorizes), for a small quadrilateral (the arcs it cuts off subtend small
+    angles: then ok, and the area is exact up to rounding). ok is False otherwise; the caller then
+    takes :func:`polygon_disk_area`."""
+    e0, k0 = _edge_disk_area_small(u0, v0, u1, v1)
+    e1, k1 = _edge_disk_area_small(u1, v1, u2, v2)
+    e2, k2 = _edge_disk_area_small(u2, v2, u3, v3)
+    e3, k3 = _edge_disk_area_small(u3, v3, u0, v0)
+    return 0.5 * abs(e0 + e1 + e2 + e3), k0 & k1 & k2 & k3
 
 
 @kernel

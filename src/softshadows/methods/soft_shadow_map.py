@@ -24,7 +24,7 @@ import numpy as np
 from numba import prange
 
 from .._jit import kernel
-from ..analytic import convex_quad_disk_area, polygon_disk_area
+from ..analytic import polygon_disk_area, quad_disk_area_small
 from ..errors import SoftShadowsError
 from ..raster import View, rasterize_depth, rasterize_fragments
 from ..raster.kernels import sample_bilinear, view_project
@@ -34,6 +34,7 @@ from .base import Method, MethodOutput, Param, register
 
 BAND_ROWS = 2  # SSM rows per accumulation band (one thread sums one band)
 FP16_MAX = 65504.0
+CROSSING_BATCH = 4096  # sphere light: texel x patch pairs computed per vectorized batch
 REFINE_ROUNDS = 3  # sphere light: narrowing passes of the penumbra extents (refine_extents_sphere)
 
 
@@ -633,8 +634,8 @@ def occlusion_percentage_disk(F, fi, fj, x0, x1, y0, y1, zo, sx, sy, sz, sh, tx,
         ):
             # a convex quadrilateral inside the (convex) disk: its own area
             return 0.5 * abs((u0 - u2) * (v1 - v3) - (u1 - u3) * (v0 - v2)) / math.pi
-        a = convex_quad_disk_area(u0, u1, u2, u3, v0, v1, v2, v3)  # the common crossing case
-        if a >= 0.0:
+        a, ok = quad_disk_area_small(u0, u1, u2, u3, v0, v1, v2, v3)  # the common crossing case
+        if ok:
             return a / math.pi
         tx[0] = u0
         tx[1] = u1
@@ -854,13 +855,12 @@ def _disk_row_pass(F, recv_depth, recv_mesh, ssm, flags, i, j0, j1, x0, x1, y0, 
     Returns how many are flagged."""
     n = 0
     ii = np.uint64(i)
+    not_check = not check_mesh
     qq0, qq1, qq2, qq3, cc, sr, ak = pk[0], pk[1], pk[2], pk[3], pk[4], pk[5], pk[6]
     for jj in range(j1 - j0):
         jx = np.uint64(j0 + jj)
         zr = np.float64(recv_depth[ii, jx])
-        ok = zr > zo
-        if check_mesh:
-            ok = ok and recv_mesh[ii, jx] != pm
+        ok = (zr > zo) & (not_check | (recv_mesh[ii, jx] != pm))  # no short-circuit: it vectorizes
         hp = F[9, ii, jx]
         kap = F[10, ii, jx]
         hmax = hp * (1.0 - 1e-9)
@@ -887,6 +887,66 @@ def _disk_row_pass(F, recv_depth, recv_mesh, ssm, flags, i, j0, j1, x0, x1, y0, 
         flags[jj] = need
         n += 1 if need else 0
     return n
+
+
+@kernel(inline=True)
+def _queue_crossings(F, flags, i, j0, j1, x0, x1, y0, y1, zo, G, Q, rows, cols, m):
+    """Append the texels of row ``i`` that :func:`_disk_row_pass` flagged (patch across the cone's
+    surface) to the queue at position ``m``: their frames to ``G`` (11, 1, n), the patch to ``Q``
+    (5, n), the texel to ``rows``, ``cols`` (contiguous copies: the batch's vector loop needs no
+    gathers). Returns the new length."""
+    for jj in range(j1 - j0):
+        if flags[jj]:
+            j = j0 + jj
+            rows[m] = i
+            cols[m] = j
+            for c in range(11):
+                G[c, 0, m] = F[c, i, j]
+            Q[0, m] = x0
+            Q[1, m] = x1
+            Q[2, m] = y0
+            Q[3, m] = y1
+            Q[4, m] = zo
+            m += 1
+    return m
+
+
+@kernel(inline=True)
+def _crossing_batch(G, Q, vals, bad, m):
+    """The first ``m`` queued texel x patch pairs (:func:`_queue_crossings`): the exact overlap of
+    the projected quadrilateral (:func:`_project_corners`) with the disk over pi, branch-free
+    (:func:`softshadows.analytic.quad_disk_area_small`; vectorizes), into ``vals``; ``bad`` where
+    that does not apply (patch not wholly between p and the disk's plane, or a wide
+    quadrilateral): those take :func:`occlusion_percentage_disk`."""
+    for k in range(m):
+        kx = np.uint64(k)
+        x0 = Q[0, kx]
+        x1 = Q[1, kx]
+        y0 = Q[2, kx]
+        y1 = Q[3, kx]
+        zo = Q[4, kx]
+        hmax = G[9, 0, kx] * (1.0 - 1e-9)
+        h0, h1, h2, h3 = _corner_heights(G, 0, kx, x0, x1, y0, y1, zo)
+        inr = (h0 > 0.0) & (h1 > 0.0) & (h2 > 0.0) & (h3 > 0.0) & (h0 < hmax) & (h1 < hmax) & (h2 < hmax) & (h3 < hmax)
+        u0, u1, u2, u3, v0, v1, v2, v3 = _project_corners(G, 0, kx, x0, x1, y0, y1, zo, h0, h1, h2, h3)
+        a, ok = quad_disk_area_small(u0, u1, u2, u3, v0, v1, v2, v3)
+        good = inr & ok
+        vals[kx] = a / math.pi if good else 0.0
+        bad[kx] = not good
+
+
+@kernel(inline=True)
+def _flush_crossings(F, G, Q, rows, cols, vals, bad, m, ssm, sx, sy, sz, sh, tx, ty, tz, th):
+    """Add the queued pairs' occlusion (:func:`_crossing_batch`, else :func:`occlusion_percentage_disk`)
+    to ``ssm``, in queue order."""
+    _crossing_batch(G, Q, vals, bad, m)
+    for k in range(m):
+        c = vals[k]
+        if bad[k]:
+            c = occlusion_percentage_disk(
+                F, rows[k], cols[k], Q[0, k], Q[1, k], Q[2, k], Q[3, k], Q[4, k], sx, sy, sz, sh, tx, ty, tz, th
+            )
+        ssm[rows[k], cols[k]] += np.float32(c)
 
 
 @kernel(inline=True)
@@ -939,11 +999,19 @@ def accumulate_soft_shadow_map_sphere(
         tz = np.empty(8)
         th = np.empty(8)
         flags = np.zeros(W, np.bool_)
+        cap = max(CROSSING_BATCH, 2 * W)
+        rows = np.zeros(cap, np.int64)
+        cols = np.zeros(cap, np.int64)
+        vals = np.zeros(cap)
+        bad = np.zeros(cap, np.bool_)
+        G = np.empty((11, 1, cap))
+        Q = np.empty((5, cap))
         pk = np.empty(7)
         for bnd in range(slot, n_bands, nslot):
             r0 = bnd * band_rows
             r1 = min(r0 + band_rows, H) - 1
             cnt = 0
+            m = 0
             for q in range(band_ptr[bnd], band_ptr[bnd + 1]):
                 p = band_idx[q]
                 x0, x1, y0, y1, zo = patches[p, 0], patches[p, 1], patches[p, 2], patches[p, 3], patches[p, 4]
@@ -969,18 +1037,20 @@ def accumulate_soft_shadow_map_sphere(
                         continue
                     # float32 sums: a branch-free pass over the row (vectorizes) adds the patch's
                     # area where it projects inside the disk, nothing where it misses the cone, and
-                    # flags the other texels, which get the exact routine: one addition per texel
-                    # and patch, in patch order
+                    # flags the other texels (a few per row), which are queued and computed in
+                    # batches (vectorized), added after the band's other contributions
                     n_exact = _disk_row_pass(
                         frames, recv_depth, recv_mesh, ssm, flags, i, j0, j1, x0, x1, y0, y1, zo, pm, check_mesh, pk
                     )
                     if n_exact:
-                        for jj in range(j1 - j0):
-                            if flags[jj]:
-                                c = occlusion_percentage_disk(
-                                    frames, i, j0 + jj, x0, x1, y0, y1, zo, sx, sy, sz, sh, tx, ty, tz, th
-                                )
-                                ssm[i, j0 + jj] += np.float32(c)
+                        if m + (j1 - j0) > cap:
+                            _flush_crossings(
+                                frames, G, Q, rows, cols, vals, bad, m, ssm, sx, sy, sz, sh, tx, ty, tz, th
+                            )
+                            m = 0
+                        m = _queue_crossings(frames, flags, i, j0, j1, x0, x1, y0, y1, zo, G, Q, rows, cols, m)
+            if m:
+                _flush_crossings(frames, G, Q, rows, cols, vals, bad, m, ssm, sx, sy, sz, sh, tx, ty, tz, th)
             touched[bnd] = cnt
     return touched
 
