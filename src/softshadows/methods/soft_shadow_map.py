@@ -369,7 +369,7 @@ def _rect_max(vals, off, ws, i0, i1, j0, j1):
     return m
 
 
-@kernel
+@kernel(parallel=True)
 def refine_extents_sphere(patches, ext, rho, pyr_vals, pyr_off, pyr_ws, svp, rounds):
     """Narrow :func:`penumbra_extents_sphere`'s ranges in place, ``rounds`` times: a texel p that the
     patch shadows lies in its current range R, so (1) its receiver depth is at most the largest one
@@ -381,7 +381,7 @@ def refine_extents_sphere(patches, ext, rho, pyr_vals, pyr_off, pyr_ws, svp, rou
     l, r, b, t = svp[VP_L], svp[VP_R], svp[VP_B], svp[VP_T]
     dxs = (r - l) / svp[VP_W]
     dys = (t - b) / svp[VP_H]
-    for k in range(patches.shape[0]):
+    for k in prange(patches.shape[0]):
         for _ in range(rounds):
             i0, i1, j0, j1 = ext[k, 0], ext[k, 1], ext[k, 2], ext[k, 3]
             if i0 > i1 or j0 > j1:
@@ -890,13 +890,19 @@ def _disk_row_pass(F, recv_depth, recv_mesh, ssm, flags, i, j0, j1, x0, x1, y0, 
 
 
 @kernel(inline=True)
-def _queue_crossings(F, flags, i, j0, j1, x0, x1, y0, y1, zo, G, Q, rows, cols, m):
+def _queue_crossings(F, flags, flags64, i, j0, j1, x0, x1, y0, y1, zo, G, Q, rows, cols, m):
     """Append the texels of row ``i`` that :func:`_disk_row_pass` flagged (patch across the cone's
     surface) to the queue at position ``m``: their frames to ``G`` (11, 1, n), the patch to ``Q``
     (5, n), the texel to ``rows``, ``cols`` (contiguous copies: the batch's vector loop needs no
-    gathers). Returns the new length."""
-    for jj in range(j1 - j0):
-        if flags[jj]:
+    gathers). ``flags64``: ``flags`` viewed as uint64, to skip 8 unflagged texels at a time.
+    Returns the new length."""
+    n = j1 - j0
+    for blk in range((n + 7) // 8):
+        if flags64[blk] == 0:
+            continue
+        for jj in range(8 * blk, min(8 * blk + 8, n)):
+            if not flags[jj]:
+                continue
             j = j0 + jj
             rows[m] = i
             cols[m] = j
@@ -998,7 +1004,8 @@ def accumulate_soft_shadow_map_sphere(
         ty = np.empty(8)
         tz = np.empty(8)
         th = np.empty(8)
-        flags = np.zeros(W, np.bool_)
+        flags = np.zeros(8 * ((W + 7) // 8), np.bool_)
+        flags64 = flags.view(np.uint64)
         cap = max(CROSSING_BATCH, 2 * W)
         rows = np.zeros(cap, np.int64)
         cols = np.zeros(cap, np.int64)
@@ -1048,7 +1055,7 @@ def accumulate_soft_shadow_map_sphere(
                                 frames, G, Q, rows, cols, vals, bad, m, ssm, sx, sy, sz, sh, tx, ty, tz, th
                             )
                             m = 0
-                        m = _queue_crossings(frames, flags, i, j0, j1, x0, x1, y0, y1, zo, G, Q, rows, cols, m)
+                        m = _queue_crossings(frames, flags, flags64, i, j0, j1, x0, x1, y0, y1, zo, G, Q, rows, cols, m)
             if m:
                 _flush_crossings(frames, G, Q, rows, cols, vals, bad, m, ssm, sx, sy, sz, sh, tx, ty, tz, th)
             touched[bnd] = cnt
