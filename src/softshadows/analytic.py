@@ -135,6 +135,67 @@ def _edge_disk_area(ax, ay, bx, by, r):
     return area
 
 
+@kernel(inline=True)
+def _small_angle(ax, ay, bx, by):
+    """(angle from a to b about the origin, ok): atan(cross / dot) by its series to x^13 (error
+    below 1e-16 for |x| <= 0.1); ok is False where |x| > 0.1 or dot <= 0 (the series is not used)."""
+    cr = ax * by - ay * bx
+    dt = ax * bx + ay * by
+    ok = (dt > 0.0) & (abs(cr) <= 0.1 * dt)
+    x = cr / dt if ok else 0.0
+    x2 = x * x
+    p = 1.0 / 13.0
+    p = 1.0 / 11.0 - x2 * p
+    p = 1.0 / 9.0 - x2 * p
+    p = 1.0 / 7.0 - x2 * p
+    p = 0.2 - x2 * p
+    p = 1.0 / 3.0 - x2 * p
+    return x - x * x2 * p, ok
+
+
+@kernel(inline=True)
+def _edge_disk_area_small(ax, ay, bx, by):
+    """:func:`_edge_disk_area` (unit disk) without branches or atan2, for a segment whose pieces
+    outside the circle subtend small angles (:func:`_small_angle`): (twice the signed area, ok)."""
+    dx = bx - ax
+    dy = by - ay
+    qa = dx * dx + dy * dy
+    hb = ax * dx + ay * dy
+    qc = ax * ax + ay * ay - 1.0
+    disc = hb * hb - qa * qc
+    cut = (qa > 0.0) & (disc > 0.0)
+    sq = math.sqrt(disc if cut else 0.0)
+    q = -(hb + sq) if hb >= 0.0 else -(hb - sq)  # numerically stable roots q / qa and qc / q
+    q = q if cut else 1.0
+    qa1 = qa if cut else 1.0
+    r0 = q / qa1
+    r1 = qc / q
+    t0 = min(max(min(r0, r1), 0.0), 1.0)
+    t1 = min(max(max(r0, r1), 0.0), 1.0)
+    t0 = t0 if cut else 1.0  # no crossing: one outside piece [0, 1]
+    t1 = t1 if cut else 1.0
+    px = ax + t0 * dx
+    py = ay + t0 * dy
+    qx = ax + t1 * dx
+    qy = ay + t1 * dy
+    a0, ok0 = _small_angle(ax, ay, px, py)  # outside piece [0, t0]
+    a1, ok1 = _small_angle(qx, qy, bx, by)  # outside piece [t1, 1]
+    return (px * qy - py * qx) + a0 + a1, ok0 & ok1
+
+
+@kernel(inline=True)
+def quad_disk_area_small(u0, u1, u2, u3, v0, v1, v2, v3):
+    """(area, ok): :func:`polygon_disk_area` of the quadrilateral (u_c, v_c) and the unit disk,
+    branch-free (it vectorizes), for a small quadrilateral (the arcs it cuts off subtend small
+    angles: then ok, and the area is exact up to rounding). ok is False otherwise; the caller then
+    takes :func:`polygon_disk_area`."""
+    e0, k0 = _edge_disk_area_small(u0, v0, u1, v1)
+    e1, k1 = _edge_disk_area_small(u1, v1, u2, v2)
+    e2, k2 = _edge_disk_area_small(u2, v2, u3, v3)
+    e3, k3 = _edge_disk_area_small(u3, v3, u0, v0)
+    return 0.5 * abs(e0 + e1 + e2 + e3), k0 & k1 & k2 & k3
+
+
 @kernel
 def polygon_disk_area(xs, ys, n, r):
     """Area of the intersection of the simple polygon (xs[:n], ys[:n]) (either orientation) with

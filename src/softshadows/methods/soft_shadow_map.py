@@ -24,7 +24,7 @@ import numpy as np
 from numba import prange
 
 from .._jit import kernel
-from ..analytic import polygon_disk_area
+from ..analytic import polygon_disk_area, quad_disk_area_small
 from ..errors import SoftShadowsError
 from ..raster import View, rasterize_depth, rasterize_fragments
 from ..raster.kernels import sample_bilinear, view_project
@@ -34,6 +34,8 @@ from .base import Method, MethodOutput, Param, register
 
 BAND_ROWS = 2  # SSM rows per accumulation band (one thread sums one band)
 FP16_MAX = 65504.0
+CROSSING_BATCH = 4096  # sphere light: texel x patch pairs computed per vectorized batch
+REFINE_ROUNDS = 3  # sphere light: narrowing passes of the penumbra extents (refine_extents_sphere)
 
 
 # ---- 1. the light-aligned views ---------------------------------------------------------------
@@ -246,6 +248,48 @@ def penumbra_extents(patches, hx, hy, z_plane, svp):
     return out
 
 
+@kernel(inline=True)
+def _sphere_extent(x0, x1, y0, y1, z, rho, lzb, z_max, svp):
+    """Texel range (fi0, fi1, fj0, fj1) (floats, inclusive, clipped to the map; empty when fi0 > fi1
+    or fj0 > fj1) that contains the penumbra of the patch ``[x0, x1] x [y0, y1]`` at depth ``z`` for
+    receivers at depths up to ``z_max``, light points in the box [-rho, rho]^2 x [-lzb, lzb]
+    (:func:`penumbra_extents_sphere`)."""
+    l, r, b, t = svp[VP_L], svp[VP_R], svp[VP_B], svp[VP_T]
+    W = svp[VP_W]
+    H = svp[VP_H]
+    dxs = (r - l) / W
+    dys = (t - b) / H
+    if not (z < z_max):
+        return 1.0, 0.0, 1.0, 0.0
+    if z > lzb:
+        x_lo = min(x0 / z, x1 / z)
+        x_hi = max(x0 / z, x1 / z)
+        y_lo = min(y0 / z, y1 / z)
+        y_hi = max(y0 / z, y1 / z)
+        for c in range(8):
+            lx = rho if (c & 1) else -rho
+            ly = rho if (c & 2) else -rho
+            lz = lzb if (c & 4) else -lzb
+            s = (z_max - lz) / (z - lz)
+            for cx in range(2):
+                qx = x0 if cx == 0 else x1
+                X = (lx + (qx - lx) * s) / z_max
+                x_lo = min(x_lo, X)
+                x_hi = max(x_hi, X)
+            for cy in range(2):
+                qy = y0 if cy == 0 else y1
+                Y = (ly + (qy - ly) * s) / z_max
+                y_lo = min(y_lo, Y)
+                y_hi = max(y_hi, Y)
+    else:  # the patch is inside the box of light points: every texel
+        x_lo, x_hi, y_lo, y_hi = l, r, b, t
+    fj0 = max(math.ceil((x_lo - l) / dxs - 0.5), 0.0)
+    fj1 = min(math.floor((x_hi - l) / dxs - 0.5), W - 1.0)
+    fi0 = max(math.ceil((t - y_hi) / dys - 0.5), 0.0)
+    fi1 = min(math.floor((t - y_lo) / dys - 0.5), H - 1.0)
+    return fi0, fi1, fj0, fj1
+
+
 @kernel
 def penumbra_extents_sphere(patches, rho, z_plane, svp):
     """:func:`penumbra_extents` for a sphere light (its disks facing each point lie in the ball of
@@ -254,59 +298,110 @@ def penumbra_extents_sphere(patches, rho, z_plane, svp):
     the patch's 4 corners seen from the 8 corners of the box [-rho, rho]^3; in projective
     coordinates each such shadow moves monotonically in 1/z from q's own projection (depth z_O)
     to its projection at ``z_plane``, so the rectangle bounding both sets contains the patch's
-    penumbra at every receiver depth. Empty when the patch is not in front of the ball."""
+    penumbra at every receiver depth. Empty when the patch is not in front of the ball.
+    :func:`refine_extents_sphere` narrows these ranges."""
     n = patches.shape[0]
     out = np.empty((n, 4), np.int32)
-    l, r, b, t = svp[VP_L], svp[VP_R], svp[VP_B], svp[VP_T]
-    W = svp[VP_W]
-    H = svp[VP_H]
-    dxs = (r - l) / W
-    dys = (t - b) / H
     for k in range(n):
-        z = patches[k, 4]
-        out[k, 0] = 1
-        out[k, 1] = 0
-        out[k, 2] = 1
-        out[k, 3] = 0
-        if not (z < z_plane):
-            continue
-        if z > rho:
-            x_lo = min(patches[k, 0] / z, patches[k, 1] / z)
-            x_hi = max(patches[k, 0] / z, patches[k, 1] / z)
-            y_lo = min(patches[k, 2] / z, patches[k, 3] / z)
-            y_hi = max(patches[k, 2] / z, patches[k, 3] / z)
-            for c in range(8):
-                lx = rho if (c & 1) else -rho
-                ly = rho if (c & 2) else -rho
-                lz = rho if (c & 4) else -rho
-                s = (z_plane - lz) / (z - lz)
-                for cx in range(2):
-                    qx = patches[k, cx]
-                    X = (lx + (qx - lx) * s) / z_plane
-                    x_lo = min(x_lo, X)
-                    x_hi = max(x_hi, X)
-                for cy in range(2):
-                    qy = patches[k, 2 + cy]
-                    Y = (ly + (qy - ly) * s) / z_plane
-                    y_lo = min(y_lo, Y)
-                    y_hi = max(y_hi, Y)
-        else:  # the patch is inside the light's ball: every texel
-            x_lo, x_hi, y_lo, y_hi = l, r, b, t
-        fj0 = math.ceil((x_lo - l) / dxs - 0.5)
-        fj1 = math.floor((x_hi - l) / dxs - 0.5)
-        fi0 = math.ceil((t - y_hi) / dys - 0.5)
-        fi1 = math.floor((t - y_lo) / dys - 0.5)
-        fj0 = max(fj0, 0.0)
-        fi0 = max(fi0, 0.0)
-        fj1 = min(fj1, W - 1.0)
-        fi1 = min(fi1, H - 1.0)
+        fi0, fi1, fj0, fj1 = _sphere_extent(
+            patches[k, 0], patches[k, 1], patches[k, 2], patches[k, 3], patches[k, 4], rho, rho, z_plane, svp
+        )
         if fj0 > fj1 or fi0 > fi1:
-            continue
-        out[k, 0] = int(fi0)
-        out[k, 1] = int(fi1)
-        out[k, 2] = int(fj0)
-        out[k, 3] = int(fj1)
+            out[k, 0], out[k, 1], out[k, 2], out[k, 3] = 1, 0, 1, 0
+        else:
+            out[k, 0], out[k, 1], out[k, 2], out[k, 3] = int(fi0), int(fi1), int(fj0), int(fj1)
     return out
+
+
+@kernel
+def max_pyramid(depth):
+    """Max-reduction pyramid of ``depth`` (H,W) (0 where no receiver): level k holds the maximum over
+    blocks of 2^k x 2^k texels, down to 1 x 1. Returns (values, level offsets, level heights, level
+    widths), the levels stored row-major one after the other in ``values``."""
+    H, W = depth.shape
+    n_lev = 1
+    h, w = H, W
+    total = h * w
+    while h > 1 or w > 1:
+        h = (h + 1) // 2
+        w = (w + 1) // 2
+        total += h * w
+        n_lev += 1
+    vals = np.zeros(total, np.float32)
+    off = np.zeros(n_lev, np.int64)
+    hs = np.zeros(n_lev, np.int64)
+    ws = np.zeros(n_lev, np.int64)
+    hs[0], ws[0] = H, W
+    for i in range(H):
+        for j in range(W):
+            vals[i * W + j] = depth[i, j]
+    for k in range(1, n_lev):
+        ph, pw, po = hs[k - 1], ws[k - 1], off[k - 1]
+        h = (ph + 1) // 2
+        w = (pw + 1) // 2
+        off[k] = po + ph * pw
+        hs[k], ws[k] = h, w
+        for i in range(h):
+            for j in range(w):
+                m = vals[po + (2 * i) * pw + 2 * j]
+                if 2 * j + 1 < pw:
+                    m = max(m, vals[po + (2 * i) * pw + 2 * j + 1])
+                if 2 * i + 1 < ph:
+                    m = max(m, vals[po + (2 * i + 1) * pw + 2 * j])
+                    if 2 * j + 1 < pw:
+                        m = max(m, vals[po + (2 * i + 1) * pw + 2 * j + 1])
+                vals[off[k] + i * w + j] = m
+    return vals, off, hs, ws
+
+
+@kernel(inline=True)
+def _rect_max(vals, off, ws, i0, i1, j0, j1):
+    """Upper bound of the maximum over texels [i0, i1] x [j0, j1] from :func:`max_pyramid`: the
+    maximum of the (at most 2 x 2) cells of the first level whose blocks cover the rectangle."""
+    k = 0
+    while (i1 >> k) - (i0 >> k) > 1 or (j1 >> k) - (j0 >> k) > 1:
+        k += 1
+    m = np.float32(0.0)
+    w = ws[k]
+    for i in range(i0 >> k, (i1 >> k) + 1):
+        for j in range(j0 >> k, (j1 >> k) + 1):
+            m = max(m, vals[off[k] + i * w + j])
+    return m
+
+
+@kernel(parallel=True)
+def refine_extents_sphere(patches, ext, rho, pyr_vals, pyr_off, pyr_ws, svp, rounds):
+    """Narrow :func:`penumbra_extents_sphere`'s ranges in place, ``rounds`` times: a texel p that the
+    patch shadows lies in its current range R, so (1) its receiver depth is at most the largest one
+    in R (:func:`_rect_max`, instead of the deepest receiver of the whole map) and (2) its facing
+    disk's light points l satisfy |l_z| <= rho sin(theta), theta the largest angle from the light's
+    axis of a texel of R (l is orthogonal to p, |l| <= rho), instead of |l_z| <= rho. The range
+    recomputed with both (:func:`_sphere_extent`), intersected with R, still contains p. A range
+    without receivers deeper than the patch becomes empty."""
+    l, r, b, t = svp[VP_L], svp[VP_R], svp[VP_B], svp[VP_T]
+    dxs = (r - l) / svp[VP_W]
+    dys = (t - b) / svp[VP_H]
+    for k in prange(patches.shape[0]):
+        for _ in range(rounds):
+            i0, i1, j0, j1 = ext[k, 0], ext[k, 1], ext[k, 2], ext[k, 3]
+            if i0 > i1 or j0 > j1:
+                break
+            z_max = np.float64(_rect_max(pyr_vals, pyr_off, pyr_ws, i0, i1, j0, j1))
+            ux = max(abs(l + (j0 + 0.5) * dxs), abs(l + (j1 + 0.5) * dxs))
+            uy = max(abs(t - (i0 + 0.5) * dys), abs(t - (i1 + 0.5) * dys))
+            u2 = ux * ux + uy * uy
+            lzb = rho * math.sqrt(u2 / (1.0 + u2))
+            fi0, fi1, fj0, fj1 = _sphere_extent(
+                patches[k, 0], patches[k, 1], patches[k, 2], patches[k, 3], patches[k, 4], rho, lzb, z_max, svp
+            )
+            n0 = max(int(fi0), i0) if fi0 <= fi1 else 1
+            n1 = min(int(fi1), i1) if fi0 <= fi1 else 0
+            m0 = max(int(fj0), j0) if fj0 <= fj1 else 1
+            m1 = min(int(fj1), j1) if fj0 <= fj1 else 0
+            if n0 > n1 or m0 > m1:
+                n0, n1, m0, m1 = 1, 0, 1, 0
+            ext[k, 0], ext[k, 1], ext[k, 2], ext[k, 3] = n0, n1, m0, m1
+    return ext
 
 
 # ---- 6. the fragment program: percentage of occlusion ------------------------------------------
@@ -403,7 +498,8 @@ def _clip_height(ix, iy, iz, ih, n, level, keep_above, ox, oy, oz, oh):
 @kernel(inline=True)
 def _disk_frame(px, py, pz, rho, out):
     """The facing disk of receiver point p = (px, py, pz) (light frame, C_L at the origin):
-    ``out`` = (w, e1, e2, |p|, rho/|p|), w = p/|p| the disk's normal, e1, e2 its in-plane axes."""
+    ``out`` = (w, e1, e2, |p|, kappa = rho/|p|, sqrt(1 + kappa^2)), w = p/|p| the disk's normal, e1, e2
+    its in-plane axes (kappa: the tangent of the half-angle of the cone from p onto the disk)."""
     hp = math.sqrt(px * px + py * py + pz * pz)
     wx = px / hp
     wy = py / hp
@@ -428,26 +524,27 @@ def _disk_frame(px, py, pz, rho, out):
     out[8] = wx * e1y - wy * e1x
     out[9] = hp
     out[10] = rho / hp
+    out[11] = math.sqrt(1.0 + out[10] * out[10])
 
 
 @kernel(parallel=True)
 def disk_frames(recv_depth, svp, rho):
-    """:func:`_disk_frame` of every SSM texel's receiver point as 11 planes (11,H,W) (contiguous
+    """:func:`_disk_frame` of every SSM texel's receiver point as 12 planes (12,H,W) (contiguous
     along rows, for the vectorized pass); zeros where no receiver."""
     H, W = recv_depth.shape
     l, r, b, t = svp[VP_L], svp[VP_R], svp[VP_B], svp[VP_T]
     dxs = (r - l) / W
     dys = (t - b) / H
-    out = np.zeros((11, H, W))
+    out = np.zeros((12, H, W))
     for i in prange(H):
         uy = t - (i + 0.5) * dys
-        f = np.empty(11)
+        f = np.empty(12)
         for j in range(W):
             zr = np.float64(recv_depth[i, j])
             if zr > 0.0:
                 ux = l + (j + 0.5) * dxs
                 _disk_frame(ux * zr, uy * zr, zr, rho, f)
-                for k in range(11):
+                for k in range(12):
                     out[k, i, j] = f[k]
     return out
 
@@ -467,6 +564,43 @@ def _outside_disk(u0, u1, u2, u3, v0, v1, v2, v3):
 
 
 @kernel(inline=True)
+def _corner_heights(F, fi, fj, x0, x1, y0, y1, zo):
+    """Heights w.q above the plane of the disk facing texel (fi, fj) (``F``: :func:`disk_frames`) of
+    the patch corners (x0,y0) (x1,y0) (x1,y1) (x0,y1) at depth z_O (everything is affine in x, y)."""
+    wx = F[0, fi, fj]
+    wy = F[1, fi, fj]
+    hz = F[2, fi, fj] * zo
+    return wx * x0 + wy * y0 + hz, wx * x1 + wy * y0 + hz, wx * x1 + wy * y1 + hz, wx * x0 + wy * y1 + hz
+
+
+@kernel(inline=True)
+def _project_corners(F, fi, fj, x0, x1, y0, y1, zo, h0, h1, h2, h3):
+    """Disk coordinates (u0..u3, v0..v3) (radius 1) of the patch corners projected from the texel's
+    receiver point p onto its facing disk's plane: ``(e1.q, e2.q) / (kappa (|p| - h))``, h the
+    corner's :func:`_corner_heights` (all in (0, |p|))."""
+    hp = F[9, fi, fj]
+    kap = F[10, fi, fj]
+    e1x, e1y, e1z = F[3, fi, fj], F[4, fi, fj], F[5, fi, fj]
+    e2x, e2y, e2z = F[6, fi, fj], F[7, fi, fj], F[8, fi, fj]
+    az = e1z * zo
+    bz = e2z * zo
+    d0 = 1.0 / (kap * (hp - h0))
+    d1 = 1.0 / (kap * (hp - h1))
+    d2 = 1.0 / (kap * (hp - h2))
+    d3 = 1.0 / (kap * (hp - h3))
+    return (
+        (e1x * x0 + e1y * y0 + az) * d0,
+        (e1x * x1 + e1y * y0 + az) * d1,
+        (e1x * x1 + e1y * y1 + az) * d2,
+        (e1x * x0 + e1y * y1 + az) * d3,
+        (e2x * x0 + e2y * y0 + bz) * d0,
+        (e2x * x1 + e2y * y0 + bz) * d1,
+        (e2x * x1 + e2y * y1 + bz) * d2,
+        (e2x * x0 + e2y * y1 + bz) * d3,
+    )
+
+
+@kernel(inline=True)
 def occlusion_percentage_disk(F, fi, fj, x0, x1, y0, y1, zo, sx, sy, sz, sh, tx, ty, tz, th):
     """Fraction of a sphere light hidden by one micro-patch at one receiver point p: the light is
     the disk of radius rho through C_L (the light frame's origin) facing p (V's definition),
@@ -481,32 +615,11 @@ def occlusion_percentage_disk(F, fi, fj, x0, x1, y0, y1, zo, sx, sy, sz, sh, tx,
     the disk hides 0, one inside it hides its own area (shoelace). Parts of the patch behind the disk's plane or not
     in front of p (w.q outside (0, |p|)) hide nothing and are clipped off first.
     ``sx..th``: scratch arrays of 8."""
-    wx, wy, wz = F[0, fi, fj], F[1, fi, fj], F[2, fi, fj]
     hp, kap = F[9, fi, fj], F[10, fi, fj]
     hmax = hp * (1.0 - 1e-9)
-    # corners in order (x0,y0) (x1,y0) (x1,y1) (x0,y1); everything is affine in x and y
-    hz = wz * zo
-    h0 = wx * x0 + wy * y0 + hz
-    h1 = wx * x1 + wy * y0 + hz
-    h2 = wx * x1 + wy * y1 + hz
-    h3 = wx * x0 + wy * y1 + hz
+    h0, h1, h2, h3 = _corner_heights(F, fi, fj, x0, x1, y0, y1, zo)
     if h0 > 0.0 and h1 > 0.0 and h2 > 0.0 and h3 > 0.0 and h0 < hmax and h1 < hmax and h2 < hmax and h3 < hmax:
-        az = F[5, fi, fj] * zo
-        bz = F[8, fi, fj] * zo
-        a0 = F[3, fi, fj] * x0 + F[4, fi, fj] * y0 + az
-        a1 = F[3, fi, fj] * x1 + F[4, fi, fj] * y0 + az
-        a2 = F[3, fi, fj] * x1 + F[4, fi, fj] * y1 + az
-        a3 = F[3, fi, fj] * x0 + F[4, fi, fj] * y1 + az
-        b0 = F[6, fi, fj] * x0 + F[7, fi, fj] * y0 + bz
-        b1 = F[6, fi, fj] * x1 + F[7, fi, fj] * y0 + bz
-        b2 = F[6, fi, fj] * x1 + F[7, fi, fj] * y1 + bz
-        b3 = F[6, fi, fj] * x0 + F[7, fi, fj] * y1 + bz
-        d0 = 1.0 / (kap * (hp - h0))
-        d1 = 1.0 / (kap * (hp - h1))
-        d2 = 1.0 / (kap * (hp - h2))
-        d3 = 1.0 / (kap * (hp - h3))
-        u0, u1, u2, u3 = a0 * d0, a1 * d1, a2 * d2, a3 * d3
-        v0, v1, v2, v3 = b0 * d0, b1 * d1, b2 * d2, b3 * d3
+        u0, u1, u2, u3, v0, v1, v2, v3 = _project_corners(F, fi, fj, x0, x1, y0, y1, zo, h0, h1, h2, h3)
         if max(u0, u1, u2, u3) <= -1.0 or min(u0, u1, u2, u3) >= 1.0:
             return 0.0
         if max(v0, v1, v2, v3) <= -1.0 or min(v0, v1, v2, v3) >= 1.0:
@@ -521,6 +634,9 @@ def occlusion_percentage_disk(F, fi, fj, x0, x1, y0, y1, zo, sx, sy, sz, sh, tx,
         ):
             # a convex quadrilateral inside the (convex) disk: its own area
             return 0.5 * abs((u0 - u2) * (v1 - v3) - (u1 - u3) * (v0 - v2)) / math.pi
+        a, ok = quad_disk_area_small(u0, u1, u2, u3, v0, v1, v2, v3)  # the common crossing case
+        if ok:
+            return a / math.pi
         tx[0] = u0
         tx[1] = u1
         tx[2] = u2
@@ -562,8 +678,8 @@ def occlusion_percentage_disk_at(patch, ux, uy, z_r, rho) -> float:
     x0, x1, y0, y1, zo = (float(v) for v in patch)
     if not z_r > zo:
         return 0.0
-    F = np.empty((11, 1, 1))
-    f = np.empty(11)
+    F = np.empty((12, 1, 1))
+    f = np.empty(12)
     _disk_frame(ux * z_r, uy * z_r, z_r, rho, f)
     F[:, 0, 0] = f
     sc = [np.empty(8) for _ in range(8)]
@@ -723,68 +839,136 @@ def accumulate_soft_shadow_map(
 
 
 @kernel(inline=True)
-def _disk_row_pass(F, recv_depth, recv_mesh, ssm, flags, i, j0, j1, x0, x1, y0, y1, zo, pm, check_mesh):
-    """One SSM row of one micro-patch for :func:`accumulate_soft_shadow_map_sphere`, branch-free:
-    adds :func:`occlusion_percentage_disk`'s value where one of its shortcuts applies (nothing
-    hidden: receiver not behind the patch, own mesh, or the projected quad's bounding box misses
-    the disk; the quad's own area: inside the disk), with the same float64 arithmetic, and sets
-    ``flags[j - j0]`` where the exact routine is needed. Returns how many."""
+def _disk_row_pass(F, recv_depth, recv_mesh, ssm, flags, i, j0, j1, x0, x1, y0, y1, zo, pm, check_mesh, pk):
+    """One SSM row of one micro-patch for :func:`accumulate_soft_shadow_map_sphere`, branch-free and
+    without projecting the corners (no per-corner division; vectorizes). With h_c the corners'
+    :func:`_corner_heights` and d_c = |p| - h_c, a corner q projects inside the facing disk iff its
+    distance from the axis of the cone from p onto the disk is at most kappa d_c:
+    ``|q|^2 - h_c^2 <= kappa^2 d_c^2``. All four inside: the projected quadrilateral's area over
+    pi rho^2 is ``A (z_R - z_O) (d1 + d3) / (2 pi kappa^2 d0 d1 d2 d3)`` (the two triangles' central
+    projections: area' = t0 t1 t2 A_tri (z_R - z_O) / |p| with t_c = |p| / d_c; A the patch's
+    area), which is added. Nothing hidden (adds 0): receiver not behind the patch, own mesh, or the
+    patch's bounding sphere (center c, radius s) outside the cone (its distance from the axis
+    exceeds kappa (|p| - w.c) + s sqrt(1 + kappa^2)). Every other texel (the patch across the
+    cone's surface, or not wholly between p and the disk's plane) is flagged in ``flags[j - j0]``
+    for :func:`occlusion_percentage_disk`. ``pk``: per patch |q_c|^2 (4), |c|^2, s, A / (2 pi).
+    Returns how many are flagged."""
     n = 0
     ii = np.uint64(i)
+    not_check = not check_mesh
+    qq0, qq1, qq2, qq3, cc, sr, ak = pk[0], pk[1], pk[2], pk[3], pk[4], pk[5], pk[6]
     for jj in range(j1 - j0):
         jx = np.uint64(j0 + jj)
         zr = np.float64(recv_depth[ii, jx])
-        ok = zr > zo
-        if check_mesh:
-            ok = ok and recv_mesh[ii, jx] != pm
-        wx = F[0, ii, jx]
-        wy = F[1, ii, jx]
-        wz = F[2, ii, jx]
+        ok = (zr > zo) & (not_check | (recv_mesh[ii, jx] != pm))  # no short-circuit: it vectorizes
         hp = F[9, ii, jx]
         kap = F[10, ii, jx]
         hmax = hp * (1.0 - 1e-9)
-        hz = wz * zo
-        h0 = wx * x0 + wy * y0 + hz
-        h1 = wx * x1 + wy * y0 + hz
-        h2 = wx * x1 + wy * y1 + hz
-        h3 = wx * x0 + wy * y1 + hz
+        h0, h1, h2, h3 = _corner_heights(F, ii, jx, x0, x1, y0, y1, zo)
         inr = (h0 > 0.0) & (h1 > 0.0) & (h2 > 0.0) & (h3 > 0.0) & (h0 < hmax) & (h1 < hmax) & (h2 < hmax) & (h3 < hmax)
-        az = F[5, ii, jx] * zo
-        bz = F[8, ii, jx] * zo
-        a0 = F[3, ii, jx] * x0 + F[4, ii, jx] * y0 + az
-        a1 = F[3, ii, jx] * x1 + F[4, ii, jx] * y0 + az
-        a2 = F[3, ii, jx] * x1 + F[4, ii, jx] * y1 + az
-        a3 = F[3, ii, jx] * x0 + F[4, ii, jx] * y1 + az
-        b0 = F[6, ii, jx] * x0 + F[7, ii, jx] * y0 + bz
-        b1 = F[6, ii, jx] * x1 + F[7, ii, jx] * y0 + bz
-        b2 = F[6, ii, jx] * x1 + F[7, ii, jx] * y1 + bz
-        b3 = F[6, ii, jx] * x0 + F[7, ii, jx] * y1 + bz
-        d0 = 1.0 / (kap * (hp - h0))
-        d1 = 1.0 / (kap * (hp - h1))
-        d2 = 1.0 / (kap * (hp - h2))
-        d3 = 1.0 / (kap * (hp - h3))
-        u0, u1, u2, u3 = a0 * d0, a1 * d1, a2 * d2, a3 * d3
-        v0, v1, v2, v3 = b0 * d0, b1 * d1, b2 * d2, b3 * d3
-        rej = (
-            (max(max(u0, u1), max(u2, u3)) <= -1.0)
-            | (min(min(u0, u1), min(u2, u3)) >= 1.0)
-            | (max(max(v0, v1), max(v2, v3)) <= -1.0)
-            | (min(min(v0, v1), min(v2, v3)) >= 1.0)
-            | _outside_disk(u0, u1, u2, u3, v0, v1, v2, v3)
-        )
+        d0 = hp - h0
+        d1 = hp - h1
+        d2 = hp - h2
+        d3 = hp - h3
+        k2 = kap * kap
         ins = (
-            (u0 * u0 + v0 * v0 <= 1.0)
-            & (u1 * u1 + v1 * v1 <= 1.0)
-            & (u2 * u2 + v2 * v2 <= 1.0)
-            & (u3 * u3 + v3 * v3 <= 1.0)
+            (qq0 - h0 * h0 <= k2 * d0 * d0)
+            & (qq1 - h1 * h1 <= k2 * d1 * d1)
+            & (qq2 - h2 * h2 <= k2 * d2 * d2)
+            & (qq3 - h3 * h3 <= k2 * d3 * d3)
         )
-        area = 0.5 * abs((u0 - u2) * (v1 - v3) - (u1 - u3) * (v0 - v2)) / math.pi
-        add = area if (ok & inr & ~rej & ins) else 0.0
+        hc = 0.5 * (h0 + h2)
+        rc = kap * (hp - hc) + sr * F[11, ii, jx]
+        miss = cc - hc * hc > rc * rc
+        area = ak * (zr - zo) * (d1 + d3) / (k2 * (d0 * d1) * (d2 * d3))
+        add = area if (ok & inr & ins) else 0.0
         ssm[ii, jx] += np.float32(add)
-        need = ok & ~(inr & (rej | ins))
+        need = ok & ~(inr & (miss | ins))
         flags[jj] = need
         n += 1 if need else 0
     return n
+
+
+@kernel(inline=True)
+def _queue_crossings(F, flags, flags64, i, j0, j1, x0, x1, y0, y1, zo, G, Q, rows, cols, m):
+    """Append the texels of row ``i`` that :func:`_disk_row_pass` flagged (patch across the cone's
+    surface) to the queue at position ``m``: their frames to ``G`` (11, 1, n), the patch to ``Q``
+    (5, n), the texel to ``rows``, ``cols`` (contiguous copies: the batch's vector loop needs no
+    gathers). ``flags64``: ``flags`` viewed as uint64, to skip 8 unflagged texels at a time.
+    Returns the new length."""
+    n = j1 - j0
+    for blk in range((n + 7) // 8):
+        if flags64[blk] == 0:
+            continue
+        for jj in range(8 * blk, min(8 * blk + 8, n)):
+            if not flags[jj]:
+                continue
+            j = j0 + jj
+            rows[m] = i
+            cols[m] = j
+            for c in range(11):
+                G[c, 0, m] = F[c, i, j]
+            Q[0, m] = x0
+            Q[1, m] = x1
+            Q[2, m] = y0
+            Q[3, m] = y1
+            Q[4, m] = zo
+            m += 1
+    return m
+
+
+@kernel(inline=True)
+def _crossing_batch(G, Q, vals, bad, m):
+    """The first ``m`` queued texel x patch pairs (:func:`_queue_crossings`): the exact overlap of
+    the projected quadrilateral (:func:`_project_corners`) with the disk over pi, branch-free
+    (:func:`softshadows.analytic.quad_disk_area_small`; vectorizes), into ``vals``; ``bad`` where
+    that does not apply (patch not wholly between p and the disk's plane, or a wide
+    quadrilateral): those take :func:`occlusion_percentage_disk`."""
+    for k in range(m):
+        kx = np.uint64(k)
+        x0 = Q[0, kx]
+        x1 = Q[1, kx]
+        y0 = Q[2, kx]
+        y1 = Q[3, kx]
+        zo = Q[4, kx]
+        hmax = G[9, 0, kx] * (1.0 - 1e-9)
+        h0, h1, h2, h3 = _corner_heights(G, 0, kx, x0, x1, y0, y1, zo)
+        inr = (h0 > 0.0) & (h1 > 0.0) & (h2 > 0.0) & (h3 > 0.0) & (h0 < hmax) & (h1 < hmax) & (h2 < hmax) & (h3 < hmax)
+        u0, u1, u2, u3, v0, v1, v2, v3 = _project_corners(G, 0, kx, x0, x1, y0, y1, zo, h0, h1, h2, h3)
+        a, ok = quad_disk_area_small(u0, u1, u2, u3, v0, v1, v2, v3)
+        good = inr & ok
+        vals[kx] = a / math.pi if good else 0.0
+        bad[kx] = not good
+
+
+@kernel(inline=True)
+def _flush_crossings(F, G, Q, rows, cols, vals, bad, m, ssm, sx, sy, sz, sh, tx, ty, tz, th):
+    """Add the queued pairs' occlusion (:func:`_crossing_batch`, else :func:`occlusion_percentage_disk`)
+    to ``ssm``, in queue order."""
+    _crossing_batch(G, Q, vals, bad, m)
+    for k in range(m):
+        c = vals[k]
+        if bad[k]:
+            c = occlusion_percentage_disk(
+                F, rows[k], cols[k], Q[0, k], Q[1, k], Q[2, k], Q[3, k], Q[4, k], sx, sy, sz, sh, tx, ty, tz, th
+            )
+        ssm[rows[k], cols[k]] += np.float32(c)
+
+
+@kernel(inline=True)
+def _patch_constants(x0, x1, y0, y1, zo, pk):
+    """Per micro-patch constants of :func:`_disk_row_pass` into ``pk``: |q_c|^2 of the 4 corners, |c|^2
+    of the center, the half diagonal s, and A / (2 pi)."""
+    z2 = zo * zo
+    pk[0] = x0 * x0 + y0 * y0 + z2
+    pk[1] = x1 * x1 + y0 * y0 + z2
+    pk[2] = x1 * x1 + y1 * y1 + z2
+    pk[3] = x0 * x0 + y1 * y1 + z2
+    cx = 0.5 * (x0 + x1)
+    cy = 0.5 * (y0 + y1)
+    pk[4] = cx * cx + cy * cy + z2
+    pk[5] = 0.5 * math.sqrt((x1 - x0) * (x1 - x0) + (y1 - y0) * (y1 - y0))
+    pk[6] = (x1 - x0) * (y1 - y0) / (2.0 * math.pi)
 
 
 @kernel(parallel=True)
@@ -820,17 +1004,29 @@ def accumulate_soft_shadow_map_sphere(
         ty = np.empty(8)
         tz = np.empty(8)
         th = np.empty(8)
-        flags = np.zeros(W, np.bool_)
+        flags = np.zeros(8 * ((W + 7) // 8), np.bool_)
+        flags64 = flags.view(np.uint64)
+        cap = max(CROSSING_BATCH, 2 * W)
+        rows = np.zeros(cap, np.int64)
+        cols = np.zeros(cap, np.int64)
+        vals = np.zeros(cap)
+        bad = np.zeros(cap, np.bool_)
+        G = np.empty((11, 1, cap))
+        Q = np.empty((5, cap))
+        pk = np.empty(7)
         for bnd in range(slot, n_bands, nslot):
             r0 = bnd * band_rows
             r1 = min(r0 + band_rows, H) - 1
             cnt = 0
+            m = 0
             for q in range(band_ptr[bnd], band_ptr[bnd + 1]):
                 p = band_idx[q]
                 x0, x1, y0, y1, zo = patches[p, 0], patches[p, 1], patches[p, 2], patches[p, 3], patches[p, 4]
                 pm = pmesh[p]
                 i0 = max(ext[p, 0], r0)
                 i1 = min(ext[p, 1], r1)
+                if not fp16:
+                    _patch_constants(x0, x1, y0, y1, zo, pk)
                 for i in range(i0, i1 + 1):
                     j0 = ext[p, 2]
                     j1 = ext[p, 3] + 1
@@ -846,20 +1042,22 @@ def accumulate_soft_shadow_map_sphere(
                             if c > 0.0:
                                 ssm[i, j] = np.float32(round_half(np.float64(ssm[i, j]) + round_half(c, rtz), rtz))
                         continue
-                    # float32 sums: a branch-free pass over the row (vectorizes) does what
-                    # occlusion_percentage_disk's shortcuts do (quads fully inside or whose bounding
-                    # box misses the disk, the same arithmetic) and flags the other texels, which
-                    # get the exact routine: one addition per texel and patch, as before
+                    # float32 sums: a branch-free pass over the row (vectorizes) adds the patch's
+                    # area where it projects inside the disk, nothing where it misses the cone, and
+                    # flags the other texels (a few per row), which are queued and computed in
+                    # batches (vectorized), added after the band's other contributions
                     n_exact = _disk_row_pass(
-                        frames, recv_depth, recv_mesh, ssm, flags, i, j0, j1, x0, x1, y0, y1, zo, pm, check_mesh
+                        frames, recv_depth, recv_mesh, ssm, flags, i, j0, j1, x0, x1, y0, y1, zo, pm, check_mesh, pk
                     )
                     if n_exact:
-                        for jj in range(j1 - j0):
-                            if flags[jj]:
-                                c = occlusion_percentage_disk(
-                                    frames, i, j0 + jj, x0, x1, y0, y1, zo, sx, sy, sz, sh, tx, ty, tz, th
-                                )
-                                ssm[i, j0 + jj] += np.float32(c)
+                        if m + (j1 - j0) > cap:
+                            _flush_crossings(
+                                frames, G, Q, rows, cols, vals, bad, m, ssm, sx, sy, sz, sh, tx, ty, tz, th
+                            )
+                            m = 0
+                        m = _queue_crossings(frames, flags, flags64, i, j0, j1, x0, x1, y0, y1, zo, G, Q, rows, cols, m)
+            if m:
+                _flush_crossings(frames, G, Q, rows, cols, vals, bad, m, ssm, sx, sy, sz, sh, tx, ty, tz, th)
             touched[bnd] = cnt
     return touched
 
@@ -971,12 +1169,16 @@ def compute_soft_shadow_map(
     n_bands = (ssm_size + BAND_ROWS - 1) // BAND_ROWS
     passes = {}
     frames = None
+    pyr = None
     fp16_safe = True
     for s in sides:
         with timer.phase("penumbra_extents"):
             patches, pmesh = discretize_occluders(omaps[s][0], omaps[s][1], ovp)
             if sphere:
                 ext = penumbra_extents_sphere(patches, hx, z_plane, svp)
+                if pyr is None:
+                    pyr = max_pyramid(rdepth0)
+                ext = refine_extents_sphere(patches, ext, hx, pyr[0], pyr[1], pyr[3], svp, REFINE_ROUNDS)
             else:
                 ext = penumbra_extents(patches, hx, hy, z_plane, svp)
             ptr, idx = bin_patches_by_band(ext, n_bands, BAND_ROWS)
