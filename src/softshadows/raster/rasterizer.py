@@ -368,41 +368,50 @@ def _tile_row_bits(mask, T, ntx, nty, bits, tile_any):
 
 @kernel(parallel=True)
 def _vertex_screen(verts, vp, near, vs):
-    """Per vertex (structure of arrays, once per vertex instead of once per triangle corner):
-    vs[0, v] = its view depth z and, where z >= near, vs[1, v], vs[2, v] = its snapped screen
+    """Per vertex (once per vertex instead of once per triangle corner):
+    vs[v, 0] = its view depth z and, where z >= near, vs[v, 1], vs[v, 2] = its snapped screen
     coordinates (NaN elsewhere). The same operations as :func:`_setup_one` / :func:`_setup_piece`
     on a corner, so the values are theirs bit for bit."""
     for v in prange(verts.shape[0]):
         x, y, z = view_coords(vp, verts[v, 0], verts[v, 1], verts[v, 2])
-        vs[0, v] = z
+        vs[v, 0] = z
         if z >= near:
             sx, sy = view_coords_to_screen(vp, x, y, z)
-            vs[1, v] = _snap(sx)
-            vs[2, v] = _snap(sy)
+            vs[v, 1] = _snap(sx)
+            vs[v, 2] = _snap(sy)
         else:
-            vs[1, v] = np.nan
-            vs[2, v] = np.nan
+            vs[v, 1] = np.nan
+            vs[v, 2] = np.nan
 
 
 #: the small-triangle rejection tests the pixel centers of a bounding box holding at most this many
-_FEW_CENTERS = 4.0
+_FEW_CENTERS = 9.0
 
 
 @kernel(inline=True)
-def _center_in(ax, ay, bx, by, py, j):
-    """:func:`_edge_in` of the edge a->b (of a positively oriented piece) at the pixel center (j + 0.5,
-    py), from the values :func:`_store_edge` would store (canonical endpoints, sign, top-left rule)."""
+def _center_bits(ax, ay, bx, by, i0, i1, j0, nw):
+    """:func:`_edge_in` of the edge a->b (of a positively oriented piece) at the pixel centers of rows
+    i0..i1 and columns j0..j0 + nw - 1, from the values :func:`_store_edge` would store (canonical
+    endpoints, sign, top-left rule): bit (i - i0) * nw + (j - j0) set where the center passes.
+    Branch-free per center (the few centers of a small triangle: unpredictable branches)."""
     cax, cay, cdx, cdy, sg = _canonical_edge(ax, ay, bx, by)
     ddx = bx - ax
     ddy = by - ay
-    own = ddy < 0.0 or (ddy == 0.0 and ddx > 0.0)
-    v = sg * (cdx * (py - cay) - cdy * ((j + 0.5) - cax))
-    return not (v < 0.0 or (v == 0.0 and not own))
+    own = (ddy < 0.0) | ((ddy == 0.0) & (ddx > 0.0))
+    bits = 0
+    q = 0
+    for i in range(i0, i1 + 1):
+        r = cdx * ((i + 0.5) - cay)
+        for j in range(j0, j0 + nw):
+            v = sg * (r - cdy * ((j + 0.5) - cax))
+            bits |= np.int64((v > 0.0) | ((v == 0.0) & own)) << q
+            q += 1
+    return bits
 
 
-#: a small triangle's code (see :func:`_classify`): its bounding box's first pixel (flat index
-#: i0 * W + j0) << _TC_PIX | its columns << _TC_NW | the bits of its covered pixel centers (row-major)
-_TC_PIX, _TC_NW, _TC_BITS = 8, 4, 15
+#: a small triangle's code (see :func:`_classify`): its bounding box's first row i0 << _TC_I0 | its
+#: first column j0 << _TC_J0 | its columns << _TC_NW | the bits of its covered pixel centers (row-major)
+_TC_I0, _TC_J0, _TC_NW, _TC_BITS = 40, 16, 12, 4095
 
 
 @kernel
@@ -420,20 +429,20 @@ def _classify(t, verts, faces, vp, near, cull, vs):
     ia = faces[t, 0]
     ib = faces[t, 1]
     ic = faces[t, 2]
-    z0 = vs[0, ia]
-    z1 = vs[0, ib]
-    z2 = vs[0, ic]
+    z0 = vs[ia, 0]
+    z1 = vs[ib, 0]
+    z2 = vs[ic, 0]
     if min(z0, min(z1, z2)) > far or max(z0, max(z1, z2)) < near:
         return -1
     if z0 >= near and z1 >= near and z2 >= near:
         W = vp[VP_W]
         H = vp[VP_H]
-        sx0 = vs[1, ia]
-        sx1 = vs[1, ib]
-        sx2 = vs[1, ic]
-        sy0 = vs[2, ia]
-        sy1 = vs[2, ib]
-        sy2 = vs[2, ic]
+        sx0 = vs[ia, 1]
+        sx1 = vs[ib, 1]
+        sx2 = vs[ic, 1]
+        sy0 = vs[ia, 2]
+        sy1 = vs[ib, 2]
+        sy2 = vs[ic, 2]
         fj0 = max(math.ceil(min(sx0, min(sx1, sx2)) - 0.5), 0.0)
         fj1 = min(math.floor(max(sx0, max(sx1, sx2)) - 0.5), W - 1.0)
         fi0 = max(math.ceil(min(sy0, min(sy1, sy2)) - 0.5), 0.0)
@@ -453,21 +462,15 @@ def _classify(t, verts, faces, vp, near, cull, vs):
             i0 = int(fi0)
             j0 = int(fj0)
             nw = int(fj1) - j0 + 1
-            bits = 0
-            bit = 1
-            for i in range(i0, int(fi1) + 1):
-                py = i + 0.5
-                for j in range(j0, j0 + nw):
-                    if (
-                        _center_in(sx0, sy0, sx1, sy1, py, j)
-                        and _center_in(sx1, sy1, sx2, sy2, py, j)
-                        and _center_in(sx2, sy2, sx0, sy0, py, j)
-                    ):
-                        bits |= bit
-                    bit <<= 1
+            i1 = int(fi1)
+            bits = (
+                _center_bits(sx0, sy0, sx1, sy1, i0, i1, j0, nw)
+                & _center_bits(sx1, sy1, sx2, sy2, i0, i1, j0, nw)
+                & _center_bits(sx2, sy2, sx0, sy0, i0, i1, j0, nw)
+            )
             if bits == 0:
                 return -1
-            return ((i0 * int(W) + j0) << _TC_PIX) | (nw << _TC_NW) | bits
+            return (i0 << _TC_I0) | (j0 << _TC_J0) | (nw << _TC_NW) | bits
     if cull == 0:
         return 0  # the degenerate test is left to the full setup
     ax = verts[ia, 0]
@@ -489,7 +492,6 @@ def _select(verts, faces, vp, near, cull, vs, chunk, ccount, nslot, keep, tcode,
     nchunk = ccount.shape[0]
     F = faces.shape[0]
     tiny = tcount.shape[1] > 0
-    W = int(vp[VP_W])
     for slot in prange(nslot):
         for c in range(slot, nchunk, nslot):
             n = 0
@@ -502,12 +504,12 @@ def _select(verts, faces, vp, near, cull, vs, chunk, ccount, nslot, keep, tcode,
                 if code > 0 and tiny:
                     k = 3
                     tcode[t] = code
-                    tcount[c, ((code >> _TC_PIX) // W) // TILE] += 1
+                    tcount[c, (code >> _TC_I0) // TILE] += 1
                 elif code >= 0:
                     # 2: the face crosses the near plane (it may be clipped into two pieces)
                     k = (
                         1
-                        if (vs[0, faces[t, 0]] >= near and vs[0, faces[t, 1]] >= near and vs[0, faces[t, 2]] >= near)
+                        if (vs[faces[t, 0], 0] >= near and vs[faces[t, 1], 0] >= near and vs[faces[t, 2], 0] >= near)
                         else 2
                     )
                     n += 1
@@ -516,7 +518,7 @@ def _select(verts, faces, vp, near, cull, vs, chunk, ccount, nslot, keep, tcode,
 
 
 @kernel(parallel=True)
-def _select_fill(chunk, coff, nslot, keep, tri, tcode, toff, tface, tlist, W):
+def _select_fill(chunk, coff, nslot, keep, tri, tcode, toff, tface, tlist):
     """Second pass: the faces kept for setup in increasing index into ``tri`` (chunk c from coff[c]);
     the small ones (keep 3) into the lists of their bands, ``tface`` (face) and ``tlist`` (code),
     chunk c of band b from toff[c, b]."""
@@ -529,7 +531,7 @@ def _select_fill(chunk, coff, nslot, keep, tri, tcode, toff, tface, tlist, W):
                 k = keep[t]
                 if k == 3:
                     code = tcode[t]
-                    b = ((code >> _TC_PIX) // W) // TILE
+                    b = (code >> _TC_I0) // TILE
                     o = toff[c, b]
                     tface[o] = t
                     tlist[o] = code
@@ -588,12 +590,11 @@ def _tiny_depth(verts, faces, vp, near, cull, bstart, tface, tlist, phase, nslot
                     continue
                 pl = (vnx, vny, vnz, vnx * x0 + vny * y0 + vnz * z0)
                 zlo, zhi = _depth_range(min(z0, min(z1, z2)), max(z0, max(z1, z2)), ortho, near)
-                pix = code >> _TC_PIX
-                i0 = pix // W
-                j0 = pix - i0 * W
+                i0 = code >> _TC_I0
+                j0 = (code >> _TC_J0) & 0xFFFFFF
                 nw = (code >> _TC_NW) & 15
                 bits = code & _TC_BITS
-                for q in range(4):
+                for q in range(int(_FEW_CENTERS)):
                     if (bits >> q) & 1:
                         i = i0 + q // nw
                         j = j0 + q % nw
@@ -1770,7 +1771,7 @@ def _front_end(vp, W, H, verts, fcs, code, near, mask=None, tiny=False):
     nchunk = int(min(max(1, F // 4096), 8 * nthreads))
     chunk = (F + nchunk - 1) // nchunk if F else 1
     ccount = np.zeros(nchunk, dtype=np.int64)
-    vs = np.empty((3, len(verts)), dtype=np.float64)
+    vs = np.empty((len(verts), 3), dtype=np.float64)
     _vertex_screen(verts, vp, near, vs)
     keep = np.empty(F, dtype=np.uint8)
     nb = (H + TILE - 1) // TILE if tiny else 0
@@ -1792,7 +1793,7 @@ def _front_end(vp, W, H, verts, fcs, code, near, mask=None, tiny=False):
     if U or NT:
         ccount[1:] = np.cumsum(ccount)[:-1]
         ccount[0] = 0
-        _select_fill(chunk, ccount, nthreads, keep, tri, tcode, toff, tface, tlist, W)
+        _select_fill(chunk, ccount, nthreads, keep, tri, tcode, toff, tface, tlist)
     # one piece slot per front-end triangle, two (u << 1, u << 1 | 1) when a face crosses the near plane
     sh = 1 if U and bool((keep == 2).any()) else 0
     NC = np.empty(U, dtype=np.int32)
