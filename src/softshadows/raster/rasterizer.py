@@ -1757,6 +1757,9 @@ _NO_FT = np.empty((0, 0), dtype=np.int32)
 #: rasterize_depth draws the small triangles directly (``_tiny_depth``); False: all through setup
 #: and the tile pass (the same output; kept for the tests that prove it)
 TINY_PATH = True
+#: the tiny path costs a pass over two (H,W) buffers (clear, merge: ~12 bytes per pixel) and saves the
+#: setup, binning and tile work of each small triangle (~20x a pixel's): taken from 1 per 64 pixels on
+_TINY_MIN_PER_PIXEL = 1.0 / 64.0
 _E1U = np.empty(0, dtype=np.uint8)
 
 
@@ -1764,8 +1767,10 @@ def _front_end(vp, W, H, verts, fcs, code, near, mask=None, tiny=False):
     """setup + binning: the arrays the tile kernels read. ``mask`` (H,W) uint8: bin a piece only
     to the tiles where its bounding box holds a set texel (min-blend's texel mask). ``tiny`` (the
     depth modes): the small triangles go to the tiny path instead of setup; returns (FrontEnd,
-    tiny) with ``tiny`` = (tstart, tface, tlist) for :func:`_tiny_depth` (None without)."""
+    tiny) with ``tiny`` = (tstart, tface, tlist) for :func:`_tiny_depth` (None without: fewer
+    small triangles than ``_TINY_MIN_PER_PIXEL`` per pixel)."""
     F = len(fcs)
+    want_tiny = tiny
     nthreads = numba.get_num_threads()
     # small-triangle rejection: only the faces that may cover a pixel center go on to setup
     nchunk = int(min(max(1, F // 4096), 8 * nthreads))
@@ -1778,6 +1783,12 @@ def _front_end(vp, W, H, verts, fcs, code, near, mask=None, tiny=False):
     tcode = np.empty(F if tiny else 0, dtype=np.int64)
     tcount = np.empty((nchunk, nb), dtype=np.int64)
     _select(verts, fcs, vp, near, code, vs, chunk, ccount, nthreads, keep, tcode, tcount)
+    if tiny and int(tcount.sum()) < _TINY_MIN_PER_PIXEL * W * H:
+        # too few small triangles to pay for the tiny path's per-pixel buffers: all go to setup
+        keep[keep == 3] = 1
+        ccount += tcount.sum(axis=1)
+        tiny = False
+        tcount = np.empty((nchunk, 0), dtype=np.int64)
     U = int(ccount.sum())
     tri = np.zeros(max(U, 1), dtype=np.int32)  # entry 0 exists (read, then discarded, where no hit)
     tstart = np.zeros(nb + 1, dtype=np.int64)  # band b's small triangles: tface/tlist[tstart[b]:tstart[b + 1]]
@@ -1843,7 +1854,7 @@ def _front_end(vp, W, H, verts, fcs, code, near, mask=None, tiny=False):
     bins = np.empty(int(start[-1]), dtype=np.int32)
     _bin_fill(NC, box, T, ntx, chunk, cnt, bins, nthreads, tile_any, use, sh)
     fe = FrontEnd(vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, normals, rowbits, sh, tri)
-    if not tiny:
+    if not want_tiny:
         return fe
     return fe, ((tstart, tface, tlist) if NT else None)
 
