@@ -404,6 +404,7 @@ def sweep(
         "log_x": kind in ("map-size", "triangles", "resolution"),
     }
     if ico:
+        data["scene"] = ICOSPHERE  # not the first level's name
         data["x_label"] = "triangles (icosphere over a ground quad)"
         data["reference_time_ms"] = ref_ms
         data["peer"] = peer
