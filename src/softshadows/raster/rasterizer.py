@@ -2,7 +2,8 @@
 
 Every public function runs the same front end (setup of each triangle in view space: cull, clip
 against the near plane, project, snap, edge equations; binning of the clipped pieces to ``TILE`` x
-``TILE`` pixel tiles) and then one tile kernel per mode: nearest depth (``rasterize_depth``), G-buffer
+``TILE`` pixel tiles; the depth modes draw a dense mesh's smallest triangles directly instead, the
+tiny path) and then one tile kernel per mode: nearest depth (``rasterize_depth``), G-buffer
 (``rasterize``), fragment count and fragment write (``rasterize_fragments``) and, per fragment
 program, MIN-blend (``rasterize_min_blend``). The kernels share small inlined helpers (coverage
 spans, plane depth, barycentrics) so that coverage, depth and tie rules are the same in every mode.
