@@ -712,3 +712,51 @@ def test_small_triangle_rejection_agrees_with_full_setup(ortho):
                     e = sg * (dx * ((i + 0.5) - ay) - dy * ((j + 0.5) - ax))
                     cov &= ~((e < 0) | ((e == 0) & (inc == 0)))
                 assert not cov.any(), t
+
+
+@pytest.mark.parametrize("ortho", [True, False])
+def test_tiny_path_is_bit_identical_to_the_tile_pass(ortho, monkeypatch):
+    """rasterize_depth draws the small triangles (bounding box of at most 9 pixel centers) directly
+    (``_tiny_depth``) and merges them into the tile pass's output. Both must give what the tile pass
+    alone gives, bit for bit, including the tie rule (equal depth: the smaller face wins): here
+    half of the small triangles lie on the plane of two big quads (exact depth ties), with face
+    indices before and after the quads', and the others at random depths; culled both ways."""
+    from softshadows.raster import rasterizer as R
+
+    rng = np.random.default_rng(11)
+    W, H, n = 64, 48, 2500
+    c = rng.uniform(-2, W + 2, size=(n, 1, 2))
+    xy = c + rng.uniform(-1.2, 1.2, size=(n, 3, 2))  # boxes of 0..9 pixel centers (and some more)
+    xy[: n // 5] = np.round(xy[: n // 5] * 2) / 2  # corners on pixel centers and edges
+    z = rng.uniform(0.6, 2.4, size=(n, 3))
+    z[: n // 2] = 2.0  # on the quads' plane (a power of two: the plane depth is exactly 2.0)
+    quads = np.array([[[-3, -3], [W + 3, -3], [W + 3, H + 3]], [[-3, -3], [W + 3, H + 3], [-3, H + 3]]], float)
+    xy = np.concatenate([xy[: n // 4], quads, xy[n // 4 :]])  # the quads are faces n/4 and n/4 + 1
+    z = np.concatenate([z[: n // 4], np.full((2, 3), 2.0), z[n // 4 :]])
+    xy, z = xy.reshape(-1, 2), z.reshape(-1)
+    if ortho:
+        V = np.stack([-xy[:, 0], H - xy[:, 1], z], 1)
+        view = View.frame([0, 0, 0], [0, 0, 1], [0, 1, 0], (0, W, 0, H), 0.5, 2.5, W, H, ortho=True)
+    else:
+        V = np.stack([(1 - 2 * xy[:, 0] / W) * z, (1 - 2 * xy[:, 1] / H) * z, z], 1)
+        view = View.frame([0, 0, 0], [0, 0, 1], [0, 1, 0], (-1, 1, -1, 1), 0.5, 2.5, W, H)
+    F = np.arange(len(V), dtype=np.int64).reshape(-1, 3)
+    for cull in ("none", "back"):
+        vp, W_, H_, verts, fcs, code, near = R._prepare(view, V, F, cull)
+        _fe, tiny = R._front_end(vp, W_, H_, verts, fcs, code, near, tiny=True)
+        assert tiny is not None and len(tiny[1]) > n // 4  # many faces do take the tiny path
+        monkeypatch.setattr(R, "TINY_PATH", True)
+        d1, t1 = rasterize_depth(view, V, F, cull)
+        monkeypatch.setattr(R, "TINY_PATH", False)
+        d0, t0 = rasterize_depth(view, V, F, cull)
+        np.testing.assert_array_equal(d1, d0)
+        np.testing.assert_array_equal(t1, t0)
+        if cull == "none":
+            # ties were decided: the small faces on the plane before the quads (faces < q0) win some
+            # of the quads' pixels, those after them (q0 + 2 .. n/2 + 1) none: the quads cover every
+            # pixel and a tie goes to the smaller face
+            q0 = n // 4
+            at_plane = d1 == np.float32(2.0)
+            assert (t1[at_plane] < q0).sum() > 20
+            assert np.isin(t1[at_plane], [q0, q0 + 1]).sum() > 20
+            assert not ((t1[at_plane] >= q0 + 2) & (t1[at_plane] < n // 2 + 2)).any()

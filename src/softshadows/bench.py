@@ -31,6 +31,12 @@ Atty et al. 2006) against the parameter:
   occluder mesh (trimesh midpoint subdivision, x4 per level, until >= f x the original count;
   the shape does not change, only the cost), f < 1 simplifies it by quadric decimation
   (``fast_simplification``, through trimesh; the shape changes); the x axis is the actual count.
+  With the scene ``icosphere`` the values are subdivision levels L of the triangle-throughput
+  scene (``scene.builtin.icosphere``: 20 x 4^L + 2 triangles; default 4, 6, 8: 5 k, 82 k, 1.3 M),
+  ``hard`` is always timed, ground truth too (``--samples`` spp, the reference), and so is the
+  same ``hard`` frame in OpenGL on Mesa's llvmpipe where the optional ``peer`` extra can make a
+  GL context (:mod:`softshadows.peer`; else the column says n/a and why); :func:`triangles_table`
+  prints the table of issue 15 (ms and x hard per method, llvmpipe's ms and V agreement).
 """
 
 from __future__ import annotations
@@ -53,6 +59,9 @@ DEFAULT_SWEEP_VALUES = {
     "map-size": [128, 256, 512, 1024, 2048],
     "triangles": [0.25, 0.5, 1.0, 4.0, 16.0],
 }
+#: the triangles sweep's scene of icosphere levels (``scene.builtin.icosphere``) and its default levels
+ICOSPHERE = "icosphere"
+ICOSPHERE_LEVELS = [4, 6, 8]
 
 
 def _stats(x) -> dict:
@@ -292,13 +301,28 @@ def sweep(
 
     if kind not in SWEEP_KINDS:
         raise SoftShadowsError(f"unknown sweep '{kind}'; valid: {', '.join(SWEEP_KINDS)}")
-    base = load(scene_name, light)
+    ico = isinstance(scene_name, str) and scene_name == ICOSPHERE
+    if ico and kind != "triangles":
+        raise SoftShadowsError(f"the '{ICOSPHERE}' scene is for --sweep triangles (its values are subdivision levels)")
+    if ico:
+        from .scene.builtin import icosphere
+
+        vals = list(ICOSPHERE_LEVELS if values is None else values)
+        for v in vals:
+            if float(v) != int(float(v)) or not 0 <= int(float(v)) <= 10:
+                raise SoftShadowsError(f"icosphere levels must be integers in 0..10, got {v}")
+        vals = [int(float(v)) for v in vals]
+        base = icosphere(vals[0] if vals else 0, light or "rect")
+    else:
+        base = load(scene_name, light)
+        vals = list(DEFAULT_SWEEP_VALUES[kind] if values is None else values)
     w0, h0 = _sizes([size])[0]
-    vals = list(DEFAULT_SWEEP_VALUES[kind] if values is None else values)
     if not vals:
         raise SoftShadowsError("--values is empty")
     names, skipped = resolve_methods(methods, base.light.shape)
     names = [n for n in names if n != REFERENCE]
+    if ico and "hard" not in names:
+        names.insert(0, "hard")  # the x-hard columns and the llvmpipe peer need it
     if not names:
         raise SoftShadowsError("no method to sweep (all were skipped for this light shape)")
     base_params = _resolve_all(names, params_by_method)
@@ -309,6 +333,8 @@ def sweep(
                 notes.append(f"{m} has no map-size parameter: rendered with its defaults")
     out = {m: {"time_ms": [], "time_min_ms": [], "time_max_ms": [], "metrics": []} for m in names}
     xs = []
+    ref_ms = []  # ground truth's frame time (icosphere sweep)
+    peer = {"label": "llvmpipe `hard`", "time_ms": [], "disagree": [], "cover": [], "renderer": None, "reason": None}
     for val in vals:
         sc, w, h = base, w0, h0
         params = {m: dict(p) for m, p in base_params.items()}
@@ -326,6 +352,9 @@ def sweep(
             for m in names:
                 for pn in _map_params(get_method(m)):
                     params[m][pn] = get_method(m).resolve_params({pn: int(val)})[pn]
+        elif kind == "triangles" and ico:
+            sc = base if int(val) == vals[0] else icosphere(int(val), light or "rect")
+            x = float(len(sc.flat.faces))
         elif kind == "triangles":
             sc = retriangulate_occluders(base, float(val))
             x = float(sc.flat.occluder.sum())
@@ -333,12 +362,16 @@ def sweep(
         if verbose:
             print(f"  {kind}={val}: ground truth ...", file=sys.stderr, flush=True)
         gt = render(sc, REFERENCE, w, h, seed=seed, samples=gt_samples)
+        if ico:  # ground truth is a column of the table: timed like the methods
+            ref_ms.append(_median_ms(render, sc, REFERENCE, w, h, seed, {"samples": gt_samples}, repeats)[0])
         for m in names:
             render(sc, m, w, h, seed=seed, **params[m])  # warm-up at this size (JIT, caches)
             ts, res = [], None
             for _ in range(max(1, int(repeats))):
                 res = render(sc, m, w, h, seed=seed, **params[m])
                 ts.append(res.timings["total"] * 1e3)
+            if ico and m == "hard":
+                _time_peer(peer, sc, w, h, params[m], res.visibility, repeats)
             met = compute_metrics(res.visibility, gt.visibility)
             d = out[m]
             d["time_ms"].append(float(np.median(ts)))
@@ -370,10 +403,83 @@ def sweep(
         "methods": out,
         "log_x": kind in ("map-size", "triangles", "resolution"),
     }
+    if ico:
+        data["scene"] = ICOSPHERE  # not the first level's name
+        data["x_label"] = "triangles (icosphere over a ground quad)"
+        data["reference_time_ms"] = ref_ms
+        data["peer"] = peer
     if out_png:
         sweep_plot(data, out_png, error_key=error_key)
         data["png"] = str(out_png)
     return data
+
+
+def _median_ms(render, sc, method, w, h, seed, params, repeats) -> tuple[float, object]:
+    """(median ms of ``repeats`` frames, the last result) of ``method`` after one warm-up frame."""
+    render(sc, method, w, h, seed=seed, **params)
+    ts, res = [], None
+    for _ in range(max(1, int(repeats))):
+        res = render(sc, method, w, h, seed=seed, **params)
+        ts.append(res.timings["total"] * 1e3)
+    return float(np.median(ts)), res
+
+
+def _time_peer(peer: dict, sc, w, h, hard_params: dict, v_hard, repeats) -> None:
+    """Append to ``peer`` the median ms of the ``hard`` frame in OpenGL on llvmpipe (after one
+    warm-up frame: shader compile) and the agreement of its V with ours; NaN (and ``peer["reason"]``)
+    where no GL context can be made."""
+    import time
+
+    from .peer import agreement, make_peer
+
+    gl, why = (
+        (None, peer["reason"])
+        if peer["reason"]
+        else make_peer(sc, w, h, hard_params["map_size"], hard_params["bias"], hard_params["slope_bias"])
+    )
+    if gl is None:
+        peer["reason"] = why
+        for k in ("time_ms", "disagree", "cover"):
+            peer[k].append(float("nan"))
+        return
+    peer["renderer"] = gl.renderer
+    v = gl.frame()
+    ts = []
+    for _ in range(max(1, int(repeats))):
+        t0 = time.perf_counter()
+        gl.frame()
+        ts.append((time.perf_counter() - t0) * 1e3)
+    disagree, cover, _n = agreement(v_hard, v)
+    peer["time_ms"].append(float(np.median(ts)))
+    peer["disagree"].append(disagree)
+    peer["cover"].append(cover)
+    gl.release()
+
+
+def triangles_table(data: dict) -> str:
+    """The table of issue 15 from an icosphere triangles sweep: per level the triangle count, each
+    method's median ms (x hard's), ground truth's and llvmpipe's ``hard`` frame (or n/a and why)."""
+    ms = data["methods"]
+    hard = ms["hard"]["time_ms"]
+    peer = data.get("peer") or {}
+    ref = data.get("reference_time_ms") or []
+    cols = list(ms) + ([f"{REFERENCE} ({data['gt_samples']} spp)"] if ref else []) + [peer.get("label", "llvmpipe")]
+    lines = ["| triangles | " + " | ".join(cols) + " |", "|---" * (len(cols) + 1) + "|"]
+    for i, x in enumerate(data["x"]):
+        times = [(m, d["time_ms"][i]) for m, d in ms.items()] + ([(REFERENCE, ref[i])] if ref else [])
+        cells = [f"{t:.0f}" if m == "hard" else f"{t:.0f} ({t / hard[i]:.2f}x)" for m, t in times]
+        pt = (peer.get("time_ms") or [float("nan")] * len(data["x"]))[i]
+        cells.append("n/a" if not np.isfinite(pt) else f"{pt:.0f} ({pt / hard[i]:.2f}x)")
+        lines.append(f"| {int(x):,} | " + " | ".join(cells) + " |")
+    lines.append(f"median ms of {data.get('repeats', '?')} frames at {data['size'][0]}x{data['size'][1]}, (x hard)")
+    if peer.get("reason"):
+        lines.append(f"llvmpipe: n/a: {peer['reason']}")
+    elif peer.get("time_ms"):
+        dis = max(peer["disagree"])
+        lines.append(
+            f"llvmpipe ({peer.get('renderer')}): its V differs from hard's on at most {100 * dis:.3f}% of pixels"
+        )
+    return "\n".join(lines)
 
 
 # ---- command line -----------------------------------------------------------------------------
@@ -418,6 +524,9 @@ def _cmd_bench(args) -> int:
             print(f"{x:12.4g}  {row}")
         for n in data["notes"]:
             print(n)
+        if "peer" in data:
+            print()
+            print(triangles_table(data))
         if args.json:
             write_json(args.json, jsonable(data))
             print(f"wrote {args.json}")

@@ -2,7 +2,8 @@
 
 Every public function runs the same front end (setup of each triangle in view space: cull, clip
 against the near plane, project, snap, edge equations; binning of the clipped pieces to ``TILE`` x
-``TILE`` pixel tiles) and then one tile kernel per mode: nearest depth (``rasterize_depth``), G-buffer
+``TILE`` pixel tiles; the depth modes draw a dense mesh's smallest triangles directly instead, the
+tiny path) and then one tile kernel per mode: nearest depth (``rasterize_depth``), G-buffer
 (``rasterize``), fragment count and fragment write (``rasterize_fragments``) and, per fragment
 program, MIN-blend (``rasterize_min_blend``). The kernels share small inlined helpers (coverage
 spans, plane depth, barycentrics) so that coverage, depth and tie rules are the same in every mode.
@@ -207,6 +208,50 @@ def _setup_piece(vp, slot, x0, y0, z0, x1, y1, z1, x2, y2, z2, far, box, edges, 
     return 1
 
 
+@kernel(inline=True)
+def _world_normal(ax, ay, az, bx, by, bz, cx, cy, cz):
+    """(nx, ny, nz, |n|): the world-space face normal as wound, n = (b - a) x (c - a)."""
+    e1x = bx - ax
+    e1y = by - ay
+    e1z = bz - az
+    e2x = cx - ax
+    e2y = cy - ay
+    e2z = cz - az
+    nx = e1y * e2z - e1z * e2y
+    ny = e1z * e2x - e1x * e2z
+    nz = e1x * e2y - e1y * e2x
+    return nx, ny, nz, math.sqrt(nx * nx + ny * ny + nz * nz)
+
+
+@kernel(inline=True)
+def _culled(vp, ortho, cull, nx, ny, nz, ax, ay, az):
+    """Whether ``cull`` (0 none, 1 back, 2 front) drops the face of world normal n and first corner a:
+    front-facing f < 0, back-facing f > 0; edge-on (f == 0) is dropped by either cull."""
+    if cull == 0:
+        return False
+    if ortho:
+        f = nx * vp[VP_FORWARD] + ny * vp[VP_FORWARD + 1] + nz * vp[VP_FORWARD + 2]
+    else:
+        f = nx * (ax - vp[VP_ORIGIN]) + ny * (ay - vp[VP_ORIGIN + 1]) + nz * (az - vp[VP_ORIGIN + 2])
+    return (cull == 1 and not (f < 0.0)) or (cull == 2 and not (f > 0.0))
+
+
+@kernel(inline=True)
+def _view_plane(x0, y0, z0, x1, y1, z1, x2, y2, z2):
+    """The view-space edges f1 = P1 - P0, f2 = P2 - P0, the plane normal n = f1 x f2 and |n|^2 of a
+    triangle: (f1x, f1y, f1z, f2x, f2y, f2z, nx, ny, nz, n2); its plane is n . X = n . P0."""
+    f1x = x1 - x0
+    f1y = y1 - y0
+    f1z = z1 - z0
+    f2x = x2 - x0
+    f2y = y2 - y0
+    f2z = z2 - z0
+    vnx = f1y * f2z - f1z * f2y
+    vny = f1z * f2x - f1x * f2z
+    vnz = f1x * f2y - f1y * f2x
+    return f1x, f1y, f1z, f2x, f2y, f2z, vnx, vny, vnz, vnx * vnx + vny * vny + vnz * vnz
+
+
 @kernel
 def _setup_one(u, t, verts, faces, vp, near, cull, NC, box, edges, zinfo, planes, normals, sh):
     """Face t, stored as front-end triangle u: NC[u] pieces in slots u << sh (and the next one: sh = 1
@@ -227,29 +272,11 @@ def _setup_one(u, t, verts, faces, vp, near, cull, NC, box, edges, zinfo, planes
     cx = verts[ic, 0]
     cy = verts[ic, 1]
     cz = verts[ic, 2]
-    # world-space face normal (as wound) and facing
-    e1x = bx - ax
-    e1y = by - ay
-    e1z = bz - az
-    e2x = cx - ax
-    e2y = cy - ay
-    e2z = cz - az
-    nx = e1y * e2z - e1z * e2y
-    ny = e1z * e2x - e1x * e2z
-    nz = e1x * e2y - e1y * e2x
-    nn = math.sqrt(nx * nx + ny * ny + nz * nz)
+    nx, ny, nz, nn = _world_normal(ax, ay, az, bx, by, bz, cx, cy, cz)
     if not (nn > 0.0 and math.isfinite(nn)):
         return  # degenerate or non-finite
-    if cull != 0:
-        if ortho:
-            f = nx * vp[VP_FORWARD] + ny * vp[VP_FORWARD + 1] + nz * vp[VP_FORWARD + 2]
-        else:
-            f = nx * (ax - vp[VP_ORIGIN]) + ny * (ay - vp[VP_ORIGIN + 1]) + nz * (az - vp[VP_ORIGIN + 2])
-        # front-facing: f < 0; back-facing: f > 0; edge-on (f == 0) is dropped by either cull
-        if cull == 1 and not (f < 0.0):
-            return
-        if cull == 2 and not (f > 0.0):
-            return
+    if _culled(vp, ortho, cull, nx, ny, nz, ax, ay, az):
+        return
     normals[u, 0] = nx / nn
     normals[u, 1] = ny / nn
     normals[u, 2] = nz / nn
@@ -260,16 +287,7 @@ def _setup_one(u, t, verts, faces, vp, near, cull, NC, box, edges, zinfo, planes
     if min(z0, min(z1, z2)) > far or max(z0, max(z1, z2)) < near:
         return
     # plane n.X = d and dual vectors: b1 = (X - P0).m1, b2 = (X - P0).m2 for X in the plane
-    f1x = x1 - x0
-    f1y = y1 - y0
-    f1z = z1 - z0
-    f2x = x2 - x0
-    f2y = y2 - y0
-    f2z = z2 - z0
-    vnx = f1y * f2z - f1z * f2y
-    vny = f1z * f2x - f1x * f2z
-    vnz = f1x * f2y - f1y * f2x
-    n2 = vnx * vnx + vny * vny + vnz * vnz
+    f1x, f1y, f1z, f2x, f2y, f2z, vnx, vny, vnz, n2 = _view_plane(x0, y0, z0, x1, y1, z1, x2, y2, z2)
     if not (n2 > 0.0 and math.isfinite(n2)):
         return
     m1x = (f2y * vnz - f2z * vny) / n2  # (e2 x n) / |n|^2
@@ -351,148 +369,242 @@ def _tile_row_bits(mask, T, ntx, nty, bits, tile_any):
 
 @kernel(parallel=True)
 def _vertex_screen(verts, vp, near, vs):
-    """Per vertex (structure of arrays, once per vertex instead of once per triangle corner):
-    vs[0, v] = its view depth z and, where z >= near, vs[1, v], vs[2, v] = its snapped screen
+    """Per vertex (once per vertex instead of once per triangle corner):
+    vs[v, 0] = its view depth z and, where z >= near, vs[v, 1], vs[v, 2] = its snapped screen
     coordinates (NaN elsewhere). The same operations as :func:`_setup_one` / :func:`_setup_piece`
     on a corner, so the values are theirs bit for bit."""
     for v in prange(verts.shape[0]):
         x, y, z = view_coords(vp, verts[v, 0], verts[v, 1], verts[v, 2])
-        vs[0, v] = z
+        vs[v, 0] = z
         if z >= near:
             sx, sy = view_coords_to_screen(vp, x, y, z)
-            vs[1, v] = _snap(sx)
-            vs[2, v] = _snap(sy)
+            vs[v, 1] = _snap(sx)
+            vs[v, 2] = _snap(sy)
         else:
-            vs[1, v] = np.nan
-            vs[2, v] = np.nan
+            vs[v, 1] = np.nan
+            vs[v, 2] = np.nan
 
 
 #: the small-triangle rejection tests the pixel centers of a bounding box holding at most this many
-_FEW_CENTERS = 4.0
+_FEW_CENTERS = 9.0
 
 
 @kernel(inline=True)
-def _center_in(ax, ay, bx, by, py, j):
-    """:func:`_edge_in` of the edge a->b (of a positively oriented piece) at the pixel center (j + 0.5,
-    py), from the values :func:`_store_edge` would store (canonical endpoints, sign, top-left rule)."""
+def _center_bits(ax, ay, bx, by, i0, i1, j0, nw):
+    """:func:`_edge_in` of the edge a->b (of a positively oriented piece) at the pixel centers of rows
+    i0..i1 and columns j0..j0 + nw - 1, from the values :func:`_store_edge` would store (canonical
+    endpoints, sign, top-left rule): bit (i - i0) * nw + (j - j0) set where the center passes.
+    Branch-free per center (the few centers of a small triangle: unpredictable branches)."""
     cax, cay, cdx, cdy, sg = _canonical_edge(ax, ay, bx, by)
     ddx = bx - ax
     ddy = by - ay
-    own = ddy < 0.0 or (ddy == 0.0 and ddx > 0.0)
-    v = sg * (cdx * (py - cay) - cdy * ((j + 0.5) - cax))
-    return not (v < 0.0 or (v == 0.0 and not own))
+    own = (ddy < 0.0) | ((ddy == 0.0) & (ddx > 0.0))
+    bits = 0
+    q = 0
+    for i in range(i0, i1 + 1):
+        r = cdx * ((i + 0.5) - cay)
+        for j in range(j0, j0 + nw):
+            v = sg * (r - cdy * ((j + 0.5) - cax))
+            bits |= np.int64((v > 0.0) | ((v == 0.0) & own)) << q
+            q += 1
+    return bits
+
+
+#: a small triangle's code (see :func:`_classify`): its bounding box's first row i0 << _TC_I0 | its
+#: first column j0 << _TC_J0 | its columns << _TC_NW | the bits of its covered pixel centers (row-major)
+_TC_I0, _TC_J0, _TC_NW, _TC_BITS = 40, 16, 12, 4095
 
 
 @kernel
-def _no_pieces(t, verts, faces, vp, near, cull, vs):
-    """True if face t surely gives no piece (small-triangle rejection before setup and binning): it
-    is degenerate, culled, beyond ``far`` or behind ``near``, or it lies wholly in front of the near
-    plane and its snapped screen bounding box holds no pixel center, or holds a few
-    (``_FEW_CENTERS``) and the triangle covers none of them. The same operations, in the same order, as :func:`_setup_one` and :func:`_setup_piece` (corners from :func:`_vertex_screen`),
-    so the decision is theirs bit for bit; the cases it does not decide (near-plane clipping, the
-    view-space plane, the area) are left to the full setup."""
+def _classify(t, verts, faces, vp, near, cull, vs):
+    """Small-triangle rejection of face t before setup and binning: -1 if it surely gives no piece
+    (degenerate, culled, beyond ``far`` or behind ``near``, or wholly in front of the near plane with
+    a snapped screen bounding box that holds no pixel center, or holds a few (``_FEW_CENTERS``) and
+    the triangle covers none of them); a code > 0 (see ``_TC_*``) if it is such a small triangle
+    and covers some of its few centers (the bits of the covered ones; the degenerate and cull tests
+    are then left to the caller); 0 otherwise (the full setup decides). The same operations, in the
+    same order, as :func:`_setup_one` and :func:`_setup_piece` (corners from :func:`_vertex_screen`),
+    so the decisions are theirs bit for bit."""
     ortho = vp[VP_ORTHO] != 0.0
     far = vp[VP_FAR]
     ia = faces[t, 0]
     ib = faces[t, 1]
     ic = faces[t, 2]
-    z0 = vs[0, ia]
-    z1 = vs[0, ib]
-    z2 = vs[0, ic]
+    z0 = vs[ia, 0]
+    z1 = vs[ib, 0]
+    z2 = vs[ic, 0]
     if min(z0, min(z1, z2)) > far or max(z0, max(z1, z2)) < near:
-        return True
+        return -1
     if z0 >= near and z1 >= near and z2 >= near:
         W = vp[VP_W]
         H = vp[VP_H]
-        sx0 = vs[1, ia]
-        sx1 = vs[1, ib]
-        sx2 = vs[1, ic]
-        sy0 = vs[2, ia]
-        sy1 = vs[2, ib]
-        sy2 = vs[2, ic]
+        sx0 = vs[ia, 1]
+        sx1 = vs[ib, 1]
+        sx2 = vs[ic, 1]
+        sy0 = vs[ia, 2]
+        sy1 = vs[ib, 2]
+        sy2 = vs[ic, 2]
         fj0 = max(math.ceil(min(sx0, min(sx1, sx2)) - 0.5), 0.0)
         fj1 = min(math.floor(max(sx0, max(sx1, sx2)) - 0.5), W - 1.0)
         fi0 = max(math.ceil(min(sy0, min(sy1, sy2)) - 0.5), 0.0)
         fi1 = min(math.floor(max(sy0, max(sy1, sy2)) - 0.5), H - 1.0)
         # NaN coordinates fail both comparisons: left to the full setup (which rejects them)
         if fj0 > fj1 or fi0 > fi1:
-            return True
+            return -1
         if (fj1 - fj0 + 1.0) * (fi1 - fi0 + 1.0) <= _FEW_CENTERS:
             # a small triangle: test its few candidate pixel centers with the tile kernels' own
             # per-pixel coverage test (_edge_in on the edges _store_edge would store)
             area = (sx1 - sx0) * (sy2 - sy0) - (sy1 - sy0) * (sx2 - sx0)
             if not (area != 0.0 and math.isfinite(area)):
-                return True
+                return -1
             if area < 0.0:
                 sx1, sx2 = sx2, sx1
                 sy1, sy2 = sy2, sy1
-            for i in range(int(fi0), int(fi1) + 1):
-                py = i + 0.5
-                for j in range(int(fj0), int(fj1) + 1):
-                    if (
-                        _center_in(sx0, sy0, sx1, sy1, py, j)
-                        and _center_in(sx1, sy1, sx2, sy2, py, j)
-                        and _center_in(sx2, sy2, sx0, sy0, py, j)
-                    ):
-                        return False
-            return True
+            i0 = int(fi0)
+            j0 = int(fj0)
+            nw = int(fj1) - j0 + 1
+            i1 = int(fi1)
+            bits = (
+                _center_bits(sx0, sy0, sx1, sy1, i0, i1, j0, nw)
+                & _center_bits(sx1, sy1, sx2, sy2, i0, i1, j0, nw)
+                & _center_bits(sx2, sy2, sx0, sy0, i0, i1, j0, nw)
+            )
+            if bits == 0:
+                return -1
+            return (i0 << _TC_I0) | (j0 << _TC_J0) | (nw << _TC_NW) | bits
     if cull == 0:
-        return False  # the degenerate test is left to the full setup
+        return 0  # the degenerate test is left to the full setup
     ax = verts[ia, 0]
     ay = verts[ia, 1]
     az = verts[ia, 2]
-    e1x = verts[ib, 0] - ax
-    e1y = verts[ib, 1] - ay
-    e1z = verts[ib, 2] - az
-    e2x = verts[ic, 0] - ax
-    e2y = verts[ic, 1] - ay
-    e2z = verts[ic, 2] - az
-    nx = e1y * e2z - e1z * e2y
-    ny = e1z * e2x - e1x * e2z
-    nz = e1x * e2y - e1y * e2x
-    if ortho:
-        f = nx * vp[VP_FORWARD] + ny * vp[VP_FORWARD + 1] + nz * vp[VP_FORWARD + 2]
-    else:
-        f = nx * (ax - vp[VP_ORIGIN]) + ny * (ay - vp[VP_ORIGIN + 1]) + nz * (az - vp[VP_ORIGIN + 2])
-    return (cull == 1 and not (f < 0.0)) or (cull == 2 and not (f > 0.0))
+    nx, ny, nz, _nn = _world_normal(
+        ax, ay, az, verts[ib, 0], verts[ib, 1], verts[ib, 2], verts[ic, 0], verts[ic, 1], verts[ic, 2]
+    )
+    return -1 if _culled(vp, ortho, cull, nx, ny, nz, ax, ay, az) else 0
 
 
 @kernel(parallel=True)
-def _select(verts, faces, vp, near, cull, vs, chunk, ccount, nslot, keep):
-    """Small-triangle rejection, first pass: keep[t] = 1 for the faces that may give pieces (not
-    :func:`_no_pieces`; 2 if they cross the near plane), ccount[c] = how many in chunk c of faces (chunks dealt round-robin to
-    ``nslot`` slots)."""
+def _select(verts, faces, vp, near, cull, vs, chunk, ccount, nslot, keep, tcode, tcount):
+    """Small-triangle rejection, first pass (:func:`_classify`): keep[t] = 1 for the faces that go on to
+    setup (2 if they cross the near plane), 3 for the small triangles drawn directly (tiny path:
+    only where ``tcount`` has columns, their code in tcode[t]), 0 for the others; ccount[c] = how
+    many faces of chunk c go to setup, tcount[c, b] = how many small ones of chunk c have their
+    first row in band b of ``TILE`` rows (chunks of faces dealt round-robin to ``nslot`` slots)."""
     nchunk = ccount.shape[0]
     F = faces.shape[0]
+    tiny = tcount.shape[1] > 0
     for slot in prange(nslot):
         for c in range(slot, nchunk, nslot):
             n = 0
+            if tiny:
+                for b in range(tcount.shape[1]):
+                    tcount[c, b] = 0
             for t in range(c * chunk, min(F, (c + 1) * chunk)):
+                code = _classify(t, verts, faces, vp, near, cull, vs)
                 k = 0
-                if not _no_pieces(t, verts, faces, vp, near, cull, vs):
+                if code > 0 and tiny:
+                    k = 3
+                    tcode[t] = code
+                    tcount[c, (code >> _TC_I0) // TILE] += 1
+                elif code >= 0:
                     # 2: the face crosses the near plane (it may be clipped into two pieces)
                     k = (
                         1
-                        if (vs[0, faces[t, 0]] >= near and vs[0, faces[t, 1]] >= near and vs[0, faces[t, 2]] >= near)
+                        if (vs[faces[t, 0], 0] >= near and vs[faces[t, 1], 0] >= near and vs[faces[t, 2], 0] >= near)
                         else 2
                     )
+                    n += 1
                 keep[t] = k
-                n += k != 0
             ccount[c] = n
 
 
 @kernel(parallel=True)
-def _select_fill(chunk, coff, nslot, keep, tri):
-    """Second pass: the kept faces in increasing index into ``tri`` (chunk c from coff[c])."""
+def _select_fill(chunk, coff, nslot, keep, tri, tcode, toff, tface, tlist):
+    """Second pass: the faces kept for setup in increasing index into ``tri`` (chunk c from coff[c]);
+    the small ones (keep 3) into the lists of their bands, ``tface`` (face) and ``tlist`` (code),
+    chunk c of band b from toff[c, b]."""
     nchunk = coff.shape[0]
     F = keep.shape[0]
     for slot in prange(nslot):
         for c in range(slot, nchunk, nslot):
             w = coff[c]
             for t in range(c * chunk, min(F, (c + 1) * chunk)):
-                if keep[t]:
+                k = keep[t]
+                if k == 3:
+                    code = tcode[t]
+                    b = (code >> _TC_I0) // TILE
+                    o = toff[c, b]
+                    tface[o] = t
+                    tlist[o] = code
+                    toff[c, b] = o + 1
+                elif k != 0:
                     tri[w] = t
                     w += 1
+
+
+@kernel(parallel=True)
+def _tiny_depth(verts, faces, vp, near, cull, bstart, tface, tlist, phase, nslot, zt, ft):
+    """The tiny path of the depth modes: the nearest depth ``zt`` (float64) and face ``ft`` of every
+    pixel over the small triangles listed per band of ``TILE`` rows (``bstart``, ``tface``,
+    ``tlist``; see :func:`_select`), drawn directly at their few covered pixel centers: the
+    degenerate and cull tests, the view-space plane, the depth clamp and the far test of
+    :func:`_setup_one` / :func:`_depth_pass`, with the same inline helpers, so every fragment's depth
+    is the tile kernels' bit for bit. The nearest wins, equal depths go to the smaller face: the
+    tile pass's rule, so merging zt/ft into its output in any order gives the output of one pass
+    over all faces. A small triangle's rows lie in its band and the next one: ``phase`` 0 clears
+    and draws the even bands (bands b and b + 1 cleared by the slot of band b), phase 1 draws the
+    odd ones; no two slots write the same row."""
+    W, H, ortho, far, wl, wt, wsx, wsy = _view_window(vp)
+    nb = bstart.shape[0] - 1
+    for slot in prange(nslot):
+        for b in range(phase + 2 * slot, nb, 2 * nslot):
+            if phase == 0:
+                for i in range(b * TILE, min((b + 2) * TILE, H)):
+                    for j in range(W):
+                        zt[i, j] = np.inf
+                        ft[i, j] = -1
+            for e in range(bstart[b], bstart[b + 1]):
+                t = tface[e]
+                code = tlist[e]
+                ia = faces[t, 0]
+                ib = faces[t, 1]
+                ic = faces[t, 2]
+                ax = verts[ia, 0]
+                ay = verts[ia, 1]
+                az = verts[ia, 2]
+                bx = verts[ib, 0]
+                by = verts[ib, 1]
+                bz = verts[ib, 2]
+                cx = verts[ic, 0]
+                cy = verts[ic, 1]
+                cz = verts[ic, 2]
+                nx, ny, nz, nn = _world_normal(ax, ay, az, bx, by, bz, cx, cy, cz)
+                if not (nn > 0.0 and math.isfinite(nn)):
+                    continue
+                if _culled(vp, ortho, cull, nx, ny, nz, ax, ay, az):
+                    continue
+                x0, y0, z0 = view_coords(vp, ax, ay, az)
+                x1, y1, z1 = view_coords(vp, bx, by, bz)
+                x2, y2, z2 = view_coords(vp, cx, cy, cz)
+                _f1x, _f1y, _f1z, _f2x, _f2y, _f2z, vnx, vny, vnz, n2 = _view_plane(x0, y0, z0, x1, y1, z1, x2, y2, z2)
+                if not (n2 > 0.0 and math.isfinite(n2)):
+                    continue
+                pl = (vnx, vny, vnz, vnx * x0 + vny * y0 + vnz * z0)
+                zlo, zhi = _depth_range(min(z0, min(z1, z2)), max(z0, max(z1, z2)), ortho, near)
+                i0 = code >> _TC_I0
+                j0 = (code >> _TC_J0) & 0xFFFFFF
+                nw = (code >> _TC_NW) & 15
+                bits = code & _TC_BITS
+                for q in range(int(_FEW_CENTERS)):
+                    if (bits >> q) & 1:
+                        i = i0 + q // nw
+                        j = j0 + q % nw
+                        zrow = _row_depth(ortho, pl, wt - (i + 0.5) * wsy)
+                        z = _clamp_depth(_frag_depth(ortho, pl, zrow, wl + (j + 0.5) * wsx), zlo, zhi)
+                        zc = zt[i, j]
+                        if not (z > far) and (z < zc or (z == zc and t < ft[i, j])):
+                            zt[i, j] = z
+                            ft[i, j] = t
 
 
 @kernel(parallel=True)
@@ -617,8 +729,12 @@ def _depth_bounds(zinfo, ct, ortho, near):
     """(zlo, zhi): sanity bounds for the plane depth of piece ``ct``'s pixels. The snapped coverage
     may extrapolate the plane a fraction of a pixel beyond the true triangle, which near the plane's
     horizon or for edge-on triangles can give huge, negative or NaN depths. zlo <= zhi."""
-    zmin = zinfo[ct, Z_MIN]
-    zmax = zinfo[ct, Z_MAX]
+    return _depth_range(zinfo[ct, Z_MIN], zinfo[ct, Z_MAX], ortho, near)
+
+
+@kernel(inline=True)
+def _depth_range(zmin, zmax, ortho, near):
+    """:func:`_depth_bounds` of a piece whose corners' view depths range over [zmin, zmax]."""
     if ortho:
         zlo = zmin - (zmax - zmin) - 1e-9 * (abs(zmin) + abs(zmax))
         zhi = zmax + (zmax - zmin) + 1e-9 * (abs(zmin) + abs(zmax))
@@ -1233,12 +1349,15 @@ def _blend_row(prog, pparams, zb, ib, rn, span, cols, yw, zrow, pl, q, ca, zr, o
 # A slot runs on one thread: its scratch is taken once per slot.
 # ----------------------------------------------------------------------------------------------
 @kernel(parallel=True)
-def _tiles_depth(fe, sc, depth_out, tri_out):
-    """rasterize_depth: the nearest depth (+inf: none) and triangle (-1: none) of every pixel."""
+def _tiles_depth(fe, sc, depth_out, tri_out, zt, ft):
+    """rasterize_depth: the nearest depth (+inf: none) and triangle (-1: none) of every pixel; with a
+    tiny path (``zt`` (H,W) not empty: :func:`_tiny_depth`), merged with its nearest depths ``zt`` and
+    faces ``ft`` by the same rule (nearer wins, then the smaller face)."""
     vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, _normals, _rowbits, sh, tri = fe
     zbuf, tbuf, spbuf, _ibuf, _lbuf, nslot = sc
     vw = _view_window(vp)
     W, H = vw[0], vw[1]
+    tiny = zt.shape[0] > 0
     for slot in prange(nslot):
         tid = numba.get_thread_id()
         zb = zbuf[tid]
@@ -1253,6 +1372,19 @@ def _tiles_depth(fe, sc, depth_out, tri_out):
                     # row views: their indices are known non-negative (no wrap-around selects)
                     drow = depth_out[i, x0 : x1 + 1]
                     trow = tri_out[i, x0 : x1 + 1]
+                    if tiny:
+                        zrow = zt[i, x0 : x1 + 1]
+                        frow = ft[i, x0 : x1 + 1]
+                        for k in range(drow.shape[0]):
+                            z = zb[i - y0, k]
+                            tv = tb[i - y0, k]
+                            f = tri[max(tv, 0)] if tv >= 0 else -1
+                            zq = zrow[k]
+                            fq = frow[k]
+                            take = (zq < z) | ((zq == z) & (fq < f))
+                            drow[k] = zq if take else z
+                            trow[k] = fq if take else f
+                        continue
                     for k in range(drow.shape[0]):
                         drow[k] = zb[i - y0, k]
                         tv = tb[i - y0, k]
@@ -1621,30 +1753,61 @@ class _Blend(NamedTuple):
 
 
 _E2I64 = np.empty((0, 0), dtype=np.int64)
+_NO_ZT = np.empty((0, 0), dtype=np.float64)
+_NO_FT = np.empty((0, 0), dtype=np.int32)
+#: rasterize_depth draws the small triangles directly (``_tiny_depth``); False: all through setup
+#: and the tile pass (the same output; kept for the tests that prove it)
+TINY_PATH = True
+#: the tiny path costs a pass over two (H,W) buffers (clear, merge: ~12 bytes per pixel) and saves the
+#: setup, binning and tile work of each small triangle (~20x a pixel's): taken from 1 per 64 pixels on
+_TINY_MIN_PER_PIXEL = 1.0 / 64.0
 _E1U = np.empty(0, dtype=np.uint8)
 
 
-def _front_end(vp, W, H, verts, fcs, code, near, mask=None) -> FrontEnd:
+def _front_end(vp, W, H, verts, fcs, code, near, mask=None, tiny=False):
     """setup + binning: the arrays the tile kernels read. ``mask`` (H,W) uint8: bin a piece only
-    to the tiles where its bounding box holds a set texel (min-blend's texel mask)."""
+    to the tiles where its bounding box holds a set texel (min-blend's texel mask). ``tiny`` (the
+    depth modes): the small triangles go to the tiny path instead of setup; returns (FrontEnd,
+    tiny) with ``tiny`` = (tstart, tface, tlist) for :func:`_tiny_depth` (None without: fewer
+    small triangles than ``_TINY_MIN_PER_PIXEL`` per pixel)."""
     F = len(fcs)
+    want_tiny = tiny
     nthreads = numba.get_num_threads()
     # small-triangle rejection: only the faces that may cover a pixel center go on to setup
     nchunk = int(min(max(1, F // 4096), 8 * nthreads))
     chunk = (F + nchunk - 1) // nchunk if F else 1
     ccount = np.zeros(nchunk, dtype=np.int64)
-    vs = np.empty((3, len(verts)), dtype=np.float64)
+    vs = np.empty((len(verts), 3), dtype=np.float64)
     _vertex_screen(verts, vp, near, vs)
     keep = np.empty(F, dtype=np.uint8)
-    _select(verts, fcs, vp, near, code, vs, chunk, ccount, nthreads, keep)
+    nb = (H + TILE - 1) // TILE if tiny else 0
+    tcode = np.empty(F if tiny else 0, dtype=np.int64)
+    tcount = np.empty((nchunk, nb), dtype=np.int64)
+    _select(verts, fcs, vp, near, code, vs, chunk, ccount, nthreads, keep, tcode, tcount)
+    if tiny and int(tcount.sum()) < _TINY_MIN_PER_PIXEL * W * H:
+        # too few small triangles to pay for the tiny path's per-pixel buffers: all go to setup
+        keep[keep == 3] = 1
+        ccount += tcount.sum(axis=1)
+        tiny = False
+        tcount = np.empty((nchunk, 0), dtype=np.int64)
     U = int(ccount.sum())
     tri = np.zeros(max(U, 1), dtype=np.int32)  # entry 0 exists (read, then discarded, where no hit)
-    if U:
+    tstart = np.zeros(nb + 1, dtype=np.int64)  # band b's small triangles: tface/tlist[tstart[b]:tstart[b + 1]]
+    if tiny:
+        # prefix sums in (band, chunk) order: offsets of chunk c of band b
+        np.cumsum(tcount.sum(axis=0), out=tstart[1:])
+        toff = (tstart[:-1][None, :] + np.cumsum(tcount, axis=0) - tcount).astype(np.int64)
+    else:
+        toff = tcount
+    NT = int(tstart[-1])
+    tface = np.empty(NT, dtype=np.int32)
+    tlist = np.empty(NT, dtype=np.int64)
+    if U or NT:
         ccount[1:] = np.cumsum(ccount)[:-1]
         ccount[0] = 0
-        _select_fill(chunk, ccount, nthreads, keep, tri)
+        _select_fill(chunk, ccount, nthreads, keep, tri, tcode, toff, tface, tlist)
     # one piece slot per front-end triangle, two (u << 1, u << 1 | 1) when a face crosses the near plane
-    sh = 1 if U and int(keep.max()) == 2 else 0
+    sh = 1 if U and bool((keep == 2).any()) else 0
     NC = np.empty(U, dtype=np.int32)
     box = np.empty((U << sh, 4), dtype=np.int32)
     edges = np.empty((U << sh, 3, E_WIDTH), dtype=np.float64)
@@ -1691,7 +1854,10 @@ def _front_end(vp, W, H, verts, fcs, code, near, mask=None) -> FrontEnd:
     _bin_offsets(cnt, start)
     bins = np.empty(int(start[-1]), dtype=np.int32)
     _bin_fill(NC, box, T, ntx, chunk, cnt, bins, nthreads, tile_any, use, sh)
-    return FrontEnd(vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, normals, rowbits, sh, tri)
+    fe = FrontEnd(vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, normals, rowbits, sh, tri)
+    if not want_tiny:
+        return fe
+    return fe, ((tstart, tface, tlist) if NT else None)
 
 
 def _scratch(T) -> _Scratch:
@@ -1731,10 +1897,22 @@ def rasterize_depth(view, vertices, faces, cull: str = "none") -> tuple[np.ndarr
     """Depth-only fast path (shadow maps): (depth (H,W) float32, +inf where none; tri_id (H,W) int32,
     -1 where none). Same coverage, depth and tie rule as :func:`rasterize`."""
     vp, W, H, verts, fcs, code, near = _prepare(view, vertices, faces, cull)
-    fe = _front_end(vp, W, H, verts, fcs, code, near)
+    if TINY_PATH:
+        fe, tiny = _front_end(vp, W, H, verts, fcs, code, near, tiny=True)
+    else:
+        fe, tiny = _front_end(vp, W, H, verts, fcs, code, near), None
     depth = np.empty((H, W), dtype=np.float32)
     tri = np.empty((H, W), dtype=np.int32)
-    _tiles_depth(fe, _scratch(fe.tile), depth, tri)
+    zt, ft = _NO_ZT, _NO_FT
+    if tiny is not None:
+        # the small triangles, drawn directly (no setup, no binning), merged by the tile pass
+        tstart, tface, tlist = tiny
+        zt = np.empty((H, W), dtype=np.float64)
+        ft = np.empty((H, W), dtype=np.int32)
+        nthreads = numba.get_num_threads()
+        for phase in (0, 1):
+            _tiny_depth(verts, fcs, vp, near, code, tstart, tface, tlist, phase, nthreads, zt, ft)
+    _tiles_depth(fe, _scratch(fe.tile), depth, tri, zt, ft)
     return depth, tri
 
 

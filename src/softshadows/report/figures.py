@@ -162,6 +162,12 @@ def sweep_plot(data: dict, path=None, error_key: str = "ssm_error") -> bytes:
         if d.get("time_min_ms") is not None:
             a1.fill_between(x, d["time_min_ms"], d["time_max_ms"], alpha=0.15, color=ln.get_color())
         a2.plot(x, np.array(d[error_key], float), "o-", label=m, color=ln.get_color())
+    ref = data.get("reference_time_ms")
+    if ref:
+        a1.plot(x, ref, "s:", color="0.4", label=f"ground truth ({data['gt_samples']} spp)")
+    peer = data.get("peer") or {}
+    if np.isfinite(np.array(peer.get("time_ms") or [np.nan], float)).any():
+        a1.plot(x, peer["time_ms"], "k--", label=peer.get("label", "peer"))
     a1.set_xlabel(data["x_label"])
     a2.set_xlabel(data["x_label"])
     a1.set_ylabel("frame time (ms, median; band: min-max)")

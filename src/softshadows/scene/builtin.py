@@ -340,6 +340,25 @@ def bunny(light: str = "rect", object_role: str = "occluder") -> Scene:
     return _finish("bunny", [_ground(), b], lt, cam, light)
 
 
+def icosphere(level: int, light: str = "rect") -> Scene:
+    """The triangle-throughput scene (``softshadows bench icosphere --sweep triangles``): an icosphere
+    of radius 0.6 centred at y = 1 with 20 * 4^level triangles (trimesh's subdivision; level 8:
+    1.3 M) over a ground quad of 2 triangles, a 0.8 x 0.8 rect light at (0.3, 3, 0.2) facing down
+    (sphere light: the disk of the same area), camera framing the ball and the shadow."""
+    import trimesh  # imported lazily: slow to import, only needed here
+
+    level = int(level)
+    if not 0 <= level <= 10:
+        raise SceneError(f"icosphere level must be in 0..10, got {level}")
+    sph = trimesh.creation.icosphere(subdivisions=level, radius=0.6)
+    verts = np.asarray(sph.vertices, dtype=np.float64) + [0.0, 1.0, 0.0]
+    ground = Mesh([[-4, 0, -4], [4, 0, -4], [4, 0, 4], [-4, 0, 4]], [[0, 2, 1], [0, 3, 2]], role="receiver")
+    ball = Mesh(verts, np.asarray(sph.faces, dtype=np.int64), albedo=(0.8, 0.3, 0.2), role="occluder")
+    rect = RectLight(center=(0.3, 3.0, 0.2), u=(0.8, 0, 0), v=(0, 0, 0.8))
+    cam = frame_camera(np.vstack([verts, [[-2.5, 0, -2.5], [2.5, 0, 2.5]]]))
+    return _finish(f"icosphere-{level}", [ground, ball], rect, cam, light)
+
+
 BUILTIN: dict = {
     "square": ("analytic case: square occluder under a parallel square light (closed-form V)", square),
     "spheres": ("three intersecting spheres with overlapping shadows", spheres),
