@@ -49,7 +49,7 @@ def reference_visibility(pts, nrm, tri, pix, tris, seed, n_side, shape, center, 
         c = 0
         for i in range(n_side):
             for j in range(n_side):
-                ja, jb = gtm.jitter_pair(seed, pix[k], i * n_side + j)
+                ja, jb = gtm.jitter_pair(gtm.point_key(seed, pix[k]), i * n_side + j)
                 a = (i + ja) / n_side
                 b = (j + jb) / n_side
                 if shape == 1:
