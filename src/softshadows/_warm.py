@@ -2,7 +2,8 @@
 
 Numba holds the GIL while it compiles, so a cold ``compare`` compiles its ~100 kernels one after
 the other on one core. :func:`start_warmup` starts a helper process (``python -m softshadows._warm``)
-that renders the same methods on a small frame in the *reverse* order of the main process, which
+that compiles the rasterizer's tile kernels the main process needs only after the eye G-buffer
+(:func:`warm_raster_modes`), then renders the same methods in the *reverse* order of the main process, which
 writes their kernels into the on-disk cache (the package's normal ``__pycache__``/user cache or
 ``NUMBA_CACHE_DIR``: the helper inherits the environment and so the same locator); when the main
 process reaches a method, Numba loads what the helper already compiled instead of compiling it

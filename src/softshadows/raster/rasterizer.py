@@ -13,8 +13,6 @@ its measured notes are in ``docs/rasterizer.md``.
 from __future__ import annotations
 
 import math
-import threading
-from concurrent.futures import ThreadPoolExecutor
 from typing import NamedTuple
 
 import numba
@@ -1229,47 +1227,20 @@ def _blend_row(prog, pparams, zb, ib, rn, span, cols, yw, zrow, pl, q, ca, zr, o
 
 
 # ----------------------------------------------------------------------------------------------
-# the tile kernels, one per mode. Load balance (see docs/rasterizer.md): the work sits where the
-# geometry is, so each mode runs one slot per thread and slot p takes tiles (or tile rows) p, p + n,
-# p + 2n, ... A slot runs on one thread and uses its own scratch (index p). Each slot is a
-# non-parallel kernel that releases the GIL, run on Python threads by _run_slots (no parfor: Numba's
-# parallel kernels cost 1.7x the compile time of the same body; docs/results/cold-start.md).
+# the tile kernels, one per mode. Load balance (see docs/rasterizer.md): Numba splits a prange into
+# equal contiguous parts, one per thread, while the work sits where the geometry is; so each kernel
+# runs a prange over one slot per thread and slot p takes tiles (or tile rows) p, p + n, p + 2n, ...
+# A slot runs on one thread: its scratch is taken once per slot.
 # ----------------------------------------------------------------------------------------------
-_POOL = None  # the threads of _run_slots, made on first use
-_POOL_LOCK = threading.Lock()
-
-
-def _run_slots(slot_kernel, nslot, args) -> None:
-    """``slot_kernel(*args, p)`` for every slot p < nslot: slot 0 on the calling thread, the others
-    on a pool of threads (the slot kernels are ``nogil``, so they run in parallel)."""
-    global _POOL
-    if nslot <= 1:
-        slot_kernel(*args, 0)
-        return
-    if _POOL is None:
-        with _POOL_LOCK:
-            if _POOL is None:
-                _POOL = ThreadPoolExecutor(max_workers=max(numba.config.NUMBA_NUM_THREADS - 1, 1))
-    futures = [_POOL.submit(slot_kernel, *args, p) for p in range(1, nslot)]
-    slot_kernel(*args, 0)
-    for f in futures:
-        f.result()
-
-
+@kernel(parallel=True)
 def _tiles_depth(fe, sc, depth_out, tri_out):
-    """rasterize_depth's tile kernel (see _tiles_depth_slot)."""
-    _run_slots(_tiles_depth_slot, sc.nslot, (fe, sc, depth_out, tri_out))
-
-
-@kernel(nogil=True)
-def _tiles_depth_slot(fe, sc, depth_out, tri_out, s0):
     """rasterize_depth: the nearest depth (+inf: none) and triangle (-1: none) of every pixel."""
     vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, _normals, _rowbits, sh, tri = fe
     zbuf, tbuf, spbuf, _ibuf, _lbuf, nslot = sc
     vw = _view_window(vp)
     W, H = vw[0], vw[1]
-    for slot in range(s0, s0 + 1):  # the one slot s0 (a thread of _run_slots)
-        tid = slot  # its scratch
+    for slot in prange(nslot):
+        tid = numba.get_thread_id()
         zb = zbuf[tid]
         tb = tbuf[tid]
         SP = spbuf[tid]
@@ -1288,21 +1259,16 @@ def _tiles_depth_slot(fe, sc, depth_out, tri_out, s0):
                         trow[k] = tri[max(tv, 0)] if tv >= 0 else -1  # the face (tb: front-end triangle)
 
 
+@kernel(parallel=True)
 def _tiles_gbuffer(fe, sc, out):
-    """rasterize's tile kernel (see _tiles_gbuffer_slot)."""
-    _run_slots(_tiles_gbuffer_slot, sc.nslot, (fe, sc, out))
-
-
-@kernel(nogil=True)
-def _tiles_gbuffer_slot(fe, sc, out, s0):
     """rasterize: the nearest surface's G-buffer ``out`` = (depth, tri, pos, nrm, bary, mask)."""
     vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, normals, _rowbits, sh, tri = fe
     zbuf, tbuf, spbuf, _ibuf, _lbuf, nslot = sc
     vw = _view_window(vp)
     W, H, ortho, _far, wl, wt, wsx, wsy = vw
     frame = _view_frame(vp)
-    for slot in range(s0, s0 + 1):  # the one slot s0 (a thread of _run_slots)
-        tid = slot  # its scratch
+    for slot in prange(nslot):
+        tid = numba.get_thread_id()
         zb = zbuf[tid]
         tb = tbuf[tid]
         SP = spbuf[tid]
@@ -1320,20 +1286,15 @@ def _tiles_gbuffer_slot(fe, sc, out, s0):
                         _gbuffer_row(out, i, i - y0, cols, x1 - x0 + 1, yw, zb, tb, frame, planes, normals, tri, False)
 
 
+@kernel(parallel=True)
 def _tiles_count(fe, sc, fcount):
-    """rasterize_fragments' counting tile kernel (see _tiles_count_slot)."""
-    _run_slots(_tiles_count_slot, sc.nslot, (fe, sc, fcount))
-
-
-@kernel(nogil=True)
-def _tiles_count_slot(fe, sc, fcount, s0):
     """rasterize_fragments, first pass: fcount[tile] = the number of fragments of the tile."""
     vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, _normals, _rowbits, sh, _tri = fe
     _zbuf, _tbuf, spbuf, _ibuf, _lbuf, nslot = sc
     vw = _view_window(vp)
     W, H, ortho, far, wl, wt, wsx, wsy = vw
-    for slot in range(s0, s0 + 1):  # the one slot s0 (a thread of _run_slots)
-        SP = spbuf[slot]
+    for slot in prange(nslot):
+        SP = spbuf[numba.get_thread_id()]
         for ty in range(slot, nty, nslot):
             for tx in range(ntx):
                 tile = ty * ntx + tx
@@ -1367,20 +1328,15 @@ def _tiles_count_slot(fe, sc, fcount, s0):
                 fcount[tile] = nfrag
 
 
+@kernel(parallel=True)
 def _tiles_fragments(fe, sc, foff, fpix, ftri, fbary, fdepth):
-    """rasterize_fragments' writing tile kernel (see _tiles_fragments_slot)."""
-    _run_slots(_tiles_fragments_slot, sc.nslot, (fe, sc, foff, fpix, ftri, fbary, fdepth))
-
-
-@kernel(nogil=True)
-def _tiles_fragments_slot(fe, sc, foff, fpix, ftri, fbary, fdepth, s0):
     """rasterize_fragments, second pass: write the fragments of each tile from foff[tile] on, by
     triangle, piece and pixel (row-major)."""
     vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, _normals, _rowbits, sh, tri = fe
     _zbuf, _tbuf, spbuf, _ibuf, _lbuf, nslot = sc
     W, H, ortho, far, wl, wt, wsx, wsy = _view_window(vp)
-    for slot in range(s0, s0 + 1):  # the one slot s0 (a thread of _run_slots)
-        SP = spbuf[slot]
+    for slot in prange(nslot):
+        SP = spbuf[numba.get_thread_id()]
         for ty in range(slot, nty, nslot):
             for tx in range(ntx):
                 tile = ty * ntx + tx
@@ -1425,8 +1381,8 @@ def _make_min_blend_kernel(prog):
     """rasterize_min_blend's tile kernel for fragment program ``prog`` (a constant of the closure:
     each kernel compiles only its own program, which inlines into the vector loops)."""
 
-    @kernel(nogil=True)
-    def tiles_slot(fe, sc, mb, s0):
+    @kernel(parallel=True)
+    def tiles(fe, sc, mb):
         """Run the program per fragment and MIN-blend its value into ``mb.out``; ``mb.stats[tile]`` +=
         (fragments and kept fragments of the triangles below / from ``mb.split``, pieces culled by
         depth, by value). With ``mb.cull_discarded``, the pieces of a tile whose every fragment lies at
@@ -1441,8 +1397,8 @@ def _make_min_blend_kernel(prog):
         W, H, ortho, far, wl, wt, wsx, wsy = vw
         use_mask = rowbits.size > 0
         ntiles = ntx * nty
-        for slot in range(s0, s0 + 1):  # the one slot s0 (a thread of _run_slots)
-            tid = slot  # its scratch
+        for slot in prange(nslot):
+            tid = numba.get_thread_id()
             zb = zbuf[tid]
             ib = ibuf[tid]
             SP = spbuf[tid]
@@ -1551,11 +1507,6 @@ def _make_min_blend_kernel(prog):
                     for k in range(brow.shape[0]):
                         brow[k] = zb[i - y0, k]
 
-    def tiles(fe, sc, mb):
-        """The tile pass: one slot per thread, each run by ``tiles_slot``."""
-        _run_slots(tiles_slot, sc.nslot, (fe, sc, mb))
-
-    tiles.slot_kernel = tiles_slot
     return tiles
 
 
@@ -1647,14 +1598,14 @@ class FrontEnd(NamedTuple):
 
 
 class _Scratch(NamedTuple):
-    """Per-thread scratch of the tile kernels (first index: the slot, see _run_slots)."""
+    """Per-thread scratch of the tile kernels (first index: numba.get_thread_id())."""
 
     depth: np.ndarray  #: (n, T, T) float64: the tile's nearest depths / min-blend values
     tri: np.ndarray  #: (n, T, T) int32: the tile's nearest triangles
     spans: np.ndarray  #: (n, 5, T) int64: per tile row, the rows _SP_* (spans, rows to visit, texels)
     image: np.ndarray  #: (n, T, T) float32: the tile's min-blend input image
     lanes: np.ndarray  #: (n, T) float64: min-blend lane maxima
-    nslot: int  #: slots of the tile kernels: one per thread
+    nslot: int  #: slots of the kernels' prange: one per thread
 
 
 class _Blend(NamedTuple):
