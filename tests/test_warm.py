@@ -37,3 +37,32 @@ def _message():
     from softshadows._warm import COLD_MESSAGE
 
     return COLD_MESSAGE + "\n"
+
+
+def test_helper_warms_the_signatures_the_real_calls_use():
+    # the helper compiles the depth, fragment and min-blend tile kernels on dummy inputs
+    # (softshadows._warm.warm_raster_modes); that is only worth it if the real calls then reuse
+    # those compiled overloads. A dtype or layout that drifts (a FrontEnd field changed, say) would
+    # make a real call compile a second signature: each dispatcher must hold exactly one.
+    import numpy as np
+
+    sys.path.insert(0, SRC)
+    import softshadows
+    from softshadows._warm import warm_raster_modes
+    from softshadows.api import eye_view
+    from softshadows.raster import rasterize_depth, rasterize_fragments, rasterize_min_blend
+    from softshadows.raster import rasterizer as r
+    from softshadows.raster.programs import PROGRAM_PENUMBRA
+
+    warm_raster_modes()
+    sc = softshadows.load_scene("spheres")
+    view = eye_view(sc, 32, 24)
+    V, F = sc.flat.vertices, sc.flat.faces
+    depth, _ = rasterize_depth(view, V, F, cull="back")
+    frags = rasterize_fragments(view, V, F)
+    assert np.isfinite(depth).any() and len(frags.pixel) > 0  # the real calls drew something
+    out = np.full((24, 32), np.inf, np.float32)
+    p = PROGRAM_PENUMBRA  # the one program the methods use (penumbra-map)
+    rasterize_min_blend(view, V, F, p, np.ones((len(F), 3)), np.zeros((24, 32), np.float32), np.zeros(3), out)
+    kernels = [r._tiles_depth, r._tiles_count, r._tiles_fragments, r._MIN_BLEND_KERNELS[p]]
+    assert [len(k.signatures) for k in kernels] == [1] * len(kernels)

@@ -2,7 +2,8 @@
 
 Numba holds the GIL while it compiles, so a cold ``compare`` compiles its ~100 kernels one after
 the other on one core. :func:`start_warmup` starts a helper process (``python -m softshadows._warm``)
-that renders the same methods on a small frame in the *reverse* order of the main process, which
+that compiles the rasterizer's tile kernels the main process needs only after the eye G-buffer
+(:func:`warm_raster_modes`), then renders the same methods in the *reverse* order of the main process, which
 writes their kernels into the on-disk cache (the package's normal ``__pycache__``/user cache or
 ``NUMBA_CACHE_DIR``: the helper inherits the environment and so the same locator); when the main
 process reaches a method, Numba loads what the helper already compiled instead of compiling it
@@ -104,12 +105,56 @@ def stop_warmup(proc) -> None:
         proc.wait()
 
 
+def warm_raster_modes() -> None:
+    """Compile the rasterizer's tile kernels of every mode but the G-buffer one (depth, fragment
+    count and write, min-blend with the one program the methods use: penumbra-map's) without the
+    front end: each is called once on a 1x1 view with no triangle, its inputs built with the dtypes
+    and layouts of the real ones (the kernels' types do not depend on the data;
+    ``tests/test_warm.py`` checks that a real call adds no signature). The main process compiles
+    the front end and the G-buffer kernel first (every render starts with the eye G-buffer), so the
+    helper begins with these and the two processes do not compile the same kernels at once."""
+    import numpy as np
+
+    from .raster import View
+    from .raster import rasterizer as r
+    from .raster.programs import PROGRAM_PENUMBRA
+
+    view = View.frame((0, 0, 0), (0, 0, 1), (0, 1, 0), (-1, 1, -1, 1), 0.1, 10.0, 1, 1)
+    vp, W, H, _v, _f, _c, near = r._prepare(view, np.zeros((0, 3)), np.zeros((0, 3), np.int64), "none")
+    fe = r.FrontEnd(
+        vp,
+        r.TILE,
+        1,
+        1,
+        near,
+        np.zeros(2, dtype=np.int64),
+        np.empty(0, dtype=np.int32),
+        np.empty((0, 4), dtype=np.int32),
+        np.empty((0, 3, r.E_WIDTH), dtype=np.float64),
+        np.empty((0, 3), dtype=np.float64),
+        np.zeros((1, r.PL_WIDTH), dtype=np.float64),
+        np.zeros((1, 3), dtype=np.float32),
+        r._E2I64,
+        0,
+        np.zeros(1, dtype=np.int32),
+    )
+    r._tiles_depth(fe, r._scratch(fe.tile), np.empty((H, W), np.float32), np.empty((H, W), np.int32))
+    r._fragments(fe, W, H)
+    out = np.zeros((H, W), np.float32)
+    stats = np.zeros((1, 6), dtype=np.int64)
+    mb = r._Blend(np.zeros(3), np.zeros((0, 3)), np.zeros((H, W), np.float32), out, stats, 0, False)
+    r._MIN_BLEND_KERNELS[PROGRAM_PENUMBRA](fe, r._scratch(fe.tile), mb)
+
+
 def _main(argv) -> int:
     job = json.loads(argv[0])
     from . import render
     from .compare import load
 
     parent = os.getppid()
+    # first what the main process needs last among what every render shares (see warm_raster_modes)
+    with contextlib.suppress(Exception):
+        warm_raster_modes()
     sc = load(job["scene"], job["light"])
     for m in job["methods"]:
         if os.getppid() != parent:  # the main process is gone (killed): stop warming for nobody
