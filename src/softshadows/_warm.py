@@ -138,7 +138,9 @@ def warm_raster_modes() -> None:
         0,
         np.zeros(1, dtype=np.int32),
     )
-    r._tiles_depth(fe, r._scratch(fe.tile), np.empty((H, W), np.float32), np.empty((H, W), np.int32))
+    r._tiles_depth(
+        fe, r._scratch(fe.tile), np.empty((H, W), np.float32), np.empty((H, W), np.int32), r._NO_ZT, r._NO_FT
+    )
     r._fragments(fe, W, H)
     out = np.zeros((H, W), np.float32)
     stats = np.zeros((1, 6), dtype=np.int64)
