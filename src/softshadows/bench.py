@@ -15,8 +15,8 @@ asked for), and each method gets ``ratio_to_hard`` = median total / hard's media
 ``eye_gbuffer`` and ``shading``). ``all`` excludes ``ground-truth`` (name it to time it).
 
 Sweeps (:func:`sweep`, also the Python API for benchmark scripts) render ground truth and each
-method for every value and plot frame time (median of ``repeats`` frames after warm-up, min-max
-band) and error against ground truth (``ssm_error`` by default: mean |dV| over umbra + penumbra,
+method for every value and plot frame time (median of ``repeats`` frames after warm-up, the
+methods rendered round-robin as above, min-max band) and error against ground truth (``ssm_error`` by default: mean |dV| over umbra + penumbra,
 Atty et al. 2006) against the parameter:
 
 * ``light-size`` — value f scales the light (``light.scaled(f)``: rect edges or sphere radius x f);
@@ -366,12 +366,17 @@ def sweep(
             ref_ms.append(_median_ms(render, sc, REFERENCE, w, h, seed, {"samples": gt_samples}, repeats)[0])
         for m in names:
             render(sc, m, w, h, seed=seed, **params[m])  # warm-up at this size (JIT, caches)
-            ts, res = [], None
-            for _ in range(max(1, int(repeats))):
-                res = render(sc, m, w, h, seed=seed, **params[m])
-                ts.append(res.timings["total"] * 1e3)
-            if ico and m == "hard":
-                _time_peer(peer, sc, w, h, params[m], res.visibility, repeats)
+        # interleaved: each round renders every method once, so load changes hit them alike
+        times = {m: [] for m in names}
+        last = {}
+        for _ in range(max(1, int(repeats))):
+            for m in names:
+                last[m] = render(sc, m, w, h, seed=seed, **params[m])
+                times[m].append(last[m].timings["total"] * 1e3)
+        if ico:
+            _time_peer(peer, sc, w, h, params["hard"], last["hard"].visibility, repeats)
+        for m in names:
+            ts, res = times[m], last[m]
             met = compute_metrics(res.visibility, gt.visibility)
             d = out[m]
             d["time_ms"].append(float(np.median(ts)))
