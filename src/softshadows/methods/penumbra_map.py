@@ -197,20 +197,12 @@ def _view_basis(view: View):
 
 
 def build_cones(
-    view: View,
-    positions: np.ndarray,
-    light_radius: float,
-    z_far: float,
-    segments: int,
-    zmax_pyramid=None,
-    needed_pyramid=None,
+    view: View, positions: np.ndarray, light_radius: float, z_far: float, segments: int, zmax_pyramid=None
 ) -> Primitives:
     """Pass 2b: a cone per silhouette vertex (positions (N,3)): tip at v_i, base circle of radius
     ``C_ri = (Z_far - Z_vi) L_r / Z_vi`` on the far plane around the ray from the light center through
     v_i, as ``segments`` triangles (v_i, B_k, B_k+1). With ``zmax_pyramid`` (early rejection) each
-    base vertex is pulled in along its ruling to the largest ``Z_P`` under the adjacent triangles,
-    and the triangles that can carry no kept fragment are dropped; with ``needed_pyramid`` (that of
-    the texels shaded) also those that can carry none at a texel shaded."""
+    base vertex is pulled in along its ruling to the largest ``Z_P`` under the adjacent triangles."""
     n = len(positions)
     if n == 0:
         return Primitives.empty()
@@ -228,11 +220,10 @@ def build_cones(
     by = ay[:, None] + cr[:, None] * np.sin(th)[None, :]
     lam = np.ones((n_ok, segments))  # fraction of each ruling kept (1 = to the far plane)
     keep = np.ones(n_ok, bool)
-    tkeep = np.ones((n_ok, segments), bool)
     if zmax_pyramid is not None:
-        lam, keep, tkeep = _reject_cones(view, q, zv, bx, by, z_far, zmax_pyramid, needed_pyramid)
+        lam, keep = _reject_cones(view, q, zv, bx, by, z_far, zmax_pyramid)
     tips = np.asarray(positions, np.float64)[ok][keep]
-    zv, bx, by, lam, tkeep = zv[keep], bx[keep], by[keep], lam[keep], tkeep[keep]
+    zv, bx, by, lam = zv[keep], bx[keep], by[keep], lam[keep]
     m = len(zv)
     o, r, u, f = _view_basis(view)
     verts, tri, zattr = _cone_triangles(
@@ -241,7 +232,6 @@ def build_cones(
         np.ascontiguousarray(bx),
         np.ascontiguousarray(by),
         np.ascontiguousarray(lam),
-        np.ascontiguousarray(tkeep),
         o,
         r,
         u,
@@ -252,19 +242,13 @@ def build_cones(
 
 
 @kernel
-def _cone_triangles(tips, zv, bx, by, lam, tkeep, o, r, u, f, z_far):
+def _cone_triangles(tips, zv, bx, by, lam, o, r, u, f, z_far):
     """Vertices (tips, then the base vertices: far-plane point (bx, by, z_far) pulled toward the tip
-    to the fraction ``lam`` of the ruling), triangles (tip, B_k, B_k+1) where ``tkeep`` and their
-    corner Z_v."""
+    to the fraction ``lam`` of the ruling), triangles (tip, B_k, B_k+1) and their corner Z_v."""
     m, seg = bx.shape
     verts = np.empty((m + m * seg, 3))
-    nt = 0
-    for i in range(m):
-        for k in range(seg):
-            nt += tkeep[i, k]
-    tri = np.empty((nt, 3), np.int64)
-    zattr = np.empty((nt, 3))
-    t = 0
+    tri = np.empty((m * seg, 3), np.int64)
+    zattr = np.empty((m * seg, 3))
     for i in range(m):
         for c in range(3):
             verts[i, c] = tips[i, c]
@@ -273,15 +257,13 @@ def _cone_triangles(tips, zv, bx, by, lam, tkeep, o, r, u, f, z_far):
             for c in range(3):
                 far = o[c] + bx[i, k] * r[c] + by[i, k] * u[c] + z_far * f[c]
                 verts[vi, c] = tips[i, c] + (far - tips[i, c]) * lam[i, k]
-            if not tkeep[i, k]:
-                continue
+            t = i * seg + k
             tri[t, 0] = i
             tri[t, 1] = vi
             tri[t, 2] = m + i * seg + (k + 1) % seg
             zattr[t, 0] = zv[i]
             zattr[t, 1] = zv[i]
             zattr[t, 2] = zv[i]
-            t += 1
     return verts, tri, zattr
 
 
@@ -295,7 +277,6 @@ def build_sheets(
     tolerance: float,
     max_subdiv: int,
     zmax_pyramid=None,
-    needed_pyramid=None,
 ) -> Primitives:
     """Pass 2c: per silhouette edge (v_0, v_1) a sheet from the edge to the outer common tangent of
     the two cones' base circles (far plane), tangent to both cones, on the side away from the
@@ -304,8 +285,7 @@ def build_sheets(
     (F_1 - v_1 = F_0 - v_0); otherwise both the surface (non-planar) and the rasterizer's linear
     interpolation of ``Z_v`` across the rulings are off, so the quad is split into
     ``k = ceil(q / tolerance)`` strips (at most ``max_subdiv``), ``q = |(F_1 - v_1) - (F_0 - v_0)| /
-    length``. Corner attribute: the ``Z_v`` of the silhouette point the ruling starts from.
-    Early rejection (``zmax_pyramid``, ``needed_pyramid``): as :func:`build_cones`."""
+    length``. Corner attribute: the ``Z_v`` of the silhouette point the ruling starts from."""
     S = sil.n_edges
     if S == 0:
         return Primitives.empty()
@@ -328,22 +308,12 @@ def build_sheets(
     if zmax_pyramid is not None and n_objects:
         ucut = _reject_sheets(view, V0, V1, F0, F1, zz0, zz1, z_far, zmax_pyramid)
         keep = ucut > 0.0
-        if needed_pyramid is not None and keep.any():  # and none at a texel shaded (the others keep their ucut)
-            ki = np.flatnonzero(keep)
-            um = _reject_sheets(view, V0[ki], V1[ki], F0[ki], F1[ki], zz0[ki], zz1[ki], z_far, needed_pyramid)
-            keep[ki[um <= 0.0]] = False
         # the sub-sheet u in [0, ucut] of every ruling: the same ruled surface, shorter
         F0 = V0 + (F0 - V0) * ucut[:, None]
         F1 = V1 + (F1 - V1) * ucut[:, None]
     verts, tri, za, n_sub = _sheet_strips(
         V0[keep], V1[keep], F0[keep], F1[keep], zz0[keep], zz1[keep], float(tolerance), int(max_subdiv)
     )
-    if needed_pyramid is not None and len(tri):  # drop the strips' triangles that miss the texels shaded
-        sx, sy, z = view.project(verts)
-        tk = np.empty(len(tri), np.bool_)
-        data, offs, ws, hs = needed_pyramid
-        _triangles_reach(sx, sy, z, tri, data, offs, ws, hs, 1e-9 * z_far, tk)
-        tri, za = tri[tk], za[tk]
     return Primitives(verts, tri, za, n_objects, int((~keep).sum()), n_sub, n_two)
 
 
@@ -457,24 +427,6 @@ def _sheet_quads(V, faces, edges, edge_faces, o, r, u, f, near, z_far, lr):
 
 
 @kernel
-def _triangles_reach(sx, sy, z, tri, data, offs, ws, hs, eps, out):
-    """Per triangle (vertices at pixel coordinates sx, sy and view depth z, all in front of the
-    near plane): whether the largest Z_P (pyramid ``data``) under its pixel box reaches beyond its
-    nearest vertex; where it does not, every fragment of the triangle lies at or behind Z_P and
-    the fragment program discards it."""
-    for t in range(tri.shape[0]):
-        a = tri[t, 0]
-        b = tri[t, 1]
-        c = tri[t, 2]
-        xa = min(sx[a], min(sx[b], sx[c]))
-        xb = max(sx[a], max(sx[b], sx[c]))
-        ya = min(sy[a], min(sy[b], sy[c]))
-        yb = max(sy[a], max(sy[b], sy[c]))
-        zmin = min(z[a], min(z[b], z[c]))
-        out[t] = _zmax_bbox(data, offs, ws, hs, xa, ya, xb, yb) > zmin - eps
-
-
-@kernel
 def _to_view(p, o, r, u, f):
     dx = p[0] - o[0]
     dy = p[1] - o[1]
@@ -572,35 +524,6 @@ def _pyramid_level1(zp_flat, H, W, data, w2):
         _max_down_row(zp_flat, 0, W, H, data, 0, w2, i)
 
 
-@kernel(inline=True)
-def _masked_max_run(zp_flat, needed_flat, o0, o1, W, mdata, w2):
-    """Texels o0..o1-1 (flat) of the mask: the cells of those set take their finite Z_P's max."""
-    r = o0 // W  # one division per run, then step along the row
-    c = o0 - r * W
-    for o in range(o0, o1):
-        if needed_flat[o] != 0:
-            cell = (r >> 1) * w2 + (c >> 1)
-            v = zp_flat[o]
-            if v > mdata[cell] and v < np.inf:
-                mdata[cell] = v
-        c += 1
-        if c == W:
-            c = 0
-            r += 1
-
-
-@kernel
-def _pyramid_level1_masked(zp_flat, needed_flat, words, W, mdata, w2):
-    """Level 1 (2x2 max, as ``_max_down_row``) of ``Z_P`` where ``needed`` is set (``mdata`` holds
-    zeros). The texels set are few: the mask is read 8 texels at a time (``words``, its uint64 view
-    up to the last whole word) and ``Z_P`` only where it is set."""
-    n8 = words.shape[0]
-    for w in range(n8):
-        if words[w] != 0:
-            _masked_max_run(zp_flat, needed_flat, 8 * w, 8 * w + 8, W, mdata, w2)
-    _masked_max_run(zp_flat, needed_flat, 8 * n8, needed_flat.shape[0], W, mdata, w2)
-
-
 @kernel
 def _pyramid_coarser(data, offs, ws, hs):
     """Levels 2.. (small: one serial pass)."""
@@ -609,14 +532,10 @@ def _pyramid_coarser(data, offs, ws, hs):
             _max_down_row(data, offs[L - 1], ws[L - 1], hs[L - 1], data, offs[L], ws[L], i)
 
 
-def build_zmax_pyramid(
-    zp: np.ndarray, needed: np.ndarray | None = None
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | tuple[tuple, tuple]:
+def build_zmax_pyramid(zp: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Max-depth mip pyramid of ``Z_P`` (empty texels count as 0: nothing behind them), as flat
     float32 data, level offsets, widths, heights. Level 0 (``Z_P`` itself) is not stored (offset
-    -1): queries start at level 1. The last level is one texel, the largest finite ``Z_P``.
-    With ``needed`` (H,W) uint8: (that pyramid, the pyramid of the texels set only, the others
-    counting as empty)."""
+    -1): queries start at level 1. The last level is one texel, the largest finite ``Z_P``."""
     h, w = zp.shape
     ws, hs, offs = [w], [h], [-1]
     total = 0
@@ -626,22 +545,11 @@ def build_zmax_pyramid(
         hs.append((hs[-1] + 1) // 2)
         total += ws[-1] * hs[-1]
     data = np.zeros(max(total, 1), np.float32)
-    mdata = np.empty(max(total, 1), np.float32) if needed is not None else data
     offs, ws, hs = np.array(offs, np.int64), np.array(ws, np.int64), np.array(hs, np.int64)
     if len(offs) > 1:
-        zf = np.ascontiguousarray(zp, dtype=np.float32).reshape(-1)
-        if needed is None:
-            _pyramid_level1(zf, h, w, data, ws[1])
-        else:
-            _pyramid_level1(zf, h, w, data, ws[1])
-            nf = np.ascontiguousarray(needed, dtype=np.uint8).reshape(-1)
-            mdata[: ws[1] * hs[1]] = 0.0
-            _pyramid_level1_masked(zf, nf, nf[: len(nf) // 8 * 8].view(np.uint64), w, mdata, ws[1])
-            _pyramid_coarser(mdata, offs, ws, hs)
+        _pyramid_level1(np.ascontiguousarray(zp, dtype=np.float32).reshape(-1), h, w, data, ws[1])
         _pyramid_coarser(data, offs, ws, hs)
-    if needed is None:
-        return data, offs, ws, hs
-    return (data, offs, ws, hs), (mdata, offs, ws, hs)
+    return data, offs, ws, hs
 
 
 def pyramid_max(pyr) -> float:
@@ -712,73 +620,17 @@ def _wedge_zmax(wl, wt, sxs, sys_, tx, ty, ux0, uy0, ux1, uy1, fa, fb, data, off
     return _zmax_bbox(data, offs, ws, hs, xa, ya, xb, yb)
 
 
-@kernel(inline=True)
-def _wedge_limit(
-    wl, wt, sxs, sys_, tx, ty, ux0, uy0, ux1, uy1, iz, izf, zvi, z_far, iters, pieces, data, offs, ws, hs, eps
+@kernel(parallel=True)
+def _cone_reject_kernel(
+    wl, wt, sx_scale, sy_scale, qx, qy, zv, bx, by, z_far, iters, pieces, data, offs, ws, hs, eps, lam, keep
 ):
-    """The depth beyond which no fragment of a cone triangle (the wedge from the tip (tx, ty) at
-    depth ``zvi``, 1/zvi = ``iz``, to the base vertices (ux0, uy0), (ux1, uy1) on the far plane) can
-    lie in front of Z_P (pyramid ``data``); at most ``zvi + eps`` where none can.
+    """Per cone (row) and base vertex k: lam[i,k] in [0,1] (fraction of the ruling to the far plane
+    that can carry kept fragments); keep[i] false when no triangle of the cone can.
 
     A fragment at depth z is kept only if z < Z_P of its texel <= max Z_P under any region of the
     wedge containing it. (1) The whole wedge, truncated at depth z, is bounded ``iters`` times;
     (2) the rest is cut into ``pieces`` slices along the rulings: the wedge ends at the last slice
     whose max Z_P lies behind its nearest depth (and not behind that max)."""
-    z = z_far
-    for _ in range(iters):
-        f = (iz - 1.0 / z) / (iz - izf)
-        zm = _wedge_zmax(wl, wt, sxs, sys_, tx, ty, ux0, uy0, ux1, uy1, 0.0, f, data, offs, ws, hs)
-        if zm < z:
-            z = zm
-        if z <= zvi + eps:
-            break
-    if z > zvi + eps and pieces > 1:
-        fhi = (iz - 1.0 / z) / (iz - izf)
-        zlast = zvi
-        for m in range(pieces - 1, -1, -1):  # the last qualifying slice: search from the end
-            fa = fhi * m / pieces
-            fb = fhi * (m + 1) / pieces
-            za = 1.0 / (iz - fa * (iz - izf))
-            zb = 1.0 / (iz - fb * (iz - izf))
-            zm = _wedge_zmax(wl, wt, sxs, sys_, tx, ty, ux0, uy0, ux1, uy1, fa, fb, data, offs, ws, hs)
-            if zm > za + eps:
-                zlast = min(zb, zm)
-                break
-        z = zlast
-    return z
-
-
-@kernel(parallel=True)
-def _cone_reject_kernel(
-    wl,
-    wt,
-    sx_scale,
-    sy_scale,
-    qx,
-    qy,
-    zv,
-    bx,
-    by,
-    z_far,
-    iters,
-    pieces,
-    data,
-    offs,
-    ws,
-    hs,
-    eps,
-    mdata,
-    use_mask,
-    lam,
-    keep,
-    tkeep,
-):
-    """Per cone (row) and base vertex k: lam[i,k] in [0,1] (fraction of the ruling to the far plane
-    that can carry kept fragments, :func:`_wedge_limit` over the Z_P pyramid ``data``); tkeep[i,k]
-    false when triangle k of the cone can carry none, keep[i] false when no triangle of the cone
-    can. With ``use_mask``, a triangle must also be able to carry one at a texel of the pyramid
-    ``mdata`` (the same, of the texels shaded only): a triangle dropped so changes no texel shaded,
-    and the others keep their vertices (lam from ``data`` alone)."""
     n, seg = bx.shape
     for i in prange(n):
         iz = 1.0 / zv[i]
@@ -786,58 +638,40 @@ def _cone_reject_kernel(
         tx = qx[i] * iz
         ty = qy[i] * iz
         zlim = np.empty(seg)
-        tk = np.empty(seg, np.bool_)
-        any_mask = True
-        if use_mask:  # one bound over the whole cone first (it bounds every triangle's first one)
-            xa = (tx - wl) * sx_scale
-            xb = xa
-            ya = (wt - ty) * sy_scale
-            yb = ya
-            for k in range(seg):
-                px = (bx[i, k] * izf - wl) * sx_scale
-                py = (wt - by[i, k] * izf) * sy_scale
-                xa = min(xa, px)
-                xb = max(xb, px)
-                ya = min(ya, py)
-                yb = max(yb, py)
-            # (one more texel each side: the wedges' own corners may round across a texel edge)
-            any_mask = _zmax_bbox(mdata, offs, ws, hs, xa - 1.0, ya - 1.0, xb + 1.0, yb + 1.0) > zv[i] + eps
-        for k in range(seg):
-            k2 = (k + 1) % seg
-            ux0 = bx[i, k] * izf
-            uy0 = by[i, k] * izf
-            ux1 = bx[i, k2] * izf
-            uy1 = by[i, k2] * izf
-            tk[k] = any_mask
-            if use_mask and any_mask:
-                zm = _wedge_limit(
-                    wl, wt, sx_scale, sy_scale, tx, ty, ux0, uy0, ux1, uy1, iz, izf, zv[i], z_far, iters, pieces,
-                    mdata, offs, ws, hs, eps,
-                )  # fmt: skip
-                tk[k] = zm > zv[i] + eps
         anyk = False
         for k in range(seg):
-            # triangle k's vertices need the limits of triangles k - 1, k, k + 1
-            if not (tk[k] or tk[(k - 1) % seg] or tk[(k + 1) % seg]):
-                zlim[k] = zv[i]
-                continue
             k2 = (k + 1) % seg
             ux0 = bx[i, k] * izf
             uy0 = by[i, k] * izf
             ux1 = bx[i, k2] * izf
             uy1 = by[i, k2] * izf
-            z = _wedge_limit(
-                wl, wt, sx_scale, sy_scale, tx, ty, ux0, uy0, ux1, uy1, iz, izf, zv[i], z_far, iters, pieces,
-                data, offs, ws, hs, eps,
-            )  # fmt: skip
+            z = z_far
+            for _ in range(iters):
+                f = (iz - 1.0 / z) / (iz - izf)
+                zm = _wedge_zmax(wl, wt, sx_scale, sy_scale, tx, ty, ux0, uy0, ux1, uy1, 0.0, f, data, offs, ws, hs)
+                if zm < z:
+                    z = zm
+                if z <= zv[i] + eps:
+                    break
+            if z > zv[i] + eps and pieces > 1:
+                fhi = (iz - 1.0 / z) / (iz - izf)
+                zlast = zv[i]
+                for m in range(pieces - 1, -1, -1):  # the last qualifying slice: search from the end
+                    fa = fhi * m / pieces
+                    fb = fhi * (m + 1) / pieces
+                    za = 1.0 / (iz - fa * (iz - izf))
+                    zb = 1.0 / (iz - fb * (iz - izf))
+                    zm = _wedge_zmax(wl, wt, sx_scale, sy_scale, tx, ty, ux0, uy0, ux1, uy1, fa, fb, data, offs, ws, hs)
+                    if zm > za + eps:
+                        zlast = min(zb, zm)
+                        break
+                z = zlast
             zlim[k] = z
-            tk[k] = tk[k] and z > zv[i] + eps
-            if tk[k]:
+            if z > zv[i] + eps:
                 anyk = True
         keep[i] = anyk
         # base vertex k is shared by triangles k-1 and k: keep the longer of the two limits
         for k in range(seg):
-            tkeep[i, k] = tk[k]
             z = max(zlim[k], zlim[(k - 1) % seg])
             if z <= zv[i]:
                 lam[i, k] = 0.0
@@ -846,15 +680,12 @@ def _cone_reject_kernel(
                 lam[i, k] = min((z - zv[i]) / (z_far - zv[i]), 1.0)
 
 
-def _reject_cones(view, q, zv, bx, by, z_far, pyr, mpyr=None):
-    """(lam (n, seg), keep (n,), tkeep (n, seg)): see :func:`_cone_reject_kernel`; ``mpyr`` the
-    pyramid of the texels shaded (None: every texel)."""
+def _reject_cones(view, q, zv, bx, by, z_far, pyr):
     data, offs, ws, hs = pyr
     l, r, b, t = view.window
     n, seg = bx.shape
     lam = np.ones((n, seg))
     keep = np.ones(n, bool)
-    tkeep = np.ones((n, seg), bool)
     eps = 1e-9 * z_far
     _cone_reject_kernel(
         l,
@@ -874,16 +705,13 @@ def _reject_cones(view, q, zv, bx, by, z_far, pyr, mpyr=None):
         ws,
         hs,
         eps,
-        data if mpyr is None else mpyr[0],
-        mpyr is not None,
         lam,
         keep,
-        tkeep,
     )
-    return lam, keep, tkeep
+    return lam, keep
 
 
-@kernel
+@kernel(parallel=True)
 def _sheet_reject_kernel(sx, sy, zc, z_far, iters, pieces, eps, data, offs, ws, hs, ucut):
     """Per sheet: the fraction ``ucut`` of every ruling (from the edge, u = 0, to the far line,
     u = 1) that can carry kept fragments; 0 drops the sheet. ``sx, sy`` (n, 4) pixel coordinates of
@@ -894,7 +722,7 @@ def _sheet_reject_kernel(sx, sy, zc, z_far, iters, pieces, eps, data, offs, ws, 
     for the cones: bound the whole sheet ``iters`` times, then cut it in ``pieces`` slices and end
     after the last slice whose max Z_P lies behind its nearest depth (and not behind that max)."""
     n = sx.shape[0]
-    for i in range(n):
+    for i in prange(n):
         zmin = min(zc[i, 0], zc[i, 1])
         u = 1.0
         for _ in range(iters):
@@ -1026,11 +854,10 @@ def penumbra_fragment_program(
     }
 
 
-@kernel
+@kernel(parallel=True)
 def _count_below(a, v):
-    # serial, as the other small kernels here: on a busy 2-core machine a parallel region costs more than it saves
     n = 0
-    for i in range(a.shape[0]):
+    for i in prange(a.shape[0]):
         for j in range(a.shape[1]):
             n += a[i, j] < v
     return n
@@ -1073,20 +900,15 @@ def render_penumbra_map(
     with phase("penumbra_map"):
         pm = np.ones((view.height, view.width), np.float32)  # clear to white
         zp = smp.surface_depth
-        # with the texels shaded, also their own pyramid: it drops the cone triangles and sheets that miss them
-        mpyr = None
-        if early_reject and needed is not None:
-            pyr, mpyr = build_zmax_pyramid(zp, needed)
-        else:
-            pyr = build_zmax_pyramid(zp)
-        zmax = pyramid_max(pyr)  # its last level is the farthest Z_P
+        pyr = build_zmax_pyramid(zp)  # its last level is the farthest Z_P
+        zmax = pyramid_max(pyr)
         z_far = zmax * (1.0 + 1e-6) if zmax > 0.0 else float(view.far)
         if not early_reject:
             pyr = None
         faces = flat.faces if flat.occluder.all() else flat.faces[flat.occluder]
-        cones = build_cones(view, flat.vertices[sil.vertices], light_radius, z_far, cone_segments, pyr, mpyr)
+        cones = build_cones(view, flat.vertices[sil.vertices], light_radius, z_far, cone_segments, pyr)
         sheets = build_sheets(
-            view, flat.vertices, faces, sil, light_radius, z_far, sheet_tolerance, sheet_max_subdiv, pyr, mpyr
+            view, flat.vertices, faces, sil, light_radius, z_far, sheet_tolerance, sheet_max_subdiv, pyr
         )
         nv = len(cones.vertices)
         verts = np.concatenate([cones.vertices, sheets.vertices])
