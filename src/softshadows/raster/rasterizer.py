@@ -209,6 +209,25 @@ def _setup_piece(vp, slot, x0, y0, z0, x1, y1, z1, x2, y2, z2, far, box, edges, 
 
 
 @kernel(inline=True)
+def _face_corners(verts, faces, t):
+    """The world corners (a, b, c) of face t, as nine scalars."""
+    ia = faces[t, 0]
+    ib = faces[t, 1]
+    ic = faces[t, 2]
+    return (
+        verts[ia, 0],
+        verts[ia, 1],
+        verts[ia, 2],
+        verts[ib, 0],
+        verts[ib, 1],
+        verts[ib, 2],
+        verts[ic, 0],
+        verts[ic, 1],
+        verts[ic, 2],
+    )
+
+
+@kernel(inline=True)
 def _world_normal(ax, ay, az, bx, by, bz, cx, cy, cz):
     """(nx, ny, nz, |n|): the world-space face normal as wound, n = (b - a) x (c - a)."""
     e1x = bx - ax
@@ -260,18 +279,7 @@ def _setup_one(u, t, verts, faces, vp, near, cull, NC, box, edges, zinfo, planes
     ortho = vp[VP_ORTHO] != 0.0
     far = vp[VP_FAR]
     NC[u] = 0
-    ia = faces[t, 0]
-    ib = faces[t, 1]
-    ic = faces[t, 2]
-    ax = verts[ia, 0]
-    ay = verts[ia, 1]
-    az = verts[ia, 2]
-    bx = verts[ib, 0]
-    by = verts[ib, 1]
-    bz = verts[ib, 2]
-    cx = verts[ic, 0]
-    cy = verts[ic, 1]
-    cz = verts[ic, 2]
+    ax, ay, az, bx, by, bz, cx, cy, cz = _face_corners(verts, faces, t)
     nx, ny, nz, nn = _world_normal(ax, ay, az, bx, by, bz, cx, cy, cz)
     if not (nn > 0.0 and math.isfinite(nn)):
         return  # degenerate or non-finite
@@ -566,18 +574,7 @@ def _tiny_depth(verts, faces, vp, near, cull, bstart, tface, tlist, phase, nslot
             for e in range(bstart[b], bstart[b + 1]):
                 t = tface[e]
                 code = tlist[e]
-                ia = faces[t, 0]
-                ib = faces[t, 1]
-                ic = faces[t, 2]
-                ax = verts[ia, 0]
-                ay = verts[ia, 1]
-                az = verts[ia, 2]
-                bx = verts[ib, 0]
-                by = verts[ib, 1]
-                bz = verts[ib, 2]
-                cx = verts[ic, 0]
-                cy = verts[ic, 1]
-                cz = verts[ic, 2]
+                ax, ay, az, bx, by, bz, cx, cy, cz = _face_corners(verts, faces, t)
                 nx, ny, nz, nn = _world_normal(ax, ay, az, bx, by, bz, cx, cy, cz)
                 if not (nn > 0.0 and math.isfinite(nn)):
                     continue
