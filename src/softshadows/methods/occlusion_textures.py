@@ -211,6 +211,11 @@ def _mark_occlusion_textures(pixel, depth, d, z_planes, leak_fix, tex):
             tex[k + 1, row, col] = 1
 
 
+def _occluder_vertices(vertices, occ_faces) -> np.ndarray:
+    """The vertices that some occluder face uses (they bound the slicing frustum)."""
+    return vertices[np.unique(occ_faces)] if len(occ_faces) else np.zeros((0, 3))
+
+
 def slice_scene(setup: SlicingSetup, vertices, faces, leak_fix: bool = False):
     """One rasterization of the occluders from the COP; returns (textures uint8 (N,S,S), fragments).
 
@@ -764,8 +769,9 @@ def occlusion_visibility(
 
     # 1. slicing
     with phase("slicing"):
-        occ_faces = np.ascontiguousarray(flat.faces[flat.occluder])
-        occ_pts = flat.vertices[np.unique(occ_faces)] if len(occ_faces) else np.zeros((0, 3))
+        # per geometry, not per frame (np.unique over every occluder corner: ~0.3 s at 1.3 M triangles)
+        occ_faces = flat.faces_where(flat.occluder)
+        occ_pts = flat.cached(("occluder_vertices",), lambda: _occluder_vertices(flat.vertices, occ_faces))
         setup = fit_slicing_view(light, occ_pts, pos, int(texture_size), int(slices), float(cop_distance))
         tex, nfrag = slice_scene(setup, flat.vertices, occ_faces, bool(leak_fix))
         nonempty = tex.reshape(tex.shape[0], -1).any(axis=1)
