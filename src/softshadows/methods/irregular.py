@@ -70,11 +70,18 @@ class SampleGrid:
 
 
 @kernel(inline=True)
-def slice_of(d, dlo, dhi, slices):
-    """Depth slice of distance ``d`` (geometric slicing between dlo and dhi), clamped."""
+def slice_scale(dlo, dhi, slices):
+    """The factor of :func:`slice_of`: slices / log(dhi / dlo)."""
+    return slices / np.log(dhi / dlo)
+
+
+@kernel(inline=True)
+def slice_of(d, dlo, kf, slices):
+    """Depth slice of distance ``d`` (geometric slicing between dlo and dhi; ``kf`` =
+    :func:`slice_scale`), clamped; non-decreasing in ``d``."""
     if slices == 1 or d <= dlo:
         return 0
-    s = int(np.floor(slices * np.log(d / dlo) / np.log(dhi / dlo)))
+    s = int(np.floor(np.log(d / dlo) * kf))
     if s < 0:
         return 0
     if s >= slices:
@@ -86,6 +93,7 @@ def slice_of(d, dlo, dhi, slices):
 def _sample_keys(pts, vp, gx, gy, B, nbx, slices, dlo, dhi, near, ix, iy, dist, key):
     n = pts.shape[0]
     l, r, b, t = vp[VP_L], vp[VP_R], vp[VP_B], vp[VP_T]
+    kf = slice_scale(dlo, dhi, slices)
     for k in prange(n):
         dx = pts[k, 0] - vp[VP_ORIGIN]
         dy = pts[k, 1] - vp[VP_ORIGIN + 1]
@@ -108,7 +116,7 @@ def _sample_keys(pts, vp, gx, gy, B, nbx, slices, dlo, dhi, near, ix, iy, dist, 
         cy = int(min(max(np.floor((t - yy) / (t - b) * gy), 0.0), gy - 1.0))
         bi = (cy // B) * nbx + cx // B
         loc = (cy % B) * B + cx % B
-        key[k] = (bi * B * B + loc) * slices + slice_of(d, dlo, dhi, slices)
+        key[k] = (bi * B * B + loc) * slices + slice_of(d, dlo, kf, slices)
 
 
 @kernel
@@ -446,6 +454,7 @@ def _umbra_kernel(
     nslot,
 ):
     nb = bin_start.shape[0] - 1
+    kf = slice_scale(dlo, dhi, S)
     for slot in prange(nslot):  # bins dealt round-robin: shadowed bins are clustered
         for bi in range(slot, nb, nslot):
             by = bi // nbx
@@ -471,7 +480,7 @@ def _umbra_kernel(
                 cx1 = min(cx1, bx * B + B - 1)
                 cy0 = max(cy0, by * B)
                 cy1 = min(cy1, by * B + B - 1)
-                s0 = slice_of(trid[f], dlo, dhi, S)
+                s0 = slice_of(trid[f], dlo, kf, S)
                 i0, i1, i2 = faces[f, 0], faces[f, 1], faces[f, 2]
                 nx = (verts[i1, 1] - verts[i0, 1]) * (verts[i2, 2] - verts[i0, 2]) - (verts[i1, 2] - verts[i0, 2]) * (
                     verts[i2, 1] - verts[i0, 1]
@@ -622,6 +631,7 @@ def fold_candidates(flat, counted, lo, hi, center, radius) -> np.ndarray:
 
     h = np.minimum(plane_h(f0), plane_h(f1))
     grazing = (dmin <= radius) | (h * dmin <= radius * dfar * (1.0 + 1e-6) + 1e-12)
+    two, f0, f1 = two[grazing], f0[grazing], f1[grazing]  # the side test only where it can matter
     corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
 
     def side(f):
@@ -634,7 +644,7 @@ def fold_candidates(flat, counted, lo, hi, center, radius) -> np.ndarray:
 
     s0, s1 = side(f0), side(f1)
     out = np.zeros(adj.n_edges, bool)
-    out[two[grazing & ((s0 == 0) | (s1 == 0) | (s0 != s1))]] = True
+    out[two[(s0 == 0) | (s1 == 0) | (s0 != s1)]] = True
     return out
 
 
@@ -807,10 +817,14 @@ def _bin_box(vp, gx, gy, B, bx, by):
     return x0, x1, y0, y1
 
 
-@kernel
-def _count_quad_bins(qd, radius, dmax, corner2, bin_maxd, per_bin, vp, gx, gy, B, nbx, nby, counts):
-    for e in range(qd.shape[0]):
+@kernel(parallel=True)
+def _quad_bins(qd, radius, dmax, corner2, bin_maxd, per_bin, vp, gx, gy, B, nbx, fill, offs, out):
+    """The screen bins quad e overlaps (refined per bin with ``per_bin``): their number into
+    ``out[e]`` (``fill`` False), or the bins themselves into ``out[offs[e]:offs[e + 1]]`` (``fill``
+    True, after a counting pass with the same arguments). One pass of the same loop for both."""
+    for e in prange(qd.shape[0]):
         n = 0
+        k = offs[e] if fill else 0
         if qd[e, 6] > 0.0:
             Rg = quad_half_width(qd, e, radius, dmax, corner2)
             if Rg > 0.0:
@@ -833,37 +847,11 @@ def _count_quad_bins(qd, radius, dmax, corner2, bin_maxd, per_bin, vp, gx, gy, B
                             if per_bin:
                                 R = quad_half_width(qd, e, radius, bin_maxd[bi], box_corner2(bx0, bx1, by0, by1))
                             if quad_overlaps_box(qd, e, R, bx0, bx1, by0, by1):
+                                if fill and k + n < offs[e + 1]:
+                                    out[k + n] = bi
                                 n += 1
-        counts[e] = n
-
-
-@kernel
-def _fill_quad_bins(qd, radius, dmax, corner2, bin_maxd, per_bin, vp, gx, gy, B, nbx, nby, offs, pair_bin):
-    for e in range(qd.shape[0]):
-        k = offs[e]
-        if k == offs[e + 1]:
-            continue
-        Rg = quad_half_width(qd, e, radius, dmax, corner2)
-        if np.isfinite(Rg):
-            x0 = min(qd[e, 0], qd[e, 2]) - Rg
-            x1 = max(qd[e, 0], qd[e, 2]) + Rg
-            y0 = min(qd[e, 1], qd[e, 3]) - Rg
-            y1 = max(qd[e, 1], qd[e, 3]) + Rg
-            cx0, cx1, cy0, cy1 = _cell_range(x0, x1, y0, y1, vp, gx, gy)
-        else:
-            cx0, cx1, cy0, cy1 = 0, gx - 1, 0, gy - 1
-        for by in range(cy0 // B, cy1 // B + 1):
-            for bx in range(cx0 // B, cx1 // B + 1):
-                bi = by * nbx + bx
-                if bin_maxd[bi] <= 0.0:
-                    continue
-                bx0, bx1, by0, by1 = _bin_box(vp, gx, gy, B, bx, by)
-                R = Rg
-                if per_bin:
-                    R = quad_half_width(qd, e, radius, bin_maxd[bi], box_corner2(bx0, bx1, by0, by1))
-                if quad_overlaps_box(qd, e, R, bx0, bx1, by0, by1) and k < offs[e + 1]:
-                    pair_bin[k] = bi
-                    k += 1
+        if not fill:
+            out[e] = n
 
 
 def window_corner2(vp) -> float:
@@ -901,13 +889,12 @@ def bin_penumbra_quads(grid: SampleGrid, qd: np.ndarray, light_radius: float, pe
         grid.gy,
         grid.bins,
         grid.nbx,
-        grid.nby,
     )
-    _count_quad_bins(*args, counts)
     offs = np.zeros(E + 1, np.int64)
+    _quad_bins(*args, False, offs, counts)
     np.cumsum(counts, out=offs[1:])
     pair_bin = np.empty(offs[-1], np.int64)
-    _fill_quad_bins(*args, offs, pair_bin)
+    _quad_bins(*args, True, offs, pair_bin)
     return _pairs_by_bin(counts, pair_bin, grid.n_bins)
 
 
@@ -955,24 +942,19 @@ def _clip_poly(buf, src, n, a, b, c, dst):
     return m
 
 
-#: per-sample row of the penumbra pass (:func:`sample_rows`): image-plane x, y, x^2 + y^2, 1 / distance
-#: to the light centre, p (3), w (3: unit, from p toward the light's plane), L (distance to that plane),
-#: c - p (3)
-_RX, _RY, _RR2, _RINV, _RP, _RW, _RL, _RC, _ROW = 0, 1, 2, 3, 4, 7, 10, 11, 14
+#: per-sample row of the penumbra pass (:func:`sample_rows`): p (3), w (3: unit, from p toward the
+#: light's plane), L (distance to that plane), c - p (3)
+_RP, _RW, _RL, _RC, _ROW = 0, 3, 6, 7, 10
 
 
 @kernel(parallel=True)
-def sample_rows(shape, center, nrm_l, sp, six, siy, sdist):
-    """Per sorted sample, everything the penumbra pass reads, in one contiguous row (layout: _R*):
-    the light frame (w: the facing disk's normal for the sphere, the rectangle's normal for the
-    rectangle; L; c - p) and the image-plane terms of the per-sample bound."""
+def sample_rows(shape, center, nrm_l, sp):
+    """Per sorted sample, everything the term evaluation reads, in one contiguous row (layout: _R*):
+    p and the light frame (w: the facing disk's normal for the sphere, the rectangle's normal for
+    the rectangle; L; c - p). The per-sample bound reads the grid's own image-plane arrays."""
     n = sp.shape[0]
     rows = np.empty((n, _ROW))
     for j in prange(n):
-        rows[j, _RX] = six[j]
-        rows[j, _RY] = siy[j]
-        rows[j, _RR2] = six[j] * six[j] + siy[j] * siy[j]
-        rows[j, _RINV] = 1.0 / sdist[j]
         rows[j, _RP] = sp[j, 0]
         rows[j, _RP + 1] = sp[j, 1]
         rows[j, _RP + 2] = sp[j, 2]
@@ -1196,15 +1178,6 @@ def cancels_in_box(e, ea, eb, tv_start, tv, box, c):
 
 
 @kernel(inline=True)
-def _point_seg_dist2(px, py, ax, ay, bx, by):
-    dx, dy = bx - ax, by - ay
-    uu = dx * dx + dy * dy
-    t = 0.0 if uu == 0.0 else min(max(((px - ax) * dx + (py - ay) * dy) / uu, 0.0), 1.0)
-    qx, qy = ax + t * dx - px, ay + t * dy - py
-    return qx * qx + qy * qy
-
-
-@kernel(inline=True)
 def _seg_box_dist(ax, ay, bx, by, x0, x1, y0, y1):
     """Lower bound of the distance between segment AB and a box: distance to the box centre minus
     its half diagonal (>= 0)."""
@@ -1234,6 +1207,9 @@ def _penumbra_kernel(
     vp,
     shape,
     rw,
+    six,
+    siy,
+    sinv,
     u,
     v,
     radius,
@@ -1261,12 +1237,15 @@ def _penumbra_kernel(
     l, r, b, t = vp[VP_L], vp[VP_R], vp[VP_B], vp[VP_T]
     cw = (r - l) / gx
     ch = (t - b) / gy
+    rad_s = radius * (1.0 + _SLACK)
+    kf = slice_scale(dlo, dhi, S)
     for slot in prange(nslot):  # bins dealt round-robin: shadowed bins are clustered
         for bi in range(slot, nb, nslot):
             by = bi // nbx
             bx = bi % nbx
             buf = np.zeros((4, 8))
             cand = np.empty(max_col, np.int64)
+            keep = np.empty(max_col, np.int8)
             bx0, bx1, by0, by1 = _bin_box(vp, gx, gy, B, bx, by)
             bc2 = box_corner2(bx0, bx1, by0, by1)
             nf = 0
@@ -1285,6 +1264,9 @@ def _penumbra_kernel(
                 qax, qay, qbx, qby, dmin, q5 = qd[e, 0], qd[e, 1], qd[e, 2], qd[e, 3], qd[e, 4], qd[e, 5]
                 dr = dmin - radius if dmin > radius else 0.0
                 inv_dr = 1.0 / dr if dr > 0.0 else 0.0
+                sdx, sdy = qbx - qax, qby - qay
+                s_uu = sdx * sdx + sdy * sdy
+                s_iuu = 1.0 / s_uu if s_uu > 0.0 else 0.0
                 for cy in range(by * B, min(by * B + B, gy)):
                     y1 = t - cy * ch
                     y0 = y1 - ch
@@ -1307,7 +1289,7 @@ def _penumbra_kernel(
                             inv = 1.0 / (dmin - radius) - dc / ((1.0 + max(q5, bc2)) * radius) / (1.0 + _SLACK)
                             if inv <= 0.0:
                                 continue
-                            s0 = slice_of((1.0 / inv) * (1.0 - _SLACK), dlo, dhi, S)
+                            s0 = slice_of((1.0 / inv) * (1.0 - _SLACK), dlo, kf, S)
                         j0, j1 = g_start[col + s0], g_start[col + S]
                         nt += j1 - j0
                         if count_only:
@@ -1319,11 +1301,14 @@ def _penumbra_kernel(
                         m = 0
                         if dr > 0.0:
                             for j in range(j0, j1):
-                                sj = 1.0 + max(q5, rw[j, _RR2])
-                                rs = sj * radius * (inv_dr - rw[j, _RINV]) * (1.0 + _SLACK) + 1e-12
-                                d2 = _point_seg_dist2(rw[j, _RX], rw[j, _RY], qax, qay, qbx, qby)
-                                cand[m] = j
-                                m += 1 - int((rs < 0.0) | (d2 > rs * rs))
+                                px, py = six[j], siy[j]
+                                rs = (1.0 + max(q5, px * px + py * py)) * rad_s * (inv_dr - sinv[j]) + 1e-12
+                                tt = min(max(((px - qax) * sdx + (py - qay) * sdy) * s_iuu, 0.0), 1.0)
+                                ox, oy = qax + tt * sdx - px, qay + tt * sdy - py
+                                keep[j - j0] = 1 - np.int8((rs < 0.0) | (ox * ox + oy * oy > rs * rs))
+                            for i in range(j1 - j0):
+                                cand[m] = j0 + i
+                                m += keep[i]
                         else:
                             for j in range(j0, j1):
                                 cand[m] = j
@@ -1367,7 +1352,7 @@ def accumulate_penumbrae(
     frags, tests, hits = np.zeros(nb, np.int64), np.zeros(nb, np.int64), np.zeros(nb, np.int64)
     evals = np.zeros(nb, np.int64)
     rad = radius if shape == 1 else bound_r
-    rw = sample_rows(shape, np.asarray(light.center, float), nrm_l, grid.pos, grid.ix, grid.iy, grid.dist)
+    rw = sample_rows(shape, np.asarray(light.center, float), nrm_l, grid.pos)
     _penumbra_kernel(
         window_corner2(grid.vp),
         grid.col_box,
@@ -1384,6 +1369,9 @@ def accumulate_penumbrae(
         grid.vp,
         shape,
         rw,
+        grid.ix,
+        grid.iy,
+        1.0 / grid.dist,
         u,
         v,
         rad,
