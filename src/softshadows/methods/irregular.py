@@ -770,13 +770,9 @@ def quad_half_width(qd, e, radius, dmax, corner2):
 
 
 @kernel(inline=True)
-def quad_overlaps_box(qd, e, R, x0, x1, y0, y1):
-    """Separating-axis test of the quad (segment A'B' grown by R along and across it) against an
-    image-plane box."""
-    if R <= 0.0:
-        return False
-    if not np.isfinite(R):
-        return True
+def quad_axes(qd, e, R):
+    """The quad of edge e with half-width R (finite, > 0) as a centred box on its own axes: (unit
+    direction ux, uy; centre cx, cy; half-length, half-width)."""
     ax, ay, bx, by = qd[e, 0], qd[e, 1], qd[e, 2], qd[e, 3]
     dx, dy = bx - ax, by - ay
     ln = np.sqrt(dx * dx + dy * dy)
@@ -784,9 +780,12 @@ def quad_overlaps_box(qd, e, R, x0, x1, y0, y1):
         ux, uy = dx / ln, dy / ln
     else:
         ux, uy = 1.0, 0.0
-    cx, cy = 0.5 * (ax + bx), 0.5 * (ay + by)
-    hl = 0.5 * ln + R
-    hw = R
+    return ux, uy, 0.5 * (ax + bx), 0.5 * (ay + by), 0.5 * ln + R, R
+
+
+@kernel(inline=True)
+def axes_overlap_box(ux, uy, cx, cy, hl, hw, x0, x1, y0, y1):
+    """Separating-axis test of a quad given by :func:`quad_axes` against an image-plane box."""
     hx, hy = 0.5 * (x1 - x0), 0.5 * (y1 - y0)
     mx, my = 0.5 * (x0 + x1), 0.5 * (y0 + y1)
     # box axes
@@ -798,6 +797,18 @@ def quad_overlaps_box(qd, e, R, x0, x1, y0, y1):
     if abs((mx - cx) * ux + (my - cy) * uy) > hl + hx * abs(ux) + hy * abs(uy):
         return False
     return abs(-(mx - cx) * uy + (my - cy) * ux) <= hw + hx * abs(uy) + hy * abs(ux)
+
+
+@kernel(inline=True)
+def quad_overlaps_box(qd, e, R, x0, x1, y0, y1):
+    """Separating-axis test of the quad (segment A'B' grown by R along and across it) against an
+    image-plane box."""
+    if R <= 0.0:
+        return False
+    if not np.isfinite(R):
+        return True
+    ux, uy, cx, cy, hl, hw = quad_axes(qd, e, R)
+    return axes_overlap_box(ux, uy, cx, cy, hl, hw, x0, x1, y0, y1)
 
 
 @kernel(inline=True)
@@ -1072,6 +1083,12 @@ def _rect_term(rw, j, lu, lv, hu, hv, rax, ray, raz, rbx, rby, rbz, nu, nv, nc, 
             dax, day = ix, iy
         else:
             dbx, dby = ix, iy
+    if ha > 0.0 and hb > 0.0:
+        # both projected endpoints beyond one side of the rectangle: so is the whole region beyond
+        # the edge inside the angle (their hull plus the rays from the centre through them)
+        mu, mv = hu * (1.0 + _SLACK), hv * (1.0 + _SLACK)
+        if (dax > mu and dbx > mu) or (dax < -mu and dbx < -mu) or (day > mv and dby > mv) or (day < -mv and dby < -mv):
+            return 0.0
     cr = dax * dby - day * dbx
     if cr == 0.0:
         return 0.0
@@ -1264,6 +1281,10 @@ def _penumbra_kernel(
                 qax, qay, qbx, qby, dmin, q5 = qd[e, 0], qd[e, 1], qd[e, 2], qd[e, 3], qd[e, 4], qd[e, 5]
                 dr = dmin - radius if dmin > radius else 0.0
                 inv_dr = 1.0 / dr if dr > 0.0 else 0.0
+                if R <= 0.0:
+                    continue  # no fragment
+                every = not np.isfinite(R)  # the light's sphere reaches the edge: every cell
+                ux, uy, qcx, qcy, hl, hw = quad_axes(qd, e, 1.0 if every else R)
                 sdx, sdy = qbx - qax, qby - qay
                 s_uu = sdx * sdx + sdy * sdy
                 s_iuu = 1.0 / s_uu if s_uu > 0.0 else 0.0
@@ -1273,10 +1294,10 @@ def _penumbra_kernel(
                     for cx in range(bx * B, min(bx * B + B, gx)):
                         x0 = l + cx * cw
                         x1 = x0 + cw
-                        if not quad_overlaps_box(qd, e, R, x0, x1, y0, y1):
-                            continue
                         col = (bi * B * B + (cy % B) * B + cx % B) * S
                         if g_start[col] == g_start[col + S]:
+                            continue
+                        if not (every or axes_overlap_box(ux, uy, qcx, qcy, hl, hw, x0, x1, y0, y1)):
                             continue
                         if cancels_in_box(e, ea, eb, tv_start, tv, col_box, col // S):
                             continue
