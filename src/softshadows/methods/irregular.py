@@ -422,6 +422,40 @@ def _pairs_by_bin(counts, pair_bin, n_bins):
     return start, item[order]
 
 
+@kernel
+def deal_bins(bin_start, g_start, cells_per_bin, nslot):
+    """Bins dealt to ``nslot`` threads by estimated work (items x samples of the bin), largest
+    first, each to the least loaded thread (LPT): (bins in thread order, start of each thread's
+    run). Each bin's own computation, and so V, does not depend on the dealing."""
+    nb = bin_start.shape[0] - 1
+    work = np.empty(nb)
+    for bi in range(nb):
+        ns = g_start[(bi + 1) * cells_per_bin] - g_start[bi * cells_per_bin]
+        work[bi] = (bin_start[bi + 1] - bin_start[bi]) * (ns + 1.0)
+    rank = np.argsort(-work, kind="mergesort")
+    load = np.zeros(nslot)
+    slot_of = np.empty(nb, np.int64)
+    cnt = np.zeros(nslot + 1, np.int64)
+    for q in range(nb):
+        bi = rank[q]
+        k = 0
+        for i in range(1, nslot):
+            if load[i] < load[k]:
+                k = i
+        load[k] += work[bi]
+        slot_of[bi] = k
+        cnt[k + 1] += 1
+    for i in range(nslot):
+        cnt[i + 1] += cnt[i]
+    fill = cnt[:-1].copy()
+    order = np.empty(nb, np.int64)
+    for q in range(nb):
+        bi = rank[q]
+        order[fill[slot_of[bi]]] = bi
+        fill[slot_of[bi]] += 1
+    return order, cnt
+
+
 @kernel(inline=True)
 def _tie(dx, dy):
     return dy > 0.0 or (dy == 0.0 and dx > 0.0)
@@ -451,12 +485,13 @@ def _umbra_kernel(
     bin_items,
     umbra,
     tests,
-    nslot,
+    bin_order,
+    slot_start,
 ):
-    nb = bin_start.shape[0] - 1
     kf = slice_scale(dlo, dhi, S)
-    for slot in prange(nslot):  # bins dealt round-robin: shadowed bins are clustered
-        for bi in range(slot, nb, nslot):
+    for slot in prange(slot_start.shape[0] - 1):  # bins dealt by deal_bins: shadowed bins are clustered
+        for q in range(slot_start[slot], slot_start[slot + 1]):
+            bi = bin_order[q]
             by = bi // nbx
             bx = bi % nbx
             ntest = 0
@@ -571,7 +606,7 @@ def count_umbrae(grid: SampleGrid, verts, faces, counted, center) -> tuple[np.nd
         bitems,
         umbra,
         tests,
-        numba.get_num_threads(),
+        *deal_bins(bstart, grid.start, grid.bins * grid.bins * grid.slices, numba.get_num_threads()),
     )
     return umbra, {
         "umbra_triangles": int(valid.sum()),
@@ -1247,17 +1282,18 @@ def _penumbra_kernel(
     tests,
     hits,
     evals,
-    nslot,
+    bin_order,
+    slot_start,
     max_col,
 ):
-    nb = bin_start.shape[0] - 1
     l, r, b, t = vp[VP_L], vp[VP_R], vp[VP_B], vp[VP_T]
     cw = (r - l) / gx
     ch = (t - b) / gy
     rad_s = radius * (1.0 + _SLACK)
     kf = slice_scale(dlo, dhi, S)
-    for slot in prange(nslot):  # bins dealt round-robin: shadowed bins are clustered
-        for bi in range(slot, nb, nslot):
+    for slot in prange(slot_start.shape[0] - 1):  # bins dealt by deal_bins: shadowed bins are clustered
+        for q in range(slot_start[slot], slot_start[slot + 1]):
+            bi = bin_order[q]
             by = bi // nbx
             bx = bi % nbx
             buf = np.zeros((4, 8))
@@ -1413,7 +1449,7 @@ def accumulate_penumbrae(
         tests,
         hits,
         evals,
-        numba.get_num_threads(),
+        *deal_bins(bins[0], grid.start, grid.bins * grid.bins * grid.slices, numba.get_num_threads()),
         int(np.diff(grid.start[:: grid.slices]).max()) if n else 0,
     )
     return pen, {
