@@ -1242,141 +1242,6 @@ def _seg_box_dist(ax, ay, bx, by, x0, x1, y0, y1):
     return max(np.sqrt(qx * qx + qy * qy) - hd, 0.0)
 
 
-@kernel
-def _penumbra_bin(
-    bi,
-    wc2,
-    col_box,
-    g_start,
-    gx,
-    gy,
-    B,
-    nbx,
-    S,
-    dlo,
-    dhi,
-    dmax,
-    bin_maxd,
-    vp,
-    shape,
-    rw,
-    six,
-    siy,
-    sinv,
-    u,
-    v,
-    radius,
-    hu,
-    hv,
-    qd,
-    ea,
-    eb,
-    tv_start,
-    tv,
-    bin_start,
-    bin_items,
-    per_bin,
-    wedge,
-    count_only,
-    pen,
-    frags,
-    tests,
-    hits,
-    evals,
-    max_col,
-):
-    """Steps (c)-(d) for screen bin ``bi``: its quads' fragments, the samples they test and the
-    exact terms, added into ``pen``; the bin's counts into frags / tests / hits / evals."""
-    l, r, b, t = vp[VP_L], vp[VP_R], vp[VP_B], vp[VP_T]
-    cw = (r - l) / gx
-    ch = (t - b) / gy
-    rad_s = radius * (1.0 + _SLACK)
-    kf = slice_scale(dlo, dhi, S)
-    by = bi // nbx
-    bx = bi % nbx
-    buf = np.zeros((4, 8))
-    cand = np.empty(max_col, np.int64)
-    keep = np.empty(max_col, np.int8)
-    bx0, bx1, by0, by1 = _bin_box(vp, gx, gy, B, bx, by)
-    bc2 = box_corner2(bx0, bx1, by0, by1)
-    nf = 0
-    nt = 0
-    nh = 0
-    nev = 0
-    for kk in range(bin_start[bi], bin_start[bi + 1]):
-        e = bin_items[kk]
-        R = quad_half_width(qd, e, radius, bin_maxd[bi], bc2) if per_bin else quad_half_width(qd, e, radius, dmax, wc2)
-        # per edge: its image-plane segment, stretch and the inverse of (dmin - r) of the
-        # per-sample bound below
-        qax, qay, qbx, qby, dmin, q5 = qd[e, 0], qd[e, 1], qd[e, 2], qd[e, 3], qd[e, 4], qd[e, 5]
-        dr = dmin - radius if dmin > radius else 0.0
-        inv_dr = 1.0 / dr if dr > 0.0 else 0.0
-        if R <= 0.0:
-            continue  # no fragment
-        every = not np.isfinite(R)  # the light's sphere reaches the edge: every cell
-        ux, uy, qcx, qcy, hl, hw = quad_axes(qd, e, 1.0 if every else R)
-        sdx, sdy = qbx - qax, qby - qay
-        s_uu = sdx * sdx + sdy * sdy
-        s_iuu = 1.0 / s_uu if s_uu > 0.0 else 0.0
-        for cy in range(by * B, min(by * B + B, gy)):
-            y1 = t - cy * ch
-            y0 = y1 - ch
-            for cx in range(bx * B, min(bx * B + B, gx)):
-                x0 = l + cx * cw
-                x1 = x0 + cw
-                col = (bi * B * B + (cy % B) * B + cx % B) * S
-                if g_start[col] == g_start[col + S]:
-                    continue
-                if not (every or axes_overlap_box(ux, uy, qcx, qcy, hl, hw, x0, x1, y0, y1)):
-                    continue
-                if cancels_in_box(e, ea, eb, tv_start, tv, col_box, col // S):
-                    continue
-                nf += 1
-                s0 = 0
-                if wedge and dmin > radius:
-                    # the wedge enters this column at the distance where its angular radius
-                    # reaches the column: r (1/(dmin - r) - 1/D) * stretch >= dist(cell, edge)
-                    dc = _seg_box_dist(qax, qay, qbx, qby, x0, x1, y0, y1)
-                    inv = 1.0 / (dmin - radius) - dc / ((1.0 + max(q5, bc2)) * radius) / (1.0 + _SLACK)
-                    if inv <= 0.0:
-                        continue
-                    s0 = slice_of((1.0 / inv) * (1.0 - _SLACK), dlo, kf, S)
-                j0, j1 = g_start[col + s0], g_start[col + S]
-                nt += j1 - j0
-                if count_only:
-                    continue
-                # the same bound at each sample itself: its image-plane distance to the
-                # edge's image against the angular radius at its own distance (stretch
-                # from its own off-axis angle and the edge's endpoints); branch-free, the
-                # survivors' indices compacted into ``cand``
-                m = 0
-                if dr > 0.0:
-                    for j in range(j0, j1):
-                        px, py = six[j], siy[j]
-                        rs = (1.0 + max(q5, px * px + py * py)) * rad_s * (inv_dr - sinv[j]) + 1e-12
-                        tt = min(max(((px - qax) * sdx + (py - qay) * sdy) * s_iuu, 0.0), 1.0)
-                        ox, oy = qax + tt * sdx - px, qay + tt * sdy - py
-                        keep[j - j0] = 1 - np.int8((rs < 0.0) | (ox * ox + oy * oy > rs * rs))
-                    for i in range(j1 - j0):
-                        cand[m] = j0 + i
-                        m += keep[i]
-                else:
-                    for j in range(j0, j1):
-                        cand[m] = j
-                        m += 1
-                nev += m
-                for i in range(m):
-                    j = cand[i]
-                    c = sample_edge_term(shape, rw, j, u, v, radius, hu, hv, e, ea, eb, tv_start, tv, buf)
-                    if c != 0.0:
-                        nh += 1
-                        pen[j] += c
-    frags[bi] = nf
-    tests[bi] = nt
-    hits[bi] = nh
-    evals[bi] = nev
-
-
 @kernel(parallel=True)
 def _penumbra_kernel(
     wc2,
@@ -1421,52 +1286,101 @@ def _penumbra_kernel(
     slot_start,
     max_col,
 ):
-    """One thread per run of bins dealt by deal_bins; the body is a plain kernel (compiled once,
-    outside the parfor passes)."""
-    for slot in prange(slot_start.shape[0] - 1):
+    l, r, b, t = vp[VP_L], vp[VP_R], vp[VP_B], vp[VP_T]
+    cw = (r - l) / gx
+    ch = (t - b) / gy
+    rad_s = radius * (1.0 + _SLACK)
+    kf = slice_scale(dlo, dhi, S)
+    for slot in prange(slot_start.shape[0] - 1):  # bins dealt by deal_bins: shadowed bins are clustered
         for q in range(slot_start[slot], slot_start[slot + 1]):
-            _penumbra_bin(
-                np.int64(bin_order[q]),
-                wc2,
-                col_box,
-                g_start,
-                gx,
-                gy,
-                B,
-                nbx,
-                S,
-                dlo,
-                dhi,
-                dmax,
-                bin_maxd,
-                vp,
-                shape,
-                rw,
-                six,
-                siy,
-                sinv,
-                u,
-                v,
-                radius,
-                hu,
-                hv,
-                qd,
-                ea,
-                eb,
-                tv_start,
-                tv,
-                bin_start,
-                bin_items,
-                per_bin,
-                wedge,
-                count_only,
-                pen,
-                frags,
-                tests,
-                hits,
-                evals,
-                max_col,
-            )
+            bi = bin_order[q]
+            by = bi // nbx
+            bx = bi % nbx
+            buf = np.zeros((4, 8))
+            cand = np.empty(max_col, np.int64)
+            keep = np.empty(max_col, np.int8)
+            bx0, bx1, by0, by1 = _bin_box(vp, gx, gy, B, bx, by)
+            bc2 = box_corner2(bx0, bx1, by0, by1)
+            nf = 0
+            nt = 0
+            nh = 0
+            nev = 0
+            for kk in range(bin_start[bi], bin_start[bi + 1]):
+                e = bin_items[kk]
+                R = (
+                    quad_half_width(qd, e, radius, bin_maxd[bi], bc2)
+                    if per_bin
+                    else quad_half_width(qd, e, radius, dmax, wc2)
+                )
+                # per edge: its image-plane segment, stretch and the inverse of (dmin - r) of the
+                # per-sample bound below
+                qax, qay, qbx, qby, dmin, q5 = qd[e, 0], qd[e, 1], qd[e, 2], qd[e, 3], qd[e, 4], qd[e, 5]
+                dr = dmin - radius if dmin > radius else 0.0
+                inv_dr = 1.0 / dr if dr > 0.0 else 0.0
+                if R <= 0.0:
+                    continue  # no fragment
+                every = not np.isfinite(R)  # the light's sphere reaches the edge: every cell
+                ux, uy, qcx, qcy, hl, hw = quad_axes(qd, e, 1.0 if every else R)
+                sdx, sdy = qbx - qax, qby - qay
+                s_uu = sdx * sdx + sdy * sdy
+                s_iuu = 1.0 / s_uu if s_uu > 0.0 else 0.0
+                for cy in range(by * B, min(by * B + B, gy)):
+                    y1 = t - cy * ch
+                    y0 = y1 - ch
+                    for cx in range(bx * B, min(bx * B + B, gx)):
+                        x0 = l + cx * cw
+                        x1 = x0 + cw
+                        col = (bi * B * B + (cy % B) * B + cx % B) * S
+                        if g_start[col] == g_start[col + S]:
+                            continue
+                        if not (every or axes_overlap_box(ux, uy, qcx, qcy, hl, hw, x0, x1, y0, y1)):
+                            continue
+                        if cancels_in_box(e, ea, eb, tv_start, tv, col_box, col // S):
+                            continue
+                        nf += 1
+                        s0 = 0
+                        if wedge and dmin > radius:
+                            # the wedge enters this column at the distance where its angular radius
+                            # reaches the column: r (1/(dmin - r) - 1/D) * stretch >= dist(cell, edge)
+                            dc = _seg_box_dist(qax, qay, qbx, qby, x0, x1, y0, y1)
+                            inv = 1.0 / (dmin - radius) - dc / ((1.0 + max(q5, bc2)) * radius) / (1.0 + _SLACK)
+                            if inv <= 0.0:
+                                continue
+                            s0 = slice_of((1.0 / inv) * (1.0 - _SLACK), dlo, kf, S)
+                        j0, j1 = g_start[col + s0], g_start[col + S]
+                        nt += j1 - j0
+                        if count_only:
+                            continue
+                        # the same bound at each sample itself: its image-plane distance to the
+                        # edge's image against the angular radius at its own distance (stretch
+                        # from its own off-axis angle and the edge's endpoints); branch-free, the
+                        # survivors' indices compacted into ``cand``
+                        m = 0
+                        if dr > 0.0:
+                            for j in range(j0, j1):
+                                px, py = six[j], siy[j]
+                                rs = (1.0 + max(q5, px * px + py * py)) * rad_s * (inv_dr - sinv[j]) + 1e-12
+                                tt = min(max(((px - qax) * sdx + (py - qay) * sdy) * s_iuu, 0.0), 1.0)
+                                ox, oy = qax + tt * sdx - px, qay + tt * sdy - py
+                                keep[j - j0] = 1 - np.int8((rs < 0.0) | (ox * ox + oy * oy > rs * rs))
+                            for i in range(j1 - j0):
+                                cand[m] = j0 + i
+                                m += keep[i]
+                        else:
+                            for j in range(j0, j1):
+                                cand[m] = j
+                                m += 1
+                        nev += m
+                        for i in range(m):
+                            j = cand[i]
+                            c = sample_edge_term(shape, rw, j, u, v, radius, hu, hv, e, ea, eb, tv_start, tv, buf)
+                            if c != 0.0:
+                                nh += 1
+                                pen[j] += c
+            frags[bi] = nf
+            tests[bi] = nt
+            hits[bi] = nh
+            evals[bi] = nev
 
 
 def _light_params(light):
