@@ -70,11 +70,18 @@ class SampleGrid:
 
 
 @kernel(inline=True)
-def slice_of(d, dlo, dhi, slices):
-    """Depth slice of distance ``d`` (geometric slicing between dlo and dhi), clamped."""
+def slice_scale(dlo, dhi, slices):
+    """The factor of :func:`slice_of`: slices / log(dhi / dlo)."""
+    return slices / np.log(dhi / dlo)
+
+
+@kernel(inline=True)
+def slice_of(d, dlo, kf, slices):
+    """Depth slice of distance ``d`` (geometric slicing between dlo and dhi; ``kf`` =
+    :func:`slice_scale`), clamped; non-decreasing in ``d``."""
     if slices == 1 or d <= dlo:
         return 0
-    s = int(np.floor(slices * np.log(d / dlo) / np.log(dhi / dlo)))
+    s = int(np.floor(np.log(d / dlo) * kf))
     if s < 0:
         return 0
     if s >= slices:
@@ -86,6 +93,7 @@ def slice_of(d, dlo, dhi, slices):
 def _sample_keys(pts, vp, gx, gy, B, nbx, slices, dlo, dhi, near, ix, iy, dist, key):
     n = pts.shape[0]
     l, r, b, t = vp[VP_L], vp[VP_R], vp[VP_B], vp[VP_T]
+    kf = slice_scale(dlo, dhi, slices)
     for k in prange(n):
         dx = pts[k, 0] - vp[VP_ORIGIN]
         dy = pts[k, 1] - vp[VP_ORIGIN + 1]
@@ -108,7 +116,7 @@ def _sample_keys(pts, vp, gx, gy, B, nbx, slices, dlo, dhi, near, ix, iy, dist, 
         cy = int(min(max(np.floor((t - yy) / (t - b) * gy), 0.0), gy - 1.0))
         bi = (cy // B) * nbx + cx // B
         loc = (cy % B) * B + cx % B
-        key[k] = (bi * B * B + loc) * slices + slice_of(d, dlo, dhi, slices)
+        key[k] = (bi * B * B + loc) * slices + slice_of(d, dlo, kf, slices)
 
 
 @kernel
@@ -414,6 +422,40 @@ def _pairs_by_bin(counts, pair_bin, n_bins):
     return start, item[order]
 
 
+@kernel
+def deal_bins(bin_start, g_start, cells_per_bin, nslot):
+    """Bins dealt to ``nslot`` threads by estimated work (items x samples of the bin), largest
+    first, each to the least loaded thread (LPT): (bins in thread order, start of each thread's
+    run). Each bin's own computation, and so V, does not depend on the dealing."""
+    nb = bin_start.shape[0] - 1
+    work = np.empty(nb)
+    for bi in range(nb):
+        ns = g_start[(bi + 1) * cells_per_bin] - g_start[bi * cells_per_bin]
+        work[bi] = (bin_start[bi + 1] - bin_start[bi]) * (ns + 1.0)
+    rank = np.argsort(-work, kind="mergesort")
+    load = np.zeros(nslot)
+    slot_of = np.empty(nb, np.int64)
+    cnt = np.zeros(nslot + 1, np.int64)
+    for q in range(nb):
+        bi = rank[q]
+        k = 0
+        for i in range(1, nslot):
+            if load[i] < load[k]:
+                k = i
+        load[k] += work[bi]
+        slot_of[bi] = k
+        cnt[k + 1] += 1
+    for i in range(nslot):
+        cnt[i + 1] += cnt[i]
+    fill = cnt[:-1].copy()
+    order = np.empty(nb, np.int64)
+    for q in range(nb):
+        bi = rank[q]
+        order[fill[slot_of[bi]]] = bi
+        fill[slot_of[bi]] += 1
+    return order, cnt
+
+
 @kernel(inline=True)
 def _tie(dx, dy):
     return dy > 0.0 or (dy == 0.0 and dx > 0.0)
@@ -443,11 +485,13 @@ def _umbra_kernel(
     bin_items,
     umbra,
     tests,
-    nslot,
+    bin_order,
+    slot_start,
 ):
-    nb = bin_start.shape[0] - 1
-    for slot in prange(nslot):  # bins dealt round-robin: shadowed bins are clustered
-        for bi in range(slot, nb, nslot):
+    kf = slice_scale(dlo, dhi, S)
+    for slot in prange(slot_start.shape[0] - 1):  # bins dealt by deal_bins: shadowed bins are clustered
+        for q in range(slot_start[slot], slot_start[slot + 1]):
+            bi = bin_order[q]
             by = bi // nbx
             bx = bi % nbx
             ntest = 0
@@ -471,7 +515,7 @@ def _umbra_kernel(
                 cx1 = min(cx1, bx * B + B - 1)
                 cy0 = max(cy0, by * B)
                 cy1 = min(cy1, by * B + B - 1)
-                s0 = slice_of(trid[f], dlo, dhi, S)
+                s0 = slice_of(trid[f], dlo, kf, S)
                 i0, i1, i2 = faces[f, 0], faces[f, 1], faces[f, 2]
                 nx = (verts[i1, 1] - verts[i0, 1]) * (verts[i2, 2] - verts[i0, 2]) - (verts[i1, 2] - verts[i0, 2]) * (
                     verts[i2, 1] - verts[i0, 1]
@@ -562,7 +606,7 @@ def count_umbrae(grid: SampleGrid, verts, faces, counted, center) -> tuple[np.nd
         bitems,
         umbra,
         tests,
-        numba.get_num_threads(),
+        *deal_bins(bstart, grid.start, grid.bins * grid.bins * grid.slices, numba.get_num_threads()),
     )
     return umbra, {
         "umbra_triangles": int(valid.sum()),
@@ -622,6 +666,7 @@ def fold_candidates(flat, counted, lo, hi, center, radius) -> np.ndarray:
 
     h = np.minimum(plane_h(f0), plane_h(f1))
     grazing = (dmin <= radius) | (h * dmin <= radius * dfar * (1.0 + 1e-6) + 1e-12)
+    two, f0, f1 = two[grazing], f0[grazing], f1[grazing]  # the side test only where it can matter
     corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
 
     def side(f):
@@ -634,7 +679,7 @@ def fold_candidates(flat, counted, lo, hi, center, radius) -> np.ndarray:
 
     s0, s1 = side(f0), side(f1)
     out = np.zeros(adj.n_edges, bool)
-    out[two[grazing & ((s0 == 0) | (s1 == 0) | (s0 != s1))]] = True
+    out[two[(s0 == 0) | (s1 == 0) | (s0 != s1)]] = True
     return out
 
 
@@ -760,13 +805,9 @@ def quad_half_width(qd, e, radius, dmax, corner2):
 
 
 @kernel(inline=True)
-def quad_overlaps_box(qd, e, R, x0, x1, y0, y1):
-    """Separating-axis test of the quad (segment A'B' grown by R along and across it) against an
-    image-plane box."""
-    if R <= 0.0:
-        return False
-    if not np.isfinite(R):
-        return True
+def quad_axes(qd, e, R):
+    """The quad of edge e with half-width R (finite, > 0) as a centred box on its own axes: (unit
+    direction ux, uy; centre cx, cy; half-length, half-width)."""
     ax, ay, bx, by = qd[e, 0], qd[e, 1], qd[e, 2], qd[e, 3]
     dx, dy = bx - ax, by - ay
     ln = np.sqrt(dx * dx + dy * dy)
@@ -774,9 +815,12 @@ def quad_overlaps_box(qd, e, R, x0, x1, y0, y1):
         ux, uy = dx / ln, dy / ln
     else:
         ux, uy = 1.0, 0.0
-    cx, cy = 0.5 * (ax + bx), 0.5 * (ay + by)
-    hl = 0.5 * ln + R
-    hw = R
+    return ux, uy, 0.5 * (ax + bx), 0.5 * (ay + by), 0.5 * ln + R, R
+
+
+@kernel(inline=True)
+def axes_overlap_box(ux, uy, cx, cy, hl, hw, x0, x1, y0, y1):
+    """Separating-axis test of a quad given by :func:`quad_axes` against an image-plane box."""
     hx, hy = 0.5 * (x1 - x0), 0.5 * (y1 - y0)
     mx, my = 0.5 * (x0 + x1), 0.5 * (y0 + y1)
     # box axes
@@ -788,6 +832,18 @@ def quad_overlaps_box(qd, e, R, x0, x1, y0, y1):
     if abs((mx - cx) * ux + (my - cy) * uy) > hl + hx * abs(ux) + hy * abs(uy):
         return False
     return abs(-(mx - cx) * uy + (my - cy) * ux) <= hw + hx * abs(uy) + hy * abs(ux)
+
+
+@kernel(inline=True)
+def quad_overlaps_box(qd, e, R, x0, x1, y0, y1):
+    """Separating-axis test of the quad (segment A'B' grown by R along and across it) against an
+    image-plane box."""
+    if R <= 0.0:
+        return False
+    if not np.isfinite(R):
+        return True
+    ux, uy, cx, cy, hl, hw = quad_axes(qd, e, R)
+    return axes_overlap_box(ux, uy, cx, cy, hl, hw, x0, x1, y0, y1)
 
 
 @kernel(inline=True)
@@ -807,10 +863,14 @@ def _bin_box(vp, gx, gy, B, bx, by):
     return x0, x1, y0, y1
 
 
-@kernel
-def _count_quad_bins(qd, radius, dmax, corner2, bin_maxd, per_bin, vp, gx, gy, B, nbx, nby, counts):
-    for e in range(qd.shape[0]):
+@kernel(parallel=True)
+def _quad_bins(qd, radius, dmax, corner2, bin_maxd, per_bin, vp, gx, gy, B, nbx, fill, offs, out):
+    """The screen bins quad e overlaps (refined per bin with ``per_bin``): their number into
+    ``out[e]`` (``fill`` False), or the bins themselves into ``out[offs[e]:offs[e + 1]]`` (``fill``
+    True, after a counting pass with the same arguments). One pass of the same loop for both."""
+    for e in prange(qd.shape[0]):
         n = 0
+        k = offs[e] if fill else 0
         if qd[e, 6] > 0.0:
             Rg = quad_half_width(qd, e, radius, dmax, corner2)
             if Rg > 0.0:
@@ -833,37 +893,11 @@ def _count_quad_bins(qd, radius, dmax, corner2, bin_maxd, per_bin, vp, gx, gy, B
                             if per_bin:
                                 R = quad_half_width(qd, e, radius, bin_maxd[bi], box_corner2(bx0, bx1, by0, by1))
                             if quad_overlaps_box(qd, e, R, bx0, bx1, by0, by1):
+                                if fill and k + n < offs[e + 1]:
+                                    out[k + n] = bi
                                 n += 1
-        counts[e] = n
-
-
-@kernel
-def _fill_quad_bins(qd, radius, dmax, corner2, bin_maxd, per_bin, vp, gx, gy, B, nbx, nby, offs, pair_bin):
-    for e in range(qd.shape[0]):
-        k = offs[e]
-        if k == offs[e + 1]:
-            continue
-        Rg = quad_half_width(qd, e, radius, dmax, corner2)
-        if np.isfinite(Rg):
-            x0 = min(qd[e, 0], qd[e, 2]) - Rg
-            x1 = max(qd[e, 0], qd[e, 2]) + Rg
-            y0 = min(qd[e, 1], qd[e, 3]) - Rg
-            y1 = max(qd[e, 1], qd[e, 3]) + Rg
-            cx0, cx1, cy0, cy1 = _cell_range(x0, x1, y0, y1, vp, gx, gy)
-        else:
-            cx0, cx1, cy0, cy1 = 0, gx - 1, 0, gy - 1
-        for by in range(cy0 // B, cy1 // B + 1):
-            for bx in range(cx0 // B, cx1 // B + 1):
-                bi = by * nbx + bx
-                if bin_maxd[bi] <= 0.0:
-                    continue
-                bx0, bx1, by0, by1 = _bin_box(vp, gx, gy, B, bx, by)
-                R = Rg
-                if per_bin:
-                    R = quad_half_width(qd, e, radius, bin_maxd[bi], box_corner2(bx0, bx1, by0, by1))
-                if quad_overlaps_box(qd, e, R, bx0, bx1, by0, by1) and k < offs[e + 1]:
-                    pair_bin[k] = bi
-                    k += 1
+        if not fill:
+            out[e] = n
 
 
 def window_corner2(vp) -> float:
@@ -901,13 +935,12 @@ def bin_penumbra_quads(grid: SampleGrid, qd: np.ndarray, light_radius: float, pe
         grid.gy,
         grid.bins,
         grid.nbx,
-        grid.nby,
     )
-    _count_quad_bins(*args, counts)
     offs = np.zeros(E + 1, np.int64)
+    _quad_bins(*args, False, offs, counts)
     np.cumsum(counts, out=offs[1:])
     pair_bin = np.empty(offs[-1], np.int64)
-    _fill_quad_bins(*args, offs, pair_bin)
+    _quad_bins(*args, True, offs, pair_bin)
     return _pairs_by_bin(counts, pair_bin, grid.n_bins)
 
 
@@ -955,24 +988,19 @@ def _clip_poly(buf, src, n, a, b, c, dst):
     return m
 
 
-#: per-sample row of the penumbra pass (:func:`sample_rows`): image-plane x, y, x^2 + y^2, 1 / distance
-#: to the light centre, p (3), w (3: unit, from p toward the light's plane), L (distance to that plane),
-#: c - p (3)
-_RX, _RY, _RR2, _RINV, _RP, _RW, _RL, _RC, _ROW = 0, 1, 2, 3, 4, 7, 10, 11, 14
+#: per-sample row of the penumbra pass (:func:`sample_rows`): p (3), w (3: unit, from p toward the
+#: light's plane), L (distance to that plane), c - p (3)
+_RP, _RW, _RL, _RC, _ROW = 0, 3, 6, 7, 10
 
 
 @kernel(parallel=True)
-def sample_rows(shape, center, nrm_l, sp, six, siy, sdist):
-    """Per sorted sample, everything the penumbra pass reads, in one contiguous row (layout: _R*):
-    the light frame (w: the facing disk's normal for the sphere, the rectangle's normal for the
-    rectangle; L; c - p) and the image-plane terms of the per-sample bound."""
+def sample_rows(shape, center, nrm_l, sp):
+    """Per sorted sample, everything the term evaluation reads, in one contiguous row (layout: _R*):
+    p and the light frame (w: the facing disk's normal for the sphere, the rectangle's normal for
+    the rectangle; L; c - p). The per-sample bound reads the grid's own image-plane arrays."""
     n = sp.shape[0]
     rows = np.empty((n, _ROW))
     for j in prange(n):
-        rows[j, _RX] = six[j]
-        rows[j, _RY] = siy[j]
-        rows[j, _RR2] = six[j] * six[j] + siy[j] * siy[j]
-        rows[j, _RINV] = 1.0 / sdist[j]
         rows[j, _RP] = sp[j, 0]
         rows[j, _RP + 1] = sp[j, 1]
         rows[j, _RP + 2] = sp[j, 2]
@@ -1090,6 +1118,12 @@ def _rect_term(rw, j, lu, lv, hu, hv, rax, ray, raz, rbx, rby, rbz, nu, nv, nc, 
             dax, day = ix, iy
         else:
             dbx, dby = ix, iy
+    if ha > 0.0 and hb > 0.0:
+        # both projected endpoints beyond one side of the rectangle: so is the whole region beyond
+        # the edge inside the angle (their hull plus the rays from the centre through them)
+        mu, mv = hu * (1.0 + _SLACK), hv * (1.0 + _SLACK)
+        if (dax > mu and dbx > mu) or (dax < -mu and dbx < -mu) or (day > mv and dby > mv) or (day < -mv and dby < -mv):
+            return 0.0
     cr = dax * dby - day * dbx
     if cr == 0.0:
         return 0.0
@@ -1196,15 +1230,6 @@ def cancels_in_box(e, ea, eb, tv_start, tv, box, c):
 
 
 @kernel(inline=True)
-def _point_seg_dist2(px, py, ax, ay, bx, by):
-    dx, dy = bx - ax, by - ay
-    uu = dx * dx + dy * dy
-    t = 0.0 if uu == 0.0 else min(max(((px - ax) * dx + (py - ay) * dy) / uu, 0.0), 1.0)
-    qx, qy = ax + t * dx - px, ay + t * dy - py
-    return qx * qx + qy * qy
-
-
-@kernel(inline=True)
 def _seg_box_dist(ax, ay, bx, by, x0, x1, y0, y1):
     """Lower bound of the distance between segment AB and a box: distance to the box centre minus
     its half diagonal (>= 0)."""
@@ -1234,6 +1259,9 @@ def _penumbra_kernel(
     vp,
     shape,
     rw,
+    six,
+    siy,
+    sinv,
     u,
     v,
     radius,
@@ -1254,19 +1282,23 @@ def _penumbra_kernel(
     tests,
     hits,
     evals,
-    nslot,
+    bin_order,
+    slot_start,
     max_col,
 ):
-    nb = bin_start.shape[0] - 1
     l, r, b, t = vp[VP_L], vp[VP_R], vp[VP_B], vp[VP_T]
     cw = (r - l) / gx
     ch = (t - b) / gy
-    for slot in prange(nslot):  # bins dealt round-robin: shadowed bins are clustered
-        for bi in range(slot, nb, nslot):
+    rad_s = radius * (1.0 + _SLACK)
+    kf = slice_scale(dlo, dhi, S)
+    for slot in prange(slot_start.shape[0] - 1):  # bins dealt by deal_bins: shadowed bins are clustered
+        for q in range(slot_start[slot], slot_start[slot + 1]):
+            bi = bin_order[q]
             by = bi // nbx
             bx = bi % nbx
             buf = np.zeros((4, 8))
             cand = np.empty(max_col, np.int64)
+            keep = np.empty(max_col, np.int8)
             bx0, bx1, by0, by1 = _bin_box(vp, gx, gy, B, bx, by)
             bc2 = box_corner2(bx0, bx1, by0, by1)
             nf = 0
@@ -1285,16 +1317,23 @@ def _penumbra_kernel(
                 qax, qay, qbx, qby, dmin, q5 = qd[e, 0], qd[e, 1], qd[e, 2], qd[e, 3], qd[e, 4], qd[e, 5]
                 dr = dmin - radius if dmin > radius else 0.0
                 inv_dr = 1.0 / dr if dr > 0.0 else 0.0
+                if R <= 0.0:
+                    continue  # no fragment
+                every = not np.isfinite(R)  # the light's sphere reaches the edge: every cell
+                ux, uy, qcx, qcy, hl, hw = quad_axes(qd, e, 1.0 if every else R)
+                sdx, sdy = qbx - qax, qby - qay
+                s_uu = sdx * sdx + sdy * sdy
+                s_iuu = 1.0 / s_uu if s_uu > 0.0 else 0.0
                 for cy in range(by * B, min(by * B + B, gy)):
                     y1 = t - cy * ch
                     y0 = y1 - ch
                     for cx in range(bx * B, min(bx * B + B, gx)):
                         x0 = l + cx * cw
                         x1 = x0 + cw
-                        if not quad_overlaps_box(qd, e, R, x0, x1, y0, y1):
-                            continue
                         col = (bi * B * B + (cy % B) * B + cx % B) * S
                         if g_start[col] == g_start[col + S]:
+                            continue
+                        if not (every or axes_overlap_box(ux, uy, qcx, qcy, hl, hw, x0, x1, y0, y1)):
                             continue
                         if cancels_in_box(e, ea, eb, tv_start, tv, col_box, col // S):
                             continue
@@ -1307,7 +1346,7 @@ def _penumbra_kernel(
                             inv = 1.0 / (dmin - radius) - dc / ((1.0 + max(q5, bc2)) * radius) / (1.0 + _SLACK)
                             if inv <= 0.0:
                                 continue
-                            s0 = slice_of((1.0 / inv) * (1.0 - _SLACK), dlo, dhi, S)
+                            s0 = slice_of((1.0 / inv) * (1.0 - _SLACK), dlo, kf, S)
                         j0, j1 = g_start[col + s0], g_start[col + S]
                         nt += j1 - j0
                         if count_only:
@@ -1319,11 +1358,14 @@ def _penumbra_kernel(
                         m = 0
                         if dr > 0.0:
                             for j in range(j0, j1):
-                                sj = 1.0 + max(q5, rw[j, _RR2])
-                                rs = sj * radius * (inv_dr - rw[j, _RINV]) * (1.0 + _SLACK) + 1e-12
-                                d2 = _point_seg_dist2(rw[j, _RX], rw[j, _RY], qax, qay, qbx, qby)
-                                cand[m] = j
-                                m += 1 - int((rs < 0.0) | (d2 > rs * rs))
+                                px, py = six[j], siy[j]
+                                rs = (1.0 + max(q5, px * px + py * py)) * rad_s * (inv_dr - sinv[j]) + 1e-12
+                                tt = min(max(((px - qax) * sdx + (py - qay) * sdy) * s_iuu, 0.0), 1.0)
+                                ox, oy = qax + tt * sdx - px, qay + tt * sdy - py
+                                keep[j - j0] = 1 - np.int8((rs < 0.0) | (ox * ox + oy * oy > rs * rs))
+                            for i in range(j1 - j0):
+                                cand[m] = j0 + i
+                                m += keep[i]
                         else:
                             for j in range(j0, j1):
                                 cand[m] = j
@@ -1367,7 +1409,7 @@ def accumulate_penumbrae(
     frags, tests, hits = np.zeros(nb, np.int64), np.zeros(nb, np.int64), np.zeros(nb, np.int64)
     evals = np.zeros(nb, np.int64)
     rad = radius if shape == 1 else bound_r
-    rw = sample_rows(shape, np.asarray(light.center, float), nrm_l, grid.pos, grid.ix, grid.iy, grid.dist)
+    rw = sample_rows(shape, np.asarray(light.center, float), nrm_l, grid.pos)
     _penumbra_kernel(
         window_corner2(grid.vp),
         grid.col_box,
@@ -1384,6 +1426,9 @@ def accumulate_penumbrae(
         grid.vp,
         shape,
         rw,
+        grid.ix,
+        grid.iy,
+        1.0 / grid.dist,
         u,
         v,
         rad,
@@ -1404,7 +1449,7 @@ def accumulate_penumbrae(
         tests,
         hits,
         evals,
-        numba.get_num_threads(),
+        *deal_bins(bins[0], grid.start, grid.bins * grid.bins * grid.slices, numba.get_num_threads()),
         int(np.diff(grid.start[:: grid.slices]).max()) if n else 0,
     )
     return pen, {
