@@ -24,7 +24,7 @@ import numpy as np
 from numba import prange
 
 from .._jit import kernel
-from ..analytic import polygon_disk_area, quad_disk_area_small
+from ..analytic import disk_facing_frame, polygon_disk_area, quad_disk_area_small
 from ..errors import SoftShadowsError
 from ..raster import View, rasterize_depth, rasterize_fragments
 from ..raster.kernels import sample_bilinear, view_project
@@ -500,28 +500,16 @@ def _disk_frame(px, py, pz, rho, out):
     """The facing disk of receiver point p = (px, py, pz) (light frame, C_L at the origin):
     ``out`` = (w, e1, e2, |p|, kappa = rho/|p|, sqrt(1 + kappa^2)), w = p/|p| the disk's normal, e1, e2
     its in-plane axes (kappa: the tangent of the half-angle of the cone from p onto the disk)."""
-    hp = math.sqrt(px * px + py * py + pz * pz)
-    wx = px / hp
-    wy = py / hp
-    wz = pz / hp
-    if abs(wx) < 0.9:
-        ax, ay, az = 1.0, 0.0, 0.0
-    else:
-        ax, ay, az = 0.0, 1.0, 0.0
-    e1x, e1y, e1z = ay * wz - az * wy, az * wx - ax * wz, ax * wy - ay * wx
-    el = math.sqrt(e1x * e1x + e1y * e1y + e1z * e1z)
-    e1x /= el
-    e1y /= el
-    e1z /= el
+    wx, wy, wz, e1x, e1y, e1z, e2x, e2y, e2z, hp = disk_facing_frame(px, py, pz)
     out[0] = wx
     out[1] = wy
     out[2] = wz
     out[3] = e1x
     out[4] = e1y
     out[5] = e1z
-    out[6] = wy * e1z - wz * e1y
-    out[7] = wz * e1x - wx * e1z
-    out[8] = wx * e1y - wy * e1x
+    out[6] = e2x
+    out[7] = e2y
+    out[8] = e2z
     out[9] = hp
     out[10] = rho / hp
     out[11] = math.sqrt(1.0 + out[10] * out[10])
