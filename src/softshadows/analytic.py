@@ -5,6 +5,8 @@
   intersected with the light) / area(light).
 * :func:`disk_halfplane_visibility` — a disk light (the sphere light's facing disk) and a
   half-plane occluder: V = 1 - circular segment / disk area.
+* :func:`disk_facing_frame` — the orthonormal frame of the sphere light's disk facing a point (the
+  one construction ground truth and ``soft-shadow-map`` share).
 * :func:`polygon_disk_area` — area of a polygon intersected with a disk (exact: triangles and
   circular sectors), and :func:`disk_polygon_occluder_visibility` — a disk light and a planar
   convex polygon occluder: V = 1 - area(disk ∩ polygon projected from p onto the disk) / disk area.
@@ -17,6 +19,28 @@ import math
 import numpy as np
 
 from ._jit import kernel
+
+
+@kernel(inline=True)
+def disk_facing_frame(wx, wy, wz):
+    """The frame of the sphere light's disk facing a point p, from w = p - C_L (not normalized):
+    (w/|w|, e1, e2, |w|) as 10 floats, e1 = normalize(a x w) with a = x (or y where |w_x| >= 0.9
+    |w|), e2 = w x e1: the disk's normal and in-plane axes."""
+    wl = math.sqrt(wx * wx + wy * wy + wz * wz)
+    wx = wx / wl
+    wy = wy / wl
+    wz = wz / wl
+    if abs(wx) < 0.9:
+        ax, ay, az = 1.0, 0.0, 0.0
+    else:
+        ax, ay, az = 0.0, 1.0, 0.0
+    e1x, e1y, e1z = ay * wz - az * wy, az * wx - ax * wz, ax * wy - ay * wx
+    el = math.sqrt(e1x * e1x + e1y * e1y + e1z * e1z)
+    e1x = e1x / el
+    e1y = e1y / el
+    e1z = e1z / el
+    e2x, e2y, e2z = wy * e1z - wz * e1y, wz * e1x - wx * e1z, wx * e1y - wy * e1x
+    return wx, wy, wz, e1x, e1y, e1z, e2x, e2y, e2z, wl
 
 
 def _overlap_1d(a0, a1, b0, b1):

@@ -18,6 +18,7 @@ from typing import ClassVar
 import numpy as np
 
 from .._jit import kernel
+from ..analytic import disk_facing_frame
 from ..shading import exposure
 from .base import Method, MethodOutput, Param, register
 
@@ -201,24 +202,9 @@ def _ray_origin(px, py, pz, nx, ny, nz, off):
 
 @kernel(inline=True)
 def _disk_frame(px, py, pz, center):
-    """Unit vectors (w toward p, e1, e2) of the sphere light's disk facing p."""
-    wx, wy, wz = px - center[0], py - center[1], pz - center[2]
-    wl = np.sqrt(wx * wx + wy * wy + wz * wz)
-    wx /= wl
-    wy /= wl
-    wz /= wl
-    if abs(wx) < 0.9:
-        ax, ay, az = 1.0, 0.0, 0.0
-    else:
-        ax, ay, az = 0.0, 1.0, 0.0
-    # e1 = normalize(a x w), e2 = w x e1
-    e1x, e1y, e1z = ay * wz - az * wy, az * wx - ax * wz, ax * wy - ay * wx
-    el = np.sqrt(e1x * e1x + e1y * e1y + e1z * e1z)
-    e1x /= el
-    e1y /= el
-    e1z /= el
-    e2x, e2y, e2z = wy * e1z - wz * e1y, wz * e1x - wx * e1z, wx * e1y - wy * e1x
-    return wx, wy, wz, e1x, e1y, e1z, e2x, e2y, e2z
+    """Unit vectors (w toward p, e1, e2) of the sphere light's disk facing p (:func:`disk_facing_frame`)."""
+    f = disk_facing_frame(px - center[0], py - center[1], pz - center[2])
+    return f[0], f[1], f[2], f[3], f[4], f[5], f[6], f[7], f[8]
 
 
 @kernel(inline=True)

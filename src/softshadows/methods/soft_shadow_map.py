@@ -24,7 +24,7 @@ import numpy as np
 from numba import prange
 
 from .._jit import kernel
-from ..analytic import polygon_disk_area, quad_disk_area_small
+from ..analytic import disk_facing_frame, polygon_disk_area, quad_disk_area_small
 from ..errors import SoftShadowsError
 from ..raster import View, rasterize_depth, rasterize_fragments
 from ..raster.kernels import sample_bilinear, view_project
@@ -500,28 +500,16 @@ def _disk_frame(px, py, pz, rho, out):
     """The facing disk of receiver point p = (px, py, pz) (light frame, C_L at the origin):
     ``out`` = (w, e1, e2, |p|, kappa = rho/|p|, sqrt(1 + kappa^2)), w = p/|p| the disk's normal, e1, e2
     its in-plane axes (kappa: the tangent of the half-angle of the cone from p onto the disk)."""
-    hp = math.sqrt(px * px + py * py + pz * pz)
-    wx = px / hp
-    wy = py / hp
-    wz = pz / hp
-    if abs(wx) < 0.9:
-        ax, ay, az = 1.0, 0.0, 0.0
-    else:
-        ax, ay, az = 0.0, 1.0, 0.0
-    e1x, e1y, e1z = ay * wz - az * wy, az * wx - ax * wz, ax * wy - ay * wx
-    el = math.sqrt(e1x * e1x + e1y * e1y + e1z * e1z)
-    e1x /= el
-    e1y /= el
-    e1z /= el
+    wx, wy, wz, e1x, e1y, e1z, e2x, e2y, e2z, hp = disk_facing_frame(px, py, pz)
     out[0] = wx
     out[1] = wy
     out[2] = wz
     out[3] = e1x
     out[4] = e1y
     out[5] = e1z
-    out[6] = wy * e1z - wz * e1y
-    out[7] = wz * e1x - wx * e1z
-    out[8] = wx * e1y - wy * e1x
+    out[6] = e2x
+    out[7] = e2y
+    out[8] = e2z
     out[9] = hp
     out[10] = rho / hp
     out[11] = math.sqrt(1.0 + out[10] * out[10])
@@ -838,34 +826,47 @@ def accumulate_soft_shadow_map(
     return touched
 
 
+_HM32 = np.float32(1.0 - 2.0**-20)  # float32 row pass: corners this close to |p| go to the exact path
+_ROUND32 = 4e-6  # float32 row pass: margin (relative to |q|^2) of the inside / outside tests
+
+
 @kernel(inline=True)
 def _disk_row_pass(F, recv_depth, recv_mesh, ssm, flags, i, j0, j1, x0, x1, y0, y1, zo, pm, check_mesh, pk):
-    """One SSM row of one micro-patch for :func:`accumulate_soft_shadow_map_sphere`, branch-free and
-    without projecting the corners (no per-corner division; vectorizes). With h_c the corners'
-    :func:`_corner_heights` and d_c = |p| - h_c, a corner q projects inside the facing disk iff its
+    """One SSM row of one micro-patch for :func:`accumulate_soft_shadow_map_sphere`, branch-free, in
+    float32 arithmetic (16 vector lanes) and without projecting the corners (no per-corner division).
+    ``F``: :func:`disk_frames32` of the texels. With h_c the corners' heights w.q (as in
+    :func:`_corner_heights`) and d_c = |p| - h_c, a corner q projects inside the facing disk iff its
     distance from the axis of the cone from p onto the disk is at most kappa d_c:
     ``|q|^2 - h_c^2 <= kappa^2 d_c^2``. All four inside: the projected quadrilateral's area over
     pi rho^2 is ``A (z_R - z_O) (d1 + d3) / (2 pi kappa^2 d0 d1 d2 d3)`` (the two triangles' central
     projections: area' = t0 t1 t2 A_tri (z_R - z_O) / |p| with t_c = |p| / d_c; A the patch's
     area), which is added. Nothing hidden (adds 0): receiver not behind the patch, own mesh, or the
     patch's bounding sphere (center c, radius s) outside the cone (its distance from the axis
-    exceeds kappa (|p| - w.c) + s sqrt(1 + kappa^2)). Every other texel (the patch across the
-    cone's surface, or not wholly between p and the disk's plane) is flagged in ``flags[j - j0]``
-    for :func:`occlusion_percentage_disk`. ``pk``: per patch |q_c|^2 (4), |c|^2, s, A / (2 pi).
-    Returns how many are flagged."""
-    n = 0
+    exceeds kappa (|p| - w.c) + s sqrt(1 + kappa^2)). Both tests keep a margin of ``_ROUND32`` |q|^2
+    (many times float32's rounding of |q|^2 - h^2), so a texel is only taken as inside or missed
+    when it is so in exact arithmetic too. Every other texel (the patch near or across the cone's
+    surface, or not wholly between p and the disk's plane) is flagged in ``flags[j - j0]`` for the
+    exact float64 path. ``pk``: per patch (float32) |q_c|^2 + margin (4), |c|^2 - margin, s,
+    A / (2 pi), and x0, x1, y0, y1, z_O. Returns how many are flagged."""
     ii = np.uint64(i)
     not_check = not check_mesh
     qq0, qq1, qq2, qq3, cc, sr, ak = pk[0], pk[1], pk[2], pk[3], pk[4], pk[5], pk[6]
+    x0, x1, y0, y1, zo = pk[7], pk[8], pk[9], pk[10], pk[11]
     for jj in range(j1 - j0):
         jx = np.uint64(j0 + jj)
-        zr = np.float64(recv_depth[ii, jx])
+        zr = recv_depth[ii, jx]
         ok = (zr > zo) & (not_check | (recv_mesh[ii, jx] != pm))  # no short-circuit: it vectorizes
-        hp = F[9, ii, jx]
-        kap = F[10, ii, jx]
-        hmax = hp * (1.0 - 1e-9)
-        h0, h1, h2, h3 = _corner_heights(F, ii, jx, x0, x1, y0, y1, zo)
-        inr = (h0 > 0.0) & (h1 > 0.0) & (h2 > 0.0) & (h3 > 0.0) & (h0 < hmax) & (h1 < hmax) & (h2 < hmax) & (h3 < hmax)
+        wx = F[0, ii, jx]
+        wy = F[1, ii, jx]
+        hz = F[2, ii, jx] * zo
+        hp = F[3, ii, jx]
+        kap = F[4, ii, jx]
+        hmax = hp * _HM32
+        h0 = wx * x0 + wy * y0 + hz
+        h1 = wx * x1 + wy * y0 + hz
+        h2 = wx * x1 + wy * y1 + hz
+        h3 = wx * x0 + wy * y1 + hz
+        inr = (h0 > _F0) & (h1 > _F0) & (h2 > _F0) & (h3 > _F0) & (h0 < hmax) & (h1 < hmax) & (h2 < hmax) & (h3 < hmax)
         d0 = hp - h0
         d1 = hp - h1
         d2 = hp - h2
@@ -877,15 +878,17 @@ def _disk_row_pass(F, recv_depth, recv_mesh, ssm, flags, i, j0, j1, x0, x1, y0, 
             & (qq2 - h2 * h2 <= k2 * d2 * d2)
             & (qq3 - h3 * h3 <= k2 * d3 * d3)
         )
-        hc = 0.5 * (h0 + h2)
-        rc = kap * (hp - hc) + sr * F[11, ii, jx]
+        hc = _FH * (h0 + h2)
+        rc = kap * (hp - hc) + sr * F[5, ii, jx]
         miss = cc - hc * hc > rc * rc
         area = ak * (zr - zo) * (d1 + d3) / (k2 * (d0 * d1) * (d2 * d3))
-        add = area if (ok & inr & ins) else 0.0
-        ssm[ii, jx] += np.float32(add)
+        add = area if (ok & inr & ins) else _F0
+        ssm[ii, jx] += add
         need = ok & ~(inr & (miss | ins))
         flags[jj] = need
-        n += 1 if need else 0
+    n = 0  # counted after the loop: a 64-bit count inside it kept LLVM at 8 lanes instead of 16
+    for jj in range(j1 - j0):
+        n += flags[jj]
     return n
 
 
@@ -957,18 +960,47 @@ def _flush_crossings(F, G, Q, rows, cols, vals, bad, m, ssm, sx, sy, sz, sh, tx,
 
 @kernel(inline=True)
 def _patch_constants(x0, x1, y0, y1, zo, pk):
-    """Per micro-patch constants of :func:`_disk_row_pass` into ``pk``: |q_c|^2 of the 4 corners, |c|^2
-    of the center, the half diagonal s, and A / (2 pi)."""
+    """Per micro-patch constants of :func:`_disk_row_pass` into ``pk`` (float32): |q_c|^2 of the 4
+    corners plus the margin, |c|^2 of the center minus it, the half diagonal s, A / (2 pi), and the
+    patch x0, x1, y0, y1, z_O."""
     z2 = zo * zo
-    pk[0] = x0 * x0 + y0 * y0 + z2
-    pk[1] = x1 * x1 + y0 * y0 + z2
-    pk[2] = x1 * x1 + y1 * y1 + z2
-    pk[3] = x0 * x0 + y1 * y1 + z2
+    q0 = x0 * x0 + y0 * y0 + z2
+    q1 = x1 * x1 + y0 * y0 + z2
+    q2 = x1 * x1 + y1 * y1 + z2
+    q3 = x0 * x0 + y1 * y1 + z2
     cx = 0.5 * (x0 + x1)
     cy = 0.5 * (y0 + y1)
-    pk[4] = cx * cx + cy * cy + z2
+    cc = cx * cx + cy * cy + z2
+    mg = _ROUND32 * max(max(q0, q1), max(max(q2, q3), cc))
+    pk[0] = q0 + mg
+    pk[1] = q1 + mg
+    pk[2] = q2 + mg
+    pk[3] = q3 + mg
+    pk[4] = cc - mg
     pk[5] = 0.5 * math.sqrt((x1 - x0) * (x1 - x0) + (y1 - y0) * (y1 - y0))
     pk[6] = (x1 - x0) * (y1 - y0) / (2.0 * math.pi)
+    pk[7] = x0
+    pk[8] = x1
+    pk[9] = y0
+    pk[10] = y1
+    pk[11] = zo
+
+
+@kernel(parallel=True)
+def disk_frames32(F):
+    """The planes of :func:`disk_frames` that :func:`_disk_row_pass` reads, in float32 (6,H,W):
+    w (3), |p|, kappa, sqrt(1 + kappa^2)."""
+    _, H, W = F.shape
+    out = np.empty((6, H, W), np.float32)
+    for i in prange(H):
+        for j in range(W):
+            out[0, i, j] = F[0, i, j]
+            out[1, i, j] = F[1, i, j]
+            out[2, i, j] = F[2, i, j]
+            out[3, i, j] = F[9, i, j]
+            out[4, i, j] = F[10, i, j]
+            out[5, i, j] = F[11, i, j]
+    return out
 
 
 @kernel(parallel=True)
@@ -982,6 +1014,7 @@ def accumulate_soft_shadow_map_sphere(
     recv_depth,
     recv_mesh,
     frames,
+    frames32,
     fp16,
     rtz,
     check_mesh,
@@ -991,7 +1024,7 @@ def accumulate_soft_shadow_map_sphere(
     """:func:`accumulate_soft_shadow_map` for a sphere light: the fragment program is
     :func:`occlusion_percentage_disk` (float64 arithmetic; the sum is stored in float32, or
     rounded to half precision with ``fp16``). Same bands, order and skipping rules. ``frames``:
-    :func:`disk_frames` of the texels."""
+    :func:`disk_frames` of the texels, ``frames32`` their :func:`disk_frames32`."""
     H, W = recv_depth.shape
     n_bands = band_ptr.shape[0] - 1
     touched = np.zeros(n_bands, np.int64)
@@ -1013,7 +1046,7 @@ def accumulate_soft_shadow_map_sphere(
         bad = np.zeros(cap, np.bool_)
         G = np.empty((11, 1, cap))
         Q = np.empty((5, cap))
-        pk = np.empty(7)
+        pk = np.empty(12, np.float32)
         for bnd in range(slot, n_bands, nslot):
             r0 = bnd * band_rows
             r1 = min(r0 + band_rows, H) - 1
@@ -1047,7 +1080,7 @@ def accumulate_soft_shadow_map_sphere(
                     # flags the other texels (a few per row), which are queued and computed in
                     # batches (vectorized), added after the band's other contributions
                     n_exact = _disk_row_pass(
-                        frames, recv_depth, recv_mesh, ssm, flags, i, j0, j1, x0, x1, y0, y1, zo, pm, check_mesh, pk
+                        frames32, recv_depth, recv_mesh, ssm, flags, i, j0, j1, x0, x1, y0, y1, zo, pm, check_mesh, pk
                     )
                     if n_exact:
                         if m + (j1 - j0) > cap:
@@ -1189,8 +1222,23 @@ def compute_soft_shadow_map(
             if sphere:
                 if frames is None:
                     frames = disk_frames(rdepth0, svp, hx)
+                    frames32 = disk_frames32(frames)
                 touched = accumulate_soft_shadow_map_sphere(
-                    patches, pmesh, ext, ptr, idx, BAND_ROWS, rdepth0, rmesh, frames, fp16, rtz, check_mesh, ssm, nslot
+                    patches,
+                    pmesh,
+                    ext,
+                    ptr,
+                    idx,
+                    BAND_ROWS,
+                    rdepth0,
+                    rmesh,
+                    frames,
+                    frames32,
+                    fp16,
+                    rtz,
+                    check_mesh,
+                    ssm,
+                    nslot,
                 )
             else:
                 touched = accumulate_soft_shadow_map(
