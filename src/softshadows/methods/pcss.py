@@ -339,10 +339,21 @@ def blocker_search_kernel(
                     nblk_out[k] = 0
                     search_out[k] = 0.0
                     continue
+                # similar triangles: the light seen from p, cut at depth z_near, in map texels
+                f = (z - z_near) / (z * z_near) / texel1
+                rx = half_light[0] * f
+                ry = half_light[1] * f
+                search_out[k] = max(rx, ry)
+                if _region_empty(sat, OCC_CELL, H, W, sx, sy, rx, ry):  # no blocker: no bias needed
+                    zr_out[k] = z
+                    avg_out[k] = 0.0
+                    nblk_out[k] = 0
+                    continue
                 off = receiver_offset(
                     vp, pts[k, 0], pts[k, 1], pts[k, 2], nrm[k, 0], nrm[k, 1], nrm[k, 2], z, bias, slope_bias
                 )
                 zt = z - off
+                zr_out[k] = zt
                 nr, nu, nf = _view_normal(vp, nrm[k, 0], nrm[k, 1], nrm[k, 2])
                 npo = nr * 0.0
                 if plane:  # n.(p - o) in view coordinates: receiver plane through p
@@ -351,16 +362,6 @@ def blocker_search_kernel(
                         + nrm[k, 1] * (pts[k, 1] - vp[VP_ORIGIN + 1])
                         + nrm[k, 2] * (pts[k, 2] - vp[VP_ORIGIN + 2])
                     )
-                # similar triangles: the light seen from p, cut at depth z_near, in map texels
-                f = (z - z_near) / (z * z_near) / texel1
-                rx = half_light[0] * f
-                ry = half_light[1] * f
-                zr_out[k] = zt
-                search_out[k] = max(rx, ry)
-                if _region_empty(sat, OCC_CELL, H, W, sx, sy, rx, ry):
-                    avg_out[k] = 0.0
-                    nblk_out[k] = 0
-                    continue
                 lo, hi = _plane_bounds(z, off)
                 c = 1.0
                 s = 0.0
@@ -499,7 +500,9 @@ def light_extent(light) -> np.ndarray:
 
 
 def blocker_search(smap, pts, nrm, light, bias, slope_bias, pattern, disk, rotate, seed, plane):
-    """Step 1 over all points -> (z_receiver, avg blocker depth, blocker count, search radius)."""
+    """Step 1 over all points -> (z_receiver, avg blocker depth, blocker count, search radius).
+    z_receiver is the biased depth where blockers were searched for, the plain depth where the
+    search was skipped (no blocker: the filter does not read it)."""
     n = len(pts)
     zr = np.empty(n, np.float64)
     avg = np.empty(n, np.float64)
