@@ -1117,10 +1117,10 @@ class PenumbraMapMethod(Method):
             "silhouette extraction: brute (per frame, the paper) or adjacency (edge table built once)",
             choices=("brute", "adjacency"),
         ),
-        Param("cone_segments", 16, "triangles per cone", min=3, max=256),
+        Param("cone_segments", 8, "triangles per cone", min=3, max=256),
         Param(
             "sheet_tolerance",
-            0.005,
+            0.02,
             "split a sheet into ceil(q / tolerance) strips, q = how far it is "
             "from a parallelogram, |(F1 - V1) - (F0 - V0)| / length (0: always sheet_max_subdiv)",
             min=0.0,
