@@ -716,7 +716,7 @@ def _reject_cones(view, q, zv, bx, by, z_far, pyr):
     return lam, keep
 
 
-@kernel(parallel=True)
+@kernel
 def _sheet_reject_kernel(sx, sy, zc, z_far, iters, pieces, eps, data, offs, ws, hs, ucut):
     """Per sheet: the fraction ``ucut`` of every ruling (from the edge, u = 0, to the far line,
     u = 1) that can carry kept fragments; 0 drops the sheet. ``sx, sy`` (n, 4) pixel coordinates of
@@ -727,7 +727,7 @@ def _sheet_reject_kernel(sx, sy, zc, z_far, iters, pieces, eps, data, offs, ws, 
     for the cones: bound the whole sheet ``iters`` times, then cut it in ``pieces`` slices and end
     after the last slice whose max Z_P lies behind its nearest depth (and not behind that max)."""
     n = sx.shape[0]
-    for i in prange(n):
+    for i in range(n):  # serial: ~1k sheets, cheaper than a parallel region
         zmin = min(zc[i, 0], zc[i, 1])
         u = 1.0
         for _ in range(iters):
@@ -859,10 +859,11 @@ def penumbra_fragment_program(
     }
 
 
-@kernel(parallel=True)
+@kernel
 def _count_below(a, v):
+    """Texels of ``a`` below ``v`` (serial: a short pass, cheaper than a parallel region)."""
     n = 0
-    for i in prange(a.shape[0]):
+    for i in range(a.shape[0]):
         for j in range(a.shape[1]):
             n += a[i, j] < v
     return n
@@ -1003,9 +1004,10 @@ def _eye_lookup_kernel(
                 needed[r2, c2] = 1
 
 
-@kernel(parallel=True)
+@kernel
 def _eye_gather_kernel(tex, umbra, pm_flat, v_out):
-    for k in prange(tex.shape[0]):
+    """V per eye point from its lookups (serial: a short pass, cheaper than a parallel region)."""
+    for k in range(tex.shape[0]):
         t = tex[k]
         v = pm_flat[max(t, 0)]
         v_out[k] = 0.0 if umbra[k] else (v if t >= 0 else 1.0)
