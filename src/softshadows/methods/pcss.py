@@ -180,6 +180,55 @@ def _cmp_bilinear(depth, sx, sy, zt):
 
 
 @kernel(inline=True)
+def _texel_or_inf(depth, r, c):
+    """depth[r, c], +inf outside the map (outside texels are lit: never < a comparison depth)."""
+    H, W = depth.shape
+    if r < 0 or r >= H or c < 0 or c >= W:
+        return np.inf
+    return depth[r, c]
+
+
+@kernel(inline=True)
+def _plane_bounds(z, off):
+    """Bounds of every comparison depth ``_plane_depth(..., z, ...) - off`` (that depth lies in
+    [z/2, 2z]; subtracting ``off`` rounds monotonically): a texel at or beyond ``hi`` is never a
+    blocker, one below ``lo`` always is, so the plane need not be evaluated for either."""
+    return 0.5 * z - off, 2.0 * z - off
+
+
+@kernel(inline=True)
+def _cmp_bilinear_plane(depth, sx, sy, vp, nr, nu, nf, npo, z, off, iw, ih, lo, hi):
+    """:func:`_cmp_bilinear` against the receiver plane's depth at (sx, sy) (``_plane_depth - off``),
+    bit for bit, with the plane evaluated only when the 2x2 texels straddle [lo, hi) (see
+    :func:`_plane_bounds`): all at or beyond ``hi``: all lit; all below ``lo``: none lit."""
+    x = sx - 0.5
+    y = sy - 0.5
+    x0 = int(np.floor(x))
+    y0 = int(np.floor(y))
+    d00 = _texel_or_inf(depth, y0, x0)
+    d01 = _texel_or_inf(depth, y0, x0 + 1)
+    d10 = _texel_or_inf(depth, y0 + 1, x0)
+    d11 = _texel_or_inf(depth, y0 + 1, x0 + 1)
+    dmin = min(min(d00, d01), min(d10, d11))
+    dmax = max(max(d00, d01), max(d10, d11))
+    if dmin >= hi:
+        zt = -np.inf  # every texel lit
+    elif dmax < lo:
+        zt = np.inf  # every texel a blocker (all inside the map: outside ones are +inf)
+    else:
+        zt = _plane_depth(vp, nr, nu, nf, npo, sx, sy, z, iw, ih) - off
+    fx = x - x0
+    fy = y - y0
+    # branch-free selects (adding 0.0 to the non-negative sum changes no bit)
+    acc = 0.0
+    acc += 0.0 if d00 < zt else (1.0 - fx) * (1.0 - fy)
+    acc += 0.0 if d01 < zt else fx * (1.0 - fy)
+    acc += 0.0 if d10 < zt else (1.0 - fx) * fy
+    acc += 0.0 if d11 < zt else fx * fy
+    return acc
+
+
+@kernel(inline=True)
 def _cmp_nearest(depth, sx, sy, zt):
     H, W = depth.shape
     c = int(np.floor(sx))
@@ -187,6 +236,64 @@ def _cmp_nearest(depth, sx, sy, zt):
     if r < 0 or r >= H or c < 0 or c >= W or not (depth[r, c] < zt):
         return 1.0
     return 0.0
+
+
+#: texels per side of the cells of the occupancy grid (:func:`occupancy_grid`)
+OCC_CELL = 16
+
+
+@kernel(parallel=True)
+def _occupancy_rows(depth, cell, counts, row_min):
+    """Per grid cell (``cell`` x ``cell`` texels) the number of finite texels, into ``counts``
+    (ny + 1, nx + 1) at [cy + 1, cx + 1]; per grid row the smallest depth, into ``row_min``."""
+    H, W = depth.shape
+    ny = row_min.shape[0]
+    nx = counts.shape[1] - 1
+    for cy in prange(ny):
+        m = np.inf
+        for r in range(cy * cell, min(H, cy * cell + cell)):
+            for cx in range(nx):
+                n = 0
+                for c in range(cx * cell, min(W, cx * cell + cell)):
+                    d = depth[r, c]
+                    n += d < np.inf
+                    m = min(m, d)
+                counts[cy + 1, cx + 1] += n
+        row_min[cy] = m
+
+
+def occupancy_grid(depth: np.ndarray) -> tuple[np.ndarray, float]:
+    """(summed-area table (ny + 1, nx + 1) int64 of the finite texels per ``OCC_CELL``-texel cell,
+    the smallest depth of the map: +inf where it holds no occluder), in one pass over the map."""
+    H, W = depth.shape
+    ny = (H + OCC_CELL - 1) // OCC_CELL
+    nx = (W + OCC_CELL - 1) // OCC_CELL
+    counts = np.zeros((ny + 1, nx + 1), np.int64)
+    row_min = np.empty(ny, np.float64)
+    _occupancy_rows(depth, OCC_CELL, counts, row_min)
+    np.cumsum(counts, axis=0, out=counts)
+    np.cumsum(counts, axis=1, out=counts)
+    return counts, float(row_min.min()) if ny else np.inf
+
+
+@kernel(inline=True)
+def _region_empty(sat, cell, H, W, sx, sy, rx, ry):
+    """Whether the taps around (sx, sy) within (rx, ry) texels (each tap reads the texel under it or
+    the 2x2 around it) read no finite texel: their bounding box, grown by 2 texels and by a
+    relative 1e-6 (rotated patterns), lies outside the map or over empty grid cells only."""
+    ex = rx * (1.0 + 1e-6) + 2.0
+    ey = ry * (1.0 + 1e-6) + 2.0
+    c0 = max(int(np.floor(sx - ex)), 0)
+    c1 = min(int(np.floor(sx + ex)), W - 1)
+    r0 = max(int(np.floor(sy - ey)), 0)
+    r1 = min(int(np.floor(sy + ey)), H - 1)
+    if c0 > c1 or r0 > r1:
+        return True
+    gx0 = c0 // cell
+    gx1 = c1 // cell + 1
+    gy0 = r0 // cell
+    gy1 = r1 // cell + 1
+    return sat[gy1, gx1] - sat[gy0, gx1] - sat[gy1, gx0] + sat[gy0, gx0] == 0
 
 
 @kernel(parallel=True)
@@ -204,6 +311,7 @@ def blocker_search_kernel(
     rotate,
     seed,
     plane,
+    sat,
     zr_out,
     avg_out,
     nblk_out,
@@ -212,7 +320,8 @@ def blocker_search_kernel(
 ):
     """Step 1. Per point: receiver depth (minus bias), average blocker depth and blocker count
     over the search region (point-sampled taps). ``half_light`` = (half size x, half size y) of
-    the light in world units, along the map's right/up axes."""
+    the light in world units, along the map's right/up axes. ``sat``: :func:`occupancy_grid`'s
+    table (a region over empty cells has no blocker: its taps are not taken)."""
     n = pts.shape[0]
     H, W = depth_map.shape
     S = pattern.shape[0]
@@ -230,10 +339,21 @@ def blocker_search_kernel(
                     nblk_out[k] = 0
                     search_out[k] = 0.0
                     continue
+                # similar triangles: the light seen from p, cut at depth z_near, in map texels
+                f = (z - z_near) / (z * z_near) / texel1
+                rx = half_light[0] * f
+                ry = half_light[1] * f
+                search_out[k] = max(rx, ry)
+                if _region_empty(sat, OCC_CELL, H, W, sx, sy, rx, ry):  # no blocker: no bias needed
+                    zr_out[k] = z
+                    avg_out[k] = 0.0
+                    nblk_out[k] = 0
+                    continue
                 off = receiver_offset(
                     vp, pts[k, 0], pts[k, 1], pts[k, 2], nrm[k, 0], nrm[k, 1], nrm[k, 2], z, bias, slope_bias
                 )
                 zt = z - off
+                zr_out[k] = zt
                 nr, nu, nf = _view_normal(vp, nrm[k, 0], nrm[k, 1], nrm[k, 2])
                 npo = nr * 0.0
                 if plane:  # n.(p - o) in view coordinates: receiver plane through p
@@ -242,10 +362,7 @@ def blocker_search_kernel(
                         + nrm[k, 1] * (pts[k, 1] - vp[VP_ORIGIN + 1])
                         + nrm[k, 2] * (pts[k, 2] - vp[VP_ORIGIN + 2])
                     )
-                # similar triangles: the light seen from p, cut at depth z_near, in map texels
-                f = (z - z_near) / (z * z_near) / texel1
-                rx = half_light[0] * f
-                ry = half_light[1] * f
+                lo, hi = _plane_bounds(z, off)
                 c = 1.0
                 s = 0.0
                 shx = 0.0
@@ -269,14 +386,17 @@ def blocker_search_kernel(
                     d = depth_map[row, col]
                     zc = zt
                     if plane:
-                        zc = _plane_depth(vp, nr, nu, nf, npo, tx, ty, z, iw, ih) - off
-                    if d < zc:
-                        total += d
-                        cnt += 1
-                zr_out[k] = zt
+                        if d >= hi:
+                            continue  # beyond every plane depth: not a blocker (e.g. an empty texel)
+                        if d >= lo:
+                            zc = _plane_depth(vp, nr, nu, nf, npo, tx, ty, z, iw, ih) - off
+                        else:
+                            zc = np.inf  # in front of every plane depth: a blocker
+                    blk = d < zc  # branch-free (adding 0.0 to the non-negative sum changes no bit)
+                    total += d if blk else 0.0
+                    cnt += blk
                 avg_out[k] = total / cnt if cnt > 0 else 0.0
                 nblk_out[k] = cnt
-                search_out[k] = max(rx, ry)
 
 
 @kernel(inline=True)
@@ -341,6 +461,7 @@ def filtering_kernel(
                     + nrm[k, 1] * (pts[k, 1] - vp[VP_ORIGIN + 1])
                     + nrm[k, 2] * (pts[k, 2] - vp[VP_ORIGIN + 2])
                 )
+                lo, hi = _plane_bounds(z, off)
                 c = 1.0
                 s = 0.0
                 shx = 0.0
@@ -356,6 +477,9 @@ def filtering_kernel(
                     ox, oy = _tap_offset(pattern, i, disk, rotate, c, s, shx, shy)
                     tx = sx + ox * rx
                     ty = sy - oy * ry
+                    if plane and bilinear:  # the plane only where the 2x2 texels need it
+                        acc += _cmp_bilinear_plane(depth_map, tx, ty, vp, nr, nu, nf, npo, z, off, iw, ih, lo, hi)
+                        continue
                     zc = zt
                     if plane:
                         zc = _plane_depth(vp, nr, nu, nf, npo, tx, ty, z, iw, ih) - off
@@ -376,13 +500,15 @@ def light_extent(light) -> np.ndarray:
 
 
 def blocker_search(smap, pts, nrm, light, bias, slope_bias, pattern, disk, rotate, seed, plane):
-    """Step 1 over all points -> (z_receiver, avg blocker depth, blocker count, search radius)."""
+    """Step 1 over all points -> (z_receiver, avg blocker depth, blocker count, search radius).
+    z_receiver is the biased depth where blockers were searched for, the plain depth where the
+    search was skipped (no blocker: the filter does not read it)."""
     n = len(pts)
     zr = np.empty(n, np.float64)
     avg = np.empty(n, np.float64)
     nblk = np.empty(n, np.int32)
     search = np.empty(n, np.float64)
-    z_near = float(np.min(smap.depth))  # +inf where no occluder: the map's nearest blocker depth
+    sat, z_near = occupancy_grid(smap.depth)  # z_near: the map's nearest blocker depth (+inf: none)
     if not np.isfinite(z_near):
         z_near = float(smap.view.near)
     z_near = max(z_near, 1e-9)
@@ -400,6 +526,7 @@ def blocker_search(smap, pts, nrm, light, bias, slope_bias, pattern, disk, rotat
         rotate,
         int(seed),
         bool(plane),
+        sat,
         zr,
         avg,
         nblk,

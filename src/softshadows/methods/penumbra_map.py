@@ -503,18 +503,25 @@ def _sheet_strips(V0, V1, F0, F1, z0, z1, tolerance, max_subdiv):
 def _max_down_row(src, s0, sw, sh, dst, d0, dw, i):
     """Row i of a 2x2-max reduction: src (sh, sw) stored flat from s0 into dst (.., dw) from d0.
     Non-finite and negative values count as 0 (empty texels: nothing behind them)."""
-    for j in range(dw):
-        m = 0.0
-        for di in range(2):
-            ii = 2 * i + di
-            if ii < sh:
-                for dj in range(2):
-                    jj = 2 * j + dj
-                    if jj < sw:
-                        v = src[s0 + ii * sw + jj]
-                        if v > m and v < np.inf:
-                            m = v
-        dst[d0 + i * dw + j] = m
+    r0 = s0 + 2 * i * sw
+    r1 = r0 + sw if 2 * i + 1 < sh else r0  # an odd last row: read row 2i twice (same max)
+    jfull = sw // 2  # columns j < jfull have both source columns
+    for j in range(jfull):  # branch-free: max(v, 0) of the finite values; inf and NaN count as 0
+        a = src[r0 + 2 * j]
+        b = src[r0 + 2 * j + 1]
+        c = src[r1 + 2 * j]
+        d = src[r1 + 2 * j + 1]
+        a = a if a < np.inf else 0.0
+        b = b if b < np.inf else 0.0
+        c = c if c < np.inf else 0.0
+        d = d if d < np.inf else 0.0
+        dst[d0 + i * dw + j] = max(max(max(a, b), max(c, d)), 0.0)
+    for j in range(jfull, dw):  # an odd last column
+        a = src[r0 + 2 * j]
+        c = src[r1 + 2 * j]
+        a = a if a < np.inf else 0.0
+        c = c if c < np.inf else 0.0
+        dst[d0 + i * dw + j] = max(max(a, c), 0.0)
 
 
 @kernel(parallel=True)
@@ -574,15 +581,13 @@ def _zmax_rect(data, offs, ws, hs, x0, y0, x1, y1):
     L = 1
     while span > (1 << (L + 3)) and len(offs) > L + 1:
         L += 1
-    m = 0.0
+    m = np.float32(0.0)  # the levels hold values >= 0 (no NaN): a branch-free max
     w = ws[L]
     for yy in range(y0 >> L, (y1 >> L) + 1):
         base = offs[L] + yy * w
         for xx in range(x0 >> L, (x1 >> L) + 1):
-            v = data[base + xx]
-            if v > m:
-                m = v
-    return m
+            m = max(m, data[base + xx])
+    return float(m)
 
 
 @kernel
@@ -711,7 +716,7 @@ def _reject_cones(view, q, zv, bx, by, z_far, pyr):
     return lam, keep
 
 
-@kernel(parallel=True)
+@kernel
 def _sheet_reject_kernel(sx, sy, zc, z_far, iters, pieces, eps, data, offs, ws, hs, ucut):
     """Per sheet: the fraction ``ucut`` of every ruling (from the edge, u = 0, to the far line,
     u = 1) that can carry kept fragments; 0 drops the sheet. ``sx, sy`` (n, 4) pixel coordinates of
@@ -722,7 +727,7 @@ def _sheet_reject_kernel(sx, sy, zc, z_far, iters, pieces, eps, data, offs, ws, 
     for the cones: bound the whole sheet ``iters`` times, then cut it in ``pieces`` slices and end
     after the last slice whose max Z_P lies behind its nearest depth (and not behind that max)."""
     n = sx.shape[0]
-    for i in prange(n):
+    for i in range(n):  # serial: ~1k sheets, cheaper than a parallel region
         zmin = min(zc[i, 0], zc[i, 1])
         u = 1.0
         for _ in range(iters):
@@ -854,10 +859,11 @@ def penumbra_fragment_program(
     }
 
 
-@kernel(parallel=True)
+@kernel
 def _count_below(a, v):
+    """Texels of ``a`` below ``v`` (serial: a short pass, cheaper than a parallel region)."""
     n = 0
-    for i in prange(a.shape[0]):
+    for i in range(a.shape[0]):
         for j in range(a.shape[1]):
             n += a[i, j] < v
     return n
@@ -998,9 +1004,10 @@ def _eye_lookup_kernel(
                 needed[r2, c2] = 1
 
 
-@kernel(parallel=True)
+@kernel
 def _eye_gather_kernel(tex, umbra, pm_flat, v_out):
-    for k in prange(tex.shape[0]):
+    """V per eye point from its lookups (serial: a short pass, cheaper than a parallel region)."""
+    for k in range(tex.shape[0]):
         t = tex[k]
         v = pm_flat[max(t, 0)]
         v_out[k] = 0.0 if umbra[k] else (v if t >= 0 else 1.0)
@@ -1112,10 +1119,10 @@ class PenumbraMapMethod(Method):
             "silhouette extraction: brute (per frame, the paper) or adjacency (edge table built once)",
             choices=("brute", "adjacency"),
         ),
-        Param("cone_segments", 16, "triangles per cone", min=3, max=256),
+        Param("cone_segments", 8, "triangles per cone", min=3, max=256),
         Param(
             "sheet_tolerance",
-            0.005,
+            0.02,
             "split a sheet into ceil(q / tolerance) strips, q = how far it is "
             "from a parallelogram, |(F1 - V1) - (F0 - V0)| / length (0: always sheet_max_subdiv)",
             min=0.0,
