@@ -20,7 +20,7 @@ import numba
 import numpy as np
 from numba import prange
 
-from .._jit import kernel
+from .._jit import frozen, kernel
 from .gbuffer import Fragments, GBuffer
 from .kernels import view_coords, view_coords_to_screen
 from .programs import PROGRAMS, discard_depth, run_program, value_lower_bound
@@ -1020,7 +1020,7 @@ def _piece_rows(edges, zinfo, ct, prect, y0, x0, W, H, SP, by_texel):
         return e0, e1, e2, not full, i1 - i0 + 1
     for k in range(TILE):
         py = (y0 + k) + 0.5
-        lo, hi, slow = _fast_bound(j0, j1, False, py, j0, j1, e0)
+        lo, hi, slow = _fast_bound(j0, j1, np.bool_(False), py, j0, j1, e0)  # not a literal: one specialisation
         lo, hi, slow = _fast_bound(lo, hi, slow, py, j0, j1, e1)
         lo, hi, slow = _fast_bound(lo, hi, slow, py, j0, j1, e2)
         SP[_SP_LO, k] = lo
@@ -1699,6 +1699,7 @@ def _prepare(view, vertices, faces, cull):
         fcs = fcs.reshape(-1, 3)
     if fcs.size and (fcs.min() < 0 or fcs.max() >= len(verts)):
         raise ValueError("faces index out of range of vertices")
+    verts, fcs = frozen(verts), frozen(fcs)  # one kernel specialisation, whoever owns the arrays
     code = _cull_code(cull)
     near = float(view.near)
     if not view.ortho:
