@@ -66,3 +66,80 @@ def test_helper_warms_the_signatures_the_real_calls_use():
     rasterize_min_blend(view, V, F, p, np.ones((len(F), 3)), np.zeros((24, 32), np.float32), np.zeros(3), out)
     kernels = [r._tiles_depth, r._tiles_count, r._tiles_fragments, r._MIN_BLEND_KERNELS[p]]
     assert [len(k.signatures) for k in kernels] == [1] * len(kernels)
+
+
+def test_claims_give_each_method_to_one_process(tmp_path):
+    # the main process and the helper claim methods from opposite ends of the list; a method
+    # claimed by one must be refused to the other, whichever asks first
+    sys.path.insert(0, SRC)
+    from softshadows._warm import Claims
+
+    a, b = Claims(str(tmp_path)), Claims(str(tmp_path))
+    assert a.claim("hard") and not b.claim("hard") and not a.claim("hard")
+    assert b.claim("pcss") and not a.claim("pcss")
+    assert not a.is_done("pcss")
+    b.done("pcss")
+    assert a.is_done("pcss")
+
+
+def test_main_process_renders_the_helpers_methods_last_in_the_original_order(monkeypatch):
+    # with a helper that has claimed the last two methods, the main process renders the others
+    # first, then waits for each of the helper's (its kernels cached) before rendering it; the
+    # results keep the order of the method list
+    sys.path.insert(0, SRC)
+    from types import SimpleNamespace
+
+    import softshadows
+    from softshadows import compare
+
+    calls = []
+
+    class FakeHelper:
+        def claim(self, name):
+            return name not in ("penumbra-map", "layered-attenuation")
+
+        def wait(self, name):
+            calls.append(("wait", name))
+
+    def fake_render(sc, m, w, h, **kw):
+        calls.append(("render", m))
+        return m
+
+    monkeypatch.setattr(softshadows, "render", fake_render)
+    names = ["hard", "pcss", "penumbra-map", "layered-attenuation"]
+    resolved = {m: {} for m in names} | {"ground-truth": {"samples": 4}}
+    sc = SimpleNamespace(name="s", light=SimpleNamespace(shape="rect"))
+    _gt, results, failed = compare._render_all(
+        sc, names, resolved, 8, 8, 0, None, False, lambda msg: None, FakeHelper()
+    )
+    # each method twice (an untimed first frame, then the timed one)
+    expect = [("render", "ground-truth")]
+    for m in ("hard", "pcss"):
+        expect += [("render", m)] * 2
+    for m in ("penumbra-map", "layered-attenuation"):
+        expect += [("wait", m)] + [("render", m)] * 2
+    assert calls == expect
+    assert list(results) == names and not failed
+
+
+def test_front_end_compiles_once_for_read_only_and_writable_geometry():
+    # a scene's cached geometry is read-only, a caller's arrays are writable: Numba would compile
+    # each front-end kernel twice (once per flag) on a cold cache unless the rasterizer freezes
+    # its inputs (softshadows._jit.frozen)
+    import numpy as np
+
+    sys.path.insert(0, SRC)
+    import softshadows
+    from softshadows.api import eye_view
+    from softshadows.raster import rasterize_depth
+    from softshadows.raster import rasterizer as r
+
+    sc = softshadows.load_scene("spheres")
+    view = eye_view(sc, 32, 24)
+    V, F = sc.flat.vertices.copy(), sc.flat.faces.copy()
+    d1, _ = rasterize_depth(view, V, F)
+    V.flags.writeable = F.flags.writeable = False
+    d2, _ = rasterize_depth(view, V, F)
+    assert np.array_equal(d1, d2) and np.isfinite(d1).any()
+    kernels = [r._vertex_screen, r._select, r._setup_count, r._bin_fill]
+    assert [len(k.signatures) for k in kernels] == [1] * len(kernels)

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import os
 
+import numpy as np
 from numba import njit
 
 FLAGS = dict(cache=True, fastmath=False, error_model="numpy")
@@ -41,3 +42,13 @@ def kernel(fn=None, *, parallel: bool = False, inline: bool = False, nogil: bool
     if fn is None:
         return wrap
     return wrap(fn)
+
+
+def frozen(a: np.ndarray) -> np.ndarray:
+    """A read-only view of ``a`` (no copy). Numba compiles a separate specialisation of a kernel for
+    a read-only and a writable array of the same dtype and layout: an input that comes both ways
+    (a scene's cached geometry is read-only, a caller's arrays are not) is passed frozen, so that
+    the kernel compiles once."""
+    v = a.view()
+    v.flags.writeable = False
+    return v

@@ -17,8 +17,11 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import shutil
 import subprocess
 import sys
+import tempfile
+import time
 
 COLD_MESSAGE = "softshadows: compiling kernels, first run only (cached afterwards) ..."
 _said = False
@@ -58,16 +61,67 @@ def say_if_cold(stream=None) -> bool:
     return cold
 
 
+class Claims:
+    """Which process renders (so compiles) which method first: a file ``claim-<method>`` made with
+    O_EXCL in a folder both processes know; the one whose create succeeds renders it, the other
+    does not compile it a second time. The helper marks a method ``done-<method>`` when its
+    kernels are in the cache."""
+
+    def __init__(self, folder: str):
+        self.folder = folder
+
+    def _path(self, kind: str, name: str) -> str:
+        return os.path.join(self.folder, f"{kind}-{name}")
+
+    def claim(self, name: str) -> bool:
+        try:
+            os.close(os.open(self._path("claim", name), os.O_CREAT | os.O_EXCL | os.O_WRONLY))
+            return True
+        except FileExistsError:
+            return False
+        except OSError:  # an unusable folder: everyone renders everything (the old behaviour)
+            return True
+
+    def done(self, name: str) -> None:
+        with contextlib.suppress(OSError):
+            os.close(os.open(self._path("done", name), os.O_CREAT | os.O_WRONLY))
+
+    def is_done(self, name: str) -> bool:
+        return os.path.exists(self._path("done", name))
+
+
+class Warmup:
+    """The helper process and the claims shared with it (see :func:`start_warmup`)."""
+
+    def __init__(self, proc, claims: Claims, folder: str):
+        self.proc = proc
+        self.claims = claims
+        self.folder = folder
+
+    def claim(self, name: str) -> bool:
+        """True: this (main) process renders ``name`` now; False: the helper has taken it."""
+        return self.claims.claim(name)
+
+    def wait(self, name: str, timeout: float = 600.0) -> None:
+        """Wait until the helper has cached ``name``'s kernels, or has ended, or ``timeout``."""
+        end = time.monotonic() + timeout
+        while not self.claims.is_done(name) and self.proc.poll() is None and time.monotonic() < end:
+            time.sleep(0.05)
+
+
 def start_warmup(scene, light_shape: str, width: int, height: int, names, params: dict):
-    """Start the helper (a ``subprocess.Popen``) when worth it, else None. ``names`` in the main
-    process's order; the helper takes them in reverse. ``scene``: a built-in name or file path
+    """Start the helper (a :class:`Warmup`) when worth it, else None. ``names`` in the main
+    process's order; the helper claims them from the end, the main process from the front
+    (:class:`Claims`), so no method is compiled by both. ``scene``: a built-in name or file path
     (any other Scene: the built-in ``bunny``; kernel types do not depend on the scene)."""
     if os.environ.get("SOFTSHADOWS_WARMUP", "1") == "0" or (os.cpu_count() or 1) < 2 or not names:
         return None
     cold, writable = cache_state()
     if not (cold and writable):
         return None
+    folder = tempfile.mkdtemp(prefix="softshadows-warm-")
     job = {
+        "claims": folder,
         "scene": scene if isinstance(scene, str) else "bunny",
         "light": light_shape,
         "width": int(width),
@@ -82,7 +136,7 @@ def start_warmup(scene, light_shape: str, width: int, height: int, names, params
     pkg_root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     env["PYTHONPATH"] = pkg_root + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
     try:
-        return subprocess.Popen(
+        proc = subprocess.Popen(
             [sys.executable, "-m", "softshadows._warm", json.dumps(job, default=str)],
             env=env,
             stdin=subprocess.DEVNULL,
@@ -90,19 +144,24 @@ def start_warmup(scene, light_shape: str, width: int, height: int, names, params
             stderr=subprocess.DEVNULL,
         )
     except OSError:
+        shutil.rmtree(folder, ignore_errors=True)
         return None
+    return Warmup(proc, Claims(folder), folder)
 
 
-def stop_warmup(proc) -> None:
+def stop_warmup(warm) -> None:
     """End the helper started by :func:`start_warmup` (its finished kernels stay cached)."""
-    if proc is None or proc.poll() is not None:
+    if warm is None:
         return
-    proc.terminate()
-    try:
-        proc.wait(timeout=5)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        proc.wait()
+    proc = warm.proc
+    if proc.poll() is None:
+        proc.terminate()
+        try:
+            proc.wait(timeout=5)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+    shutil.rmtree(warm.folder, ignore_errors=True)
 
 
 def warm_raster_modes() -> None:
@@ -158,12 +217,16 @@ def _main(argv) -> int:
     with contextlib.suppress(Exception):
         warm_raster_modes()
     sc = load(job["scene"], job["light"])
+    claims = Claims(job["claims"])
     for m in job["methods"]:
         if os.getppid() != parent:  # the main process is gone (killed): stop warming for nobody
             return 0
+        if not claims.claim(m):
+            return 0  # the main process has reached the methods from the front: the rest is its
         # the main process reports failures; the helper only warms the cache
         with contextlib.suppress(Exception):
             render(sc, m, job["width"], job["height"], **job["params"].get(m, {}))
+        claims.done(m)
     return 0
 
 

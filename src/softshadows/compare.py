@@ -237,13 +237,16 @@ def compare(
     # the ground truth and compiles from the front (softshadows._warm)
     helper = start_warmup(scene, sc.light.shape, width, height, names, resolved)
     try:
-        gt, results, failed = _render_all(sc, names, resolved, width, height, seed, progress, verbose, say)
+        gt, results, failed = _render_all(sc, names, resolved, width, height, seed, progress, verbose, say, helper)
     finally:
         stop_warmup(helper)
     return _finish(sc, skipped, resolved, gt, results, failed, width, height, out_dir, command, seed, t_start)
 
 
-def _render_all(sc, names, resolved, width, height, seed, progress, verbose, say):
+def _render_all(sc, names, resolved, width, height, seed, progress, verbose, say, helper=None):
+    """Ground truth, then each method. With a warm-up ``helper`` (a cold cache), the methods it has
+    claimed (from the end of the list) are rendered last, once it has cached their kernels, so that
+    no kernel is compiled by both processes; the results keep the order of ``names``."""
     from . import render
 
     say(
@@ -251,21 +254,37 @@ def _render_all(sc, names, resolved, width, height, seed, progress, verbose, say
     )
     gt = render(sc, REFERENCE, width, height, seed=seed, progress=progress, **resolved[REFERENCE])
     results, failed = {}, {}
+    later = []
     for m in names:
-        say(f"  {m} ...")
-        try:
-            # one untimed frame at the real size first: some kernels only run (and compile, on a
-            # cold cache) at full size, which would otherwise land in the reported time
-            render(sc, m, width, height, seed=seed, **resolved[m])
-            results[m] = render(sc, m, width, height, seed=seed, **resolved[m])
-        except SoftShadowsError:
-            raise
-        except Exception as exc:
-            failed[m] = f"{type(exc).__name__}: {exc}"
-            print(f"softshadows: warning: method '{m}' failed: {failed[m]}", file=sys.stderr)
-            if verbose:
-                traceback.print_exc()
+        if helper is not None and not helper.claim(m):
+            later.append(m)  # the helper compiles it now
+            continue
+        _render_method(sc, m, resolved, width, height, seed, verbose, say, results, failed)
+    for m in later:
+        helper.wait(m)
+        _render_method(sc, m, resolved, width, height, seed, verbose, say, results, failed)
+    results = {m: results[m] for m in names if m in results}
+    failed = {m: failed[m] for m in names if m in failed}
     return gt, results, failed
+
+
+def _render_method(sc, m, resolved, width, height, seed, verbose, say, results, failed):
+    """Render method ``m`` into ``results`` (or its failure into ``failed``)."""
+    from . import render
+
+    say(f"  {m} ...")
+    try:
+        # one untimed frame at the real size first: some kernels only run (and compile, on a
+        # cold cache) at full size, which would otherwise land in the reported time
+        render(sc, m, width, height, seed=seed, **resolved[m])
+        results[m] = render(sc, m, width, height, seed=seed, **resolved[m])
+    except SoftShadowsError:
+        raise
+    except Exception as exc:
+        failed[m] = f"{type(exc).__name__}: {exc}"
+        print(f"softshadows: warning: method '{m}' failed: {failed[m]}", file=sys.stderr)
+        if verbose:
+            traceback.print_exc()
 
 
 def _finish(sc, skipped, resolved, gt, results, failed, width, height, out_dir, command, seed, t_start):

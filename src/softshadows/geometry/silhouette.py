@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._jit import kernel
+from .._jit import frozen, kernel
 from ..errors import SoftShadowsError
 
 __all__ = [
@@ -259,8 +259,8 @@ def _facing_kernel(v, faces, p):
 def facing(vertices: np.ndarray, faces: np.ndarray, point) -> np.ndarray:
     """(F,) bool: triangle faces ``point`` (``((b-a) x (c-a)) . (point - a) > 0``)."""
     return _facing_kernel(
-        np.ascontiguousarray(vertices, dtype=np.float64),
-        np.ascontiguousarray(faces, np.int64),
+        frozen(np.ascontiguousarray(vertices, dtype=np.float64)),
+        frozen(np.ascontiguousarray(faces, np.int64)),
         np.asarray(point, dtype=np.float64).reshape(3),
     )
 

@@ -507,7 +507,7 @@ def trace_shadow_ray(
                     flags,
                     stack,
                     hidB,
-                    0,
+                    np.int64(0),  # not the literal 0: one specialisation for both call sites
                     cnt,
                 )
                 if hit:
@@ -753,7 +753,7 @@ def coherent_tiles(
         sa = np.empty(S)
         sb = np.empty(S)
         c_ = cnt[t]
-        nblk = 0
+        nblk = np.int64(0)  # not the literal 0: predict_visibility compiles once
         valid = False  # a prediction exists (a previous point in this walk, no reset since)
         px0 = np.nan
         py0 = np.nan
@@ -769,7 +769,7 @@ def coherent_tiles(
             oz = pz + eps * nrm[k, 2]
             d2 = (px - px0) ** 2 + (py - py0) ** 2 + (pz - pz0) ** 2
             if not (d2 <= reset2):  # far from the previous point (or the first): reset the list
-                nblk = 0
+                nblk = np.int64(0)
                 valid = False
             px0, py0, pz0 = px, py, pz
             key = point_key(seed, pix[k])
@@ -782,7 +782,7 @@ def coherent_tiles(
                     ox, oy, oz, blk, nblk, hires_done, cen, u, v, nl, N, H, sa, sb, pred, state, grid
                 )
             else:
-                nblk = 0
+                nblk = np.int64(0)
                 for c in range(S):
                     pred[c] = 0
                     state[c] = 1

@@ -516,7 +516,7 @@ def _nb_square(nb, s, cx, cy, size):
     size, interpolated linearly in size."""
     lmax = nb.shape[1] - 1
     if size <= 1.0:
-        return _nb_box(nb, s, 0, cx - 0.5, cy - 0.5)
+        return _nb_box(nb, s, np.int64(0), cx - 0.5, cy - 0.5)  # not a literal: one specialisation
     lf = math.log2(size)
     l0 = int(math.floor(lf))
     if l0 >= lmax:

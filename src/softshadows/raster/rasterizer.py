@@ -20,7 +20,7 @@ import numba
 import numpy as np
 from numba import prange
 
-from .._jit import kernel
+from .._jit import frozen, kernel
 from .gbuffer import Fragments, GBuffer
 from .kernels import view_coords, view_coords_to_screen
 from .programs import PROGRAMS, discard_depth, run_program, value_lower_bound
@@ -1020,7 +1020,7 @@ def _piece_rows(edges, zinfo, ct, prect, y0, x0, W, H, SP, by_texel):
         return e0, e1, e2, not full, i1 - i0 + 1
     for k in range(TILE):
         py = (y0 + k) + 0.5
-        lo, hi, slow = _fast_bound(j0, j1, False, py, j0, j1, e0)
+        lo, hi, slow = _fast_bound(j0, j1, np.bool_(False), py, j0, j1, e0)  # not a literal: one specialisation
         lo, hi, slow = _fast_bound(lo, hi, slow, py, j0, j1, e1)
         lo, hi, slow = _fast_bound(lo, hi, slow, py, j0, j1, e2)
         SP[_SP_LO, k] = lo
@@ -1415,100 +1415,233 @@ def _tiles_gbuffer(fe, sc, out):
                         _gbuffer_row(out, i, i - y0, cols, x1 - x0 + 1, yw, zb, tb, frame, planes, normals, tri, False)
 
 
-@kernel(parallel=True)
-def _tiles_count(fe, sc, fcount):
-    """rasterize_fragments, first pass: fcount[tile] = the number of fragments of the tile."""
+@kernel
+def _tiles_count_slot(slot, tid, fe, sc, fcount):
+    """Slot ``slot`` (on thread ``tid``) of :func:`_tiles_count`: the body of its prange, a serial kernel
+    (Numba's parfor passes then see a one-line loop: docs/results/cold-start.md)."""
     vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, _normals, _rowbits, sh, _tri = fe
     _zbuf, _tbuf, spbuf, _ibuf, _lbuf, nslot = sc
     vw = _view_window(vp)
     W, H, ortho, far, wl, wt, wsx, wsy = vw
-    for slot in prange(nslot):
-        SP = spbuf[numba.get_thread_id()]
-        for ty in range(slot, nty, nslot):
-            for tx in range(ntx):
-                tile = ty * ntx + tx
-                rect = _tile_rect(ty, tx, T, W, H)
-                y0, _y1, x0, _x1 = rect
-                cols = (x0, wl, wsx)
-                nfrag = 0
-                for bi in range(start[tile], start[tile + 1]):
-                    ct = bins[bi]
-                    prect = _piece_rect(box, ct, rect)
-                    i0, i1, j0, j1 = prect
-                    if i0 > i1 or j0 > j1:
-                        continue
-                    zlo, zhi = _depth_bounds(zinfo, ct, ortho, near)
-                    zr = (zlo, zhi, far)
-                    pl = _plane(planes, ct >> sh)
-                    e0, e1, e2, scan, nrows = _piece_rows(edges, zinfo, ct, prect, y0, x0, W, H, SP, False)
-                    for rr in range(nrows):
-                        li = SP[_SP_RW, rr]
-                        i = li + y0
-                        py = i + 0.5
-                        zrow = _row_depth(ortho, pl, wt - py * wsy)
-                        lo, hi, r0, r1, r2 = _first_span(scan, li, py, j0, j1, SP, e0, e1, e2)
-                        while lo <= hi:
-                            span = (li, lo - x0, hi - x0)
-                            if ortho:
-                                nfrag += _count_row(span, cols, pl, zrow, zr, True)
-                            else:
-                                nfrag += _count_row(span, cols, pl, zrow, zr, False)
-                            lo, hi = _next_span(scan, hi, j1, e0, e1, e2, r0, r1, r2)
-                fcount[tile] = nfrag
+    SP = spbuf[tid]
+    for ty in range(slot, nty, nslot):
+        for tx in range(ntx):
+            tile = ty * ntx + tx
+            rect = _tile_rect(ty, tx, T, W, H)
+            y0, _y1, x0, _x1 = rect
+            cols = (x0, wl, wsx)
+            nfrag = 0
+            for bi in range(start[tile], start[tile + 1]):
+                ct = bins[bi]
+                prect = _piece_rect(box, ct, rect)
+                i0, i1, j0, j1 = prect
+                if i0 > i1 or j0 > j1:
+                    continue
+                zlo, zhi = _depth_bounds(zinfo, ct, ortho, near)
+                zr = (zlo, zhi, far)
+                pl = _plane(planes, ct >> sh)
+                e0, e1, e2, scan, nrows = _piece_rows(edges, zinfo, ct, prect, y0, x0, W, H, SP, False)
+                for rr in range(nrows):
+                    li = SP[_SP_RW, rr]
+                    i = li + y0
+                    py = i + 0.5
+                    zrow = _row_depth(ortho, pl, wt - py * wsy)
+                    lo, hi, r0, r1, r2 = _first_span(scan, li, py, j0, j1, SP, e0, e1, e2)
+                    while lo <= hi:
+                        span = (li, lo - x0, hi - x0)
+                        if ortho:
+                            nfrag += _count_row(span, cols, pl, zrow, zr, True)
+                        else:
+                            nfrag += _count_row(span, cols, pl, zrow, zr, False)
+                        lo, hi = _next_span(scan, hi, j1, e0, e1, e2, r0, r1, r2)
+            fcount[tile] = nfrag
+
+
+@kernel(parallel=True)
+def _tiles_count(fe, sc, fcount):
+    """rasterize_fragments, first pass: fcount[tile] = the number of fragments of the tile."""
+    for slot in prange(sc[5]):  # sc.nslot: one slot per thread
+        _tiles_count_slot(np.uint64(slot), numba.get_thread_id(), fe, sc, fcount)
+
+
+@kernel
+def _tiles_fragments_slot(slot, tid, fe, sc, foff, fpix, ftri, fbary, fdepth):
+    """Slot ``slot`` (on thread ``tid``) of :func:`_tiles_fragments`: the body of its prange, a serial kernel
+    (Numba's parfor passes then see a one-line loop: docs/results/cold-start.md)."""
+    vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, _normals, _rowbits, sh, tri = fe
+    _zbuf, _tbuf, spbuf, _ibuf, _lbuf, nslot = sc
+    W, H, ortho, far, wl, wt, wsx, wsy = _view_window(vp)
+    SP = spbuf[tid]
+    for ty in range(slot, nty, nslot):
+        for tx in range(ntx):
+            tile = ty * ntx + tx
+            rect = _tile_rect(ty, tx, T, W, H)
+            y0, _y1, x0, _x1 = rect
+            w = foff[tile]
+            for bi in range(start[tile], start[tile + 1]):
+                ct = bins[bi]
+                t = ct >> sh
+                prect = _piece_rect(box, ct, rect)
+                i0, i1, j0, j1 = prect
+                if i0 > i1 or j0 > j1:
+                    continue
+                zlo, zhi = _depth_bounds(zinfo, ct, ortho, near)
+                pl = _plane(planes, t)
+                q = _dual(planes, t)
+                e0, e1, e2, scan, nrows = _piece_rows(edges, zinfo, ct, prect, y0, x0, W, H, SP, False)
+                for rr in range(nrows):
+                    li = SP[_SP_RW, rr]
+                    i = li + y0
+                    py = i + 0.5
+                    yw = wt - py * wsy
+                    zrow = _row_depth(ortho, pl, yw)
+                    lo, hi, r0, r1, r2 = _first_span(scan, li, py, j0, j1, SP, e0, e1, e2)
+                    while lo <= hi:
+                        for j in range(lo, hi + 1):
+                            xw = wl + (j + 0.5) * wsx
+                            z = _clamp_depth(_frag_depth(ortho, pl, zrow, xw), zlo, zhi)
+                            if z > far:
+                                continue
+                            b1, b2 = _bary(q, xw, yw, z, ortho)
+                            fpix[w] = i * W + j
+                            ftri[w] = tri[t]
+                            fbary[w, 0] = b1
+                            fbary[w, 1] = b2
+                            fdepth[w] = z
+                            w += 1
+                        lo, hi = _next_span(scan, hi, j1, e0, e1, e2, r0, r1, r2)
 
 
 @kernel(parallel=True)
 def _tiles_fragments(fe, sc, foff, fpix, ftri, fbary, fdepth):
     """rasterize_fragments, second pass: write the fragments of each tile from foff[tile] on, by
     triangle, piece and pixel (row-major)."""
-    vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, _normals, _rowbits, sh, tri = fe
-    _zbuf, _tbuf, spbuf, _ibuf, _lbuf, nslot = sc
-    W, H, ortho, far, wl, wt, wsx, wsy = _view_window(vp)
-    for slot in prange(nslot):
-        SP = spbuf[numba.get_thread_id()]
-        for ty in range(slot, nty, nslot):
-            for tx in range(ntx):
-                tile = ty * ntx + tx
-                rect = _tile_rect(ty, tx, T, W, H)
-                y0, _y1, x0, _x1 = rect
-                w = foff[tile]
-                for bi in range(start[tile], start[tile + 1]):
-                    ct = bins[bi]
-                    t = ct >> sh
-                    prect = _piece_rect(box, ct, rect)
-                    i0, i1, j0, j1 = prect
-                    if i0 > i1 or j0 > j1:
-                        continue
-                    zlo, zhi = _depth_bounds(zinfo, ct, ortho, near)
-                    pl = _plane(planes, t)
-                    q = _dual(planes, t)
-                    e0, e1, e2, scan, nrows = _piece_rows(edges, zinfo, ct, prect, y0, x0, W, H, SP, False)
-                    for rr in range(nrows):
-                        li = SP[_SP_RW, rr]
-                        i = li + y0
-                        py = i + 0.5
-                        yw = wt - py * wsy
-                        zrow = _row_depth(ortho, pl, yw)
-                        lo, hi, r0, r1, r2 = _first_span(scan, li, py, j0, j1, SP, e0, e1, e2)
-                        while lo <= hi:
-                            for j in range(lo, hi + 1):
-                                xw = wl + (j + 0.5) * wsx
-                                z = _clamp_depth(_frag_depth(ortho, pl, zrow, xw), zlo, zhi)
-                                if z > far:
-                                    continue
-                                b1, b2 = _bary(q, xw, yw, z, ortho)
-                                fpix[w] = i * W + j
-                                ftri[w] = tri[t]
-                                fbary[w, 0] = b1
-                                fbary[w, 1] = b2
-                                fdepth[w] = z
-                                w += 1
-                            lo, hi = _next_span(scan, hi, j1, e0, e1, e2, r0, r1, r2)
+    for slot in prange(sc[5]):  # sc.nslot: one slot per thread
+        _tiles_fragments_slot(np.uint64(slot), numba.get_thread_id(), fe, sc, foff, fpix, ftri, fbary, fdepth)
 
 
 def _make_min_blend_kernel(prog):
     """rasterize_min_blend's tile kernel for fragment program ``prog`` (a constant of the closure:
     each kernel compiles only its own program, which inlines into the vector loops)."""
+
+    @kernel
+    def slot_fn(slot, tid, fe, sc, mb):
+        """Slot ``slot`` (on thread ``tid``) of :func:`tiles`: the body of its prange, a serial kernel
+        (Numba's parfor passes then see a one-line loop: docs/results/cold-start.md)."""
+        vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, _normals, rowbits, sh, tri = fe
+        zbuf, _tbuf, spbuf, ibuf, lbuf, nslot = sc
+        pparams, cattr, img, blend, bstats, split, cull_discarded = mb
+        vw = _view_window(vp)
+        W, H, ortho, far, wl, wt, wsx, wsy = vw
+        use_mask = rowbits.size > 0
+        ntiles = ntx * nty
+        zb = zbuf[tid]
+        ib = ibuf[tid]
+        SP = spbuf[tid]
+        CM = lbuf[tid]
+        for tile in range(slot, ntiles, nslot):  # tiles dealt round-robin: the work sits in few
+            if start[tile] == start[tile + 1]:
+                continue  # nothing binned here: ``blend`` unchanged
+            ty = tile // ntx
+            rect = _tile_rect(ty, tile - ty * ntx, T, W, H)
+            y0, y1, x0, x1 = rect
+            if not _texels_to_shade(SP, rowbits, tile, use_mask, y1 - y0, x1 - x0):
+                continue  # no texel to shade: ``blend`` unchanged
+            tthr, smax, cmax = _load_blend_tile(prog, pparams, blend, img, rect, SP, zb, ib)
+            dirty = False  # whether pieces have lowered values since cmax was computed
+            cols = (x0, wl, wsx)
+            na = 0
+            nb = 0
+            ka = 0
+            kb = 0
+            nculled = 0
+            nvculled = 0
+            for bi in range(start[tile], start[tile + 1]):
+                ct = bins[bi]
+                t = ct >> sh
+                prect = _piece_rect(box, ct, rect)
+                i0, i1, j0, j1 = prect
+                if i0 > i1 or j0 > j1:
+                    continue
+                if use_mask and not _rect_has_bits(SP, i0 - y0, i1 - y0, j0 - x0, j1 - x0):
+                    continue  # no texel to shade in the piece's rectangle of the tile
+                zlo, zhi = _depth_bounds(zinfo, ct, ortho, near)
+                pl = _plane(planes, t)
+                ot = tri[t]  # the face
+                ca = (cattr[ot, 0], cattr[ot, 1], cattr[ot, 2])
+                cconst = (ca[0] == ca[1]) & (ca[0] == ca[2])
+                if cull_discarded:
+                    # hierarchical culling (a GPU's coarse depth test): the nearest fragment of the
+                    # piece in this tile; if the program discards at that depth on every pixel of
+                    # the tile, skip the piece. The depth is evaluated exactly as per fragment; its
+                    # rounding is monotonic in x and in y, so the minimum over the pixel centers
+                    # is at a corner of the rectangle: exact, no margin needed.
+                    zc_min = min(max(_rect_min_depth(ortho, pl, vw, prect), zlo), zhi)
+                    if zc_min >= tthr:
+                        nculled += 1
+                        continue
+                    # the coarse value test (MIN blending): if no fragment of the piece can go
+                    # below the tile's largest current value, it can change no texel. Values
+                    # only decrease, so cmax is recomputed only after a piece has run.
+                    if cconst:
+                        vb = value_lower_bound(prog, pparams, ca[0], zc_min, smax)
+                        if dirty and vb >= cmax - _VALUE_RECOMPUTE:  # recompute only where it may pay
+                            cmax = _tile_max(zb, SP, CM, y1 - y0)
+                            dirty = False
+                        if vb >= cmax:
+                            nvculled += 1
+                            continue
+                e0, e1, e2, scan, nrows = _piece_rows(edges, zinfo, ct, prect, y0, x0, W, H, SP, True)
+                if nrows == 0:
+                    continue
+                dirty = True  # this piece will lower texels: the tile's largest value may fall
+                q = _dual(planes, t)
+                zr = (zlo, zhi, far)
+                side_a = ot < split
+                for rr in range(nrows):
+                    li = SP[_SP_RW, rr]
+                    i = li + y0
+                    rn = SP[_SP_RN, li]
+                    if use_mask and rn == 0:
+                        continue  # no texel of this row is shaded
+                    py = i + 0.5
+                    yw = wt - py * wsy
+                    zrow = _row_depth(ortho, pl, yw)
+                    lo, hi, r0, r1, r2 = _first_span(scan, li, py, j0, j1, SP, e0, e1, e2)
+                    while lo <= hi:
+                        klo = lo - x0
+                        khi = hi - x0
+                        if not use_mask or ((rn >> klo) & ((np.int64(1) << (khi - klo + 1)) - 1)) != 0:
+                            span = (li, klo, khi)
+                            if ortho:
+                                cin, ckp = _blend_row(
+                                    prog, pparams, zb, ib, rn, span, cols, yw, zrow, pl, q, ca, zr, True, False
+                                )
+                            elif cconst:
+                                cin, ckp = _blend_row(
+                                    prog, pparams, zb, ib, rn, span, cols, yw, zrow, pl, q, ca, zr, False, True
+                                )
+                            else:
+                                cin, ckp = _blend_row(
+                                    prog, pparams, zb, ib, rn, span, cols, yw, zrow, pl, q, ca, zr, False, False
+                                )
+                            if side_a:
+                                na += cin
+                                ka += ckp
+                            else:
+                                nb += cin
+                                kb += ckp
+                        lo, hi = _next_span(scan, hi, j1, e0, e1, e2, r0, r1, r2)
+            bstats[tile, 0] += na
+            bstats[tile, 1] += nb
+            bstats[tile, 2] += ka
+            bstats[tile, 3] += kb
+            bstats[tile, 4] += nculled
+            bstats[tile, 5] += nvculled
+            for i in range(y0, y1 + 1):
+                brow = blend[i, x0 : x1 + 1]
+                for k in range(brow.shape[0]):
+                    brow[k] = zb[i - y0, k]
 
     @kernel(parallel=True)
     def tiles(fe, sc, mb):
@@ -1519,122 +1652,8 @@ def _make_min_blend_kernel(prog):
         skipped, and so are the pieces with a constant attribute whose value bound
         (``value_lower_bound``) is at least the tile's largest value: the output is the same. With a
         texel mask (``fe.rowbits``), only its texels are shaded, the others keep their value."""
-        vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, _normals, rowbits, sh, tri = fe
-        zbuf, _tbuf, spbuf, ibuf, lbuf, nslot = sc
-        pparams, cattr, img, blend, bstats, split, cull_discarded = mb
-        vw = _view_window(vp)
-        W, H, ortho, far, wl, wt, wsx, wsy = vw
-        use_mask = rowbits.size > 0
-        ntiles = ntx * nty
-        for slot in prange(nslot):
-            tid = numba.get_thread_id()
-            zb = zbuf[tid]
-            ib = ibuf[tid]
-            SP = spbuf[tid]
-            CM = lbuf[tid]
-            for tile in range(slot, ntiles, nslot):  # tiles dealt round-robin: the work sits in few
-                if start[tile] == start[tile + 1]:
-                    continue  # nothing binned here: ``blend`` unchanged
-                ty = tile // ntx
-                rect = _tile_rect(ty, tile - ty * ntx, T, W, H)
-                y0, y1, x0, x1 = rect
-                if not _texels_to_shade(SP, rowbits, tile, use_mask, y1 - y0, x1 - x0):
-                    continue  # no texel to shade: ``blend`` unchanged
-                tthr, smax, cmax = _load_blend_tile(prog, pparams, blend, img, rect, SP, zb, ib)
-                dirty = False  # whether pieces have lowered values since cmax was computed
-                cols = (x0, wl, wsx)
-                na = 0
-                nb = 0
-                ka = 0
-                kb = 0
-                nculled = 0
-                nvculled = 0
-                for bi in range(start[tile], start[tile + 1]):
-                    ct = bins[bi]
-                    t = ct >> sh
-                    prect = _piece_rect(box, ct, rect)
-                    i0, i1, j0, j1 = prect
-                    if i0 > i1 or j0 > j1:
-                        continue
-                    if use_mask and not _rect_has_bits(SP, i0 - y0, i1 - y0, j0 - x0, j1 - x0):
-                        continue  # no texel to shade in the piece's rectangle of the tile
-                    zlo, zhi = _depth_bounds(zinfo, ct, ortho, near)
-                    pl = _plane(planes, t)
-                    ot = tri[t]  # the face
-                    ca = (cattr[ot, 0], cattr[ot, 1], cattr[ot, 2])
-                    cconst = (ca[0] == ca[1]) & (ca[0] == ca[2])
-                    if cull_discarded:
-                        # hierarchical culling (a GPU's coarse depth test): the nearest fragment of the
-                        # piece in this tile; if the program discards at that depth on every pixel of
-                        # the tile, skip the piece. The depth is evaluated exactly as per fragment; its
-                        # rounding is monotonic in x and in y, so the minimum over the pixel centers
-                        # is at a corner of the rectangle: exact, no margin needed.
-                        zc_min = min(max(_rect_min_depth(ortho, pl, vw, prect), zlo), zhi)
-                        if zc_min >= tthr:
-                            nculled += 1
-                            continue
-                        # the coarse value test (MIN blending): if no fragment of the piece can go
-                        # below the tile's largest current value, it can change no texel. Values
-                        # only decrease, so cmax is recomputed only after a piece has run.
-                        if cconst:
-                            vb = value_lower_bound(prog, pparams, ca[0], zc_min, smax)
-                            if dirty and vb >= cmax - _VALUE_RECOMPUTE:  # recompute only where it may pay
-                                cmax = _tile_max(zb, SP, CM, y1 - y0)
-                                dirty = False
-                            if vb >= cmax:
-                                nvculled += 1
-                                continue
-                    e0, e1, e2, scan, nrows = _piece_rows(edges, zinfo, ct, prect, y0, x0, W, H, SP, True)
-                    if nrows == 0:
-                        continue
-                    dirty = True  # this piece will lower texels: the tile's largest value may fall
-                    q = _dual(planes, t)
-                    zr = (zlo, zhi, far)
-                    side_a = ot < split
-                    for rr in range(nrows):
-                        li = SP[_SP_RW, rr]
-                        i = li + y0
-                        rn = SP[_SP_RN, li]
-                        if use_mask and rn == 0:
-                            continue  # no texel of this row is shaded
-                        py = i + 0.5
-                        yw = wt - py * wsy
-                        zrow = _row_depth(ortho, pl, yw)
-                        lo, hi, r0, r1, r2 = _first_span(scan, li, py, j0, j1, SP, e0, e1, e2)
-                        while lo <= hi:
-                            klo = lo - x0
-                            khi = hi - x0
-                            if not use_mask or ((rn >> klo) & ((np.int64(1) << (khi - klo + 1)) - 1)) != 0:
-                                span = (li, klo, khi)
-                                if ortho:
-                                    cin, ckp = _blend_row(
-                                        prog, pparams, zb, ib, rn, span, cols, yw, zrow, pl, q, ca, zr, True, False
-                                    )
-                                elif cconst:
-                                    cin, ckp = _blend_row(
-                                        prog, pparams, zb, ib, rn, span, cols, yw, zrow, pl, q, ca, zr, False, True
-                                    )
-                                else:
-                                    cin, ckp = _blend_row(
-                                        prog, pparams, zb, ib, rn, span, cols, yw, zrow, pl, q, ca, zr, False, False
-                                    )
-                                if side_a:
-                                    na += cin
-                                    ka += ckp
-                                else:
-                                    nb += cin
-                                    kb += ckp
-                            lo, hi = _next_span(scan, hi, j1, e0, e1, e2, r0, r1, r2)
-                bstats[tile, 0] += na
-                bstats[tile, 1] += nb
-                bstats[tile, 2] += ka
-                bstats[tile, 3] += kb
-                bstats[tile, 4] += nculled
-                bstats[tile, 5] += nvculled
-                for i in range(y0, y1 + 1):
-                    brow = blend[i, x0 : x1 + 1]
-                    for k in range(brow.shape[0]):
-                        brow[k] = zb[i - y0, k]
+        for slot in prange(sc[5]):  # sc.nslot: one slot per thread
+            slot_fn(np.uint64(slot), numba.get_thread_id(), fe, sc, mb)
 
     return tiles
 
@@ -1699,6 +1718,7 @@ def _prepare(view, vertices, faces, cull):
         fcs = fcs.reshape(-1, 3)
     if fcs.size and (fcs.min() < 0 or fcs.max() >= len(verts)):
         raise ValueError("faces index out of range of vertices")
+    verts, fcs = frozen(verts), frozen(fcs)  # one kernel specialisation, whoever owns the arrays
     code = _cull_code(cull)
     near = float(view.near)
     if not view.ortho:
