@@ -1415,109 +1415,95 @@ def _tiles_gbuffer(fe, sc, out):
                         _gbuffer_row(out, i, i - y0, cols, x1 - x0 + 1, yw, zb, tb, frame, planes, normals, tri, False)
 
 
-@kernel
-def _tiles_count_slot(slot, tid, fe, sc, fcount):
-    """Slot ``slot`` (on thread ``tid``) of :func:`_tiles_count`: the body of its prange, a serial kernel
-    (Numba's parfor passes then see a one-line loop: docs/results/cold-start.md)."""
+@kernel(parallel=True)
+def _tiles_count(fe, sc, fcount):
+    """rasterize_fragments, first pass: fcount[tile] = the number of fragments of the tile."""
     vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, _normals, _rowbits, sh, _tri = fe
     _zbuf, _tbuf, spbuf, _ibuf, _lbuf, nslot = sc
     vw = _view_window(vp)
     W, H, ortho, far, wl, wt, wsx, wsy = vw
-    SP = spbuf[tid]
-    for ty in range(slot, nty, nslot):
-        for tx in range(ntx):
-            tile = ty * ntx + tx
-            rect = _tile_rect(ty, tx, T, W, H)
-            y0, _y1, x0, _x1 = rect
-            cols = (x0, wl, wsx)
-            nfrag = 0
-            for bi in range(start[tile], start[tile + 1]):
-                ct = bins[bi]
-                prect = _piece_rect(box, ct, rect)
-                i0, i1, j0, j1 = prect
-                if i0 > i1 or j0 > j1:
-                    continue
-                zlo, zhi = _depth_bounds(zinfo, ct, ortho, near)
-                zr = (zlo, zhi, far)
-                pl = _plane(planes, ct >> sh)
-                e0, e1, e2, scan, nrows = _piece_rows(edges, zinfo, ct, prect, y0, x0, W, H, SP, False)
-                for rr in range(nrows):
-                    li = SP[_SP_RW, rr]
-                    i = li + y0
-                    py = i + 0.5
-                    zrow = _row_depth(ortho, pl, wt - py * wsy)
-                    lo, hi, r0, r1, r2 = _first_span(scan, li, py, j0, j1, SP, e0, e1, e2)
-                    while lo <= hi:
-                        span = (li, lo - x0, hi - x0)
-                        if ortho:
-                            nfrag += _count_row(span, cols, pl, zrow, zr, True)
-                        else:
-                            nfrag += _count_row(span, cols, pl, zrow, zr, False)
-                        lo, hi = _next_span(scan, hi, j1, e0, e1, e2, r0, r1, r2)
-            fcount[tile] = nfrag
-
-
-@kernel(parallel=True)
-def _tiles_count(fe, sc, fcount):
-    """rasterize_fragments, first pass: fcount[tile] = the number of fragments of the tile."""
-    for slot in prange(sc[5]):  # sc.nslot: one slot per thread
-        _tiles_count_slot(np.uint64(slot), numba.get_thread_id(), fe, sc, fcount)
-
-
-@kernel
-def _tiles_fragments_slot(slot, tid, fe, sc, foff, fpix, ftri, fbary, fdepth):
-    """Slot ``slot`` (on thread ``tid``) of :func:`_tiles_fragments`: the body of its prange, a serial kernel
-    (Numba's parfor passes then see a one-line loop: docs/results/cold-start.md)."""
-    vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, _normals, _rowbits, sh, tri = fe
-    _zbuf, _tbuf, spbuf, _ibuf, _lbuf, nslot = sc
-    W, H, ortho, far, wl, wt, wsx, wsy = _view_window(vp)
-    SP = spbuf[tid]
-    for ty in range(slot, nty, nslot):
-        for tx in range(ntx):
-            tile = ty * ntx + tx
-            rect = _tile_rect(ty, tx, T, W, H)
-            y0, _y1, x0, _x1 = rect
-            w = foff[tile]
-            for bi in range(start[tile], start[tile + 1]):
-                ct = bins[bi]
-                t = ct >> sh
-                prect = _piece_rect(box, ct, rect)
-                i0, i1, j0, j1 = prect
-                if i0 > i1 or j0 > j1:
-                    continue
-                zlo, zhi = _depth_bounds(zinfo, ct, ortho, near)
-                pl = _plane(planes, t)
-                q = _dual(planes, t)
-                e0, e1, e2, scan, nrows = _piece_rows(edges, zinfo, ct, prect, y0, x0, W, H, SP, False)
-                for rr in range(nrows):
-                    li = SP[_SP_RW, rr]
-                    i = li + y0
-                    py = i + 0.5
-                    yw = wt - py * wsy
-                    zrow = _row_depth(ortho, pl, yw)
-                    lo, hi, r0, r1, r2 = _first_span(scan, li, py, j0, j1, SP, e0, e1, e2)
-                    while lo <= hi:
-                        for j in range(lo, hi + 1):
-                            xw = wl + (j + 0.5) * wsx
-                            z = _clamp_depth(_frag_depth(ortho, pl, zrow, xw), zlo, zhi)
-                            if z > far:
-                                continue
-                            b1, b2 = _bary(q, xw, yw, z, ortho)
-                            fpix[w] = i * W + j
-                            ftri[w] = tri[t]
-                            fbary[w, 0] = b1
-                            fbary[w, 1] = b2
-                            fdepth[w] = z
-                            w += 1
-                        lo, hi = _next_span(scan, hi, j1, e0, e1, e2, r0, r1, r2)
+    for slot in prange(nslot):
+        SP = spbuf[numba.get_thread_id()]
+        for ty in range(slot, nty, nslot):
+            for tx in range(ntx):
+                tile = ty * ntx + tx
+                rect = _tile_rect(ty, tx, T, W, H)
+                y0, _y1, x0, _x1 = rect
+                cols = (x0, wl, wsx)
+                nfrag = 0
+                for bi in range(start[tile], start[tile + 1]):
+                    ct = bins[bi]
+                    prect = _piece_rect(box, ct, rect)
+                    i0, i1, j0, j1 = prect
+                    if i0 > i1 or j0 > j1:
+                        continue
+                    zlo, zhi = _depth_bounds(zinfo, ct, ortho, near)
+                    zr = (zlo, zhi, far)
+                    pl = _plane(planes, ct >> sh)
+                    e0, e1, e2, scan, nrows = _piece_rows(edges, zinfo, ct, prect, y0, x0, W, H, SP, False)
+                    for rr in range(nrows):
+                        li = SP[_SP_RW, rr]
+                        i = li + y0
+                        py = i + 0.5
+                        zrow = _row_depth(ortho, pl, wt - py * wsy)
+                        lo, hi, r0, r1, r2 = _first_span(scan, li, py, j0, j1, SP, e0, e1, e2)
+                        while lo <= hi:
+                            span = (li, lo - x0, hi - x0)
+                            if ortho:
+                                nfrag += _count_row(span, cols, pl, zrow, zr, True)
+                            else:
+                                nfrag += _count_row(span, cols, pl, zrow, zr, False)
+                            lo, hi = _next_span(scan, hi, j1, e0, e1, e2, r0, r1, r2)
+                fcount[tile] = nfrag
 
 
 @kernel(parallel=True)
 def _tiles_fragments(fe, sc, foff, fpix, ftri, fbary, fdepth):
     """rasterize_fragments, second pass: write the fragments of each tile from foff[tile] on, by
     triangle, piece and pixel (row-major)."""
-    for slot in prange(sc[5]):  # sc.nslot: one slot per thread
-        _tiles_fragments_slot(np.uint64(slot), numba.get_thread_id(), fe, sc, foff, fpix, ftri, fbary, fdepth)
+    vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, _normals, _rowbits, sh, tri = fe
+    _zbuf, _tbuf, spbuf, _ibuf, _lbuf, nslot = sc
+    W, H, ortho, far, wl, wt, wsx, wsy = _view_window(vp)
+    for slot in prange(nslot):
+        SP = spbuf[numba.get_thread_id()]
+        for ty in range(slot, nty, nslot):
+            for tx in range(ntx):
+                tile = ty * ntx + tx
+                rect = _tile_rect(ty, tx, T, W, H)
+                y0, _y1, x0, _x1 = rect
+                w = foff[tile]
+                for bi in range(start[tile], start[tile + 1]):
+                    ct = bins[bi]
+                    t = ct >> sh
+                    prect = _piece_rect(box, ct, rect)
+                    i0, i1, j0, j1 = prect
+                    if i0 > i1 or j0 > j1:
+                        continue
+                    zlo, zhi = _depth_bounds(zinfo, ct, ortho, near)
+                    pl = _plane(planes, t)
+                    q = _dual(planes, t)
+                    e0, e1, e2, scan, nrows = _piece_rows(edges, zinfo, ct, prect, y0, x0, W, H, SP, False)
+                    for rr in range(nrows):
+                        li = SP[_SP_RW, rr]
+                        i = li + y0
+                        py = i + 0.5
+                        yw = wt - py * wsy
+                        zrow = _row_depth(ortho, pl, yw)
+                        lo, hi, r0, r1, r2 = _first_span(scan, li, py, j0, j1, SP, e0, e1, e2)
+                        while lo <= hi:
+                            for j in range(lo, hi + 1):
+                                xw = wl + (j + 0.5) * wsx
+                                z = _clamp_depth(_frag_depth(ortho, pl, zrow, xw), zlo, zhi)
+                                if z > far:
+                                    continue
+                                b1, b2 = _bary(q, xw, yw, z, ortho)
+                                fpix[w] = i * W + j
+                                ftri[w] = tri[t]
+                                fbary[w, 0] = b1
+                                fbary[w, 1] = b2
+                                fdepth[w] = z
+                                w += 1
+                            lo, hi = _next_span(scan, hi, j1, e0, e1, e2, r0, r1, r2)
 
 
 def _make_min_blend_kernel(prog):
