@@ -485,7 +485,7 @@ def trace_shadow_ray(
     for r in range(n):
         k = order[r]
         cnt[C_IMAGES] += 1
-        nnew = 0
+        nnew = np.int64(0)  # typed, not the literal 0: traverse_epipolar compiles once
         if r == 0 or not use_iv:
             if seg[k, 0] != 0.0:
                 hit, th, nnew = traverse_epipolar(
