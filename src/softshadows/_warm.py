@@ -119,7 +119,10 @@ def start_warmup(scene, light_shape: str, width: int, height: int, names, params
     cold, writable = cache_state()
     if not (cold and writable):
         return None
-    folder = tempfile.mkdtemp(prefix="softshadows-warm-")
+    try:
+        folder = tempfile.mkdtemp(prefix="softshadows-warm-")
+    except OSError:  # no usable temporary folder: no helper (compare compiles alone)
+        return None
     job = {
         "claims": folder,
         "scene": scene if isinstance(scene, str) else "bunny",

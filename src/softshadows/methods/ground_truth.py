@@ -182,6 +182,17 @@ def hit_points(flat, eye, idx, nrm):
 
 
 @kernel(inline=True)
+def _blocked_ray(dirs, dist, geo, q, nx, ny, nz):
+    """Ray q is blocked by the pixel's own triangle: direction the normal (never traced: length 0),
+    geometry term -1 (counted as occluded)."""
+    dirs[q, 0] = nx
+    dirs[q, 1] = ny
+    dirs[q, 2] = nz
+    dist[q] = 0.0
+    geo[q] = -1.0
+
+
+@kernel(inline=True)
 def _ray_origin(px, py, pz, nx, ny, nz, off):
     """``p + off n`` rounded to float32 away from the surface (the next float32 outward where
     rounding to nearest came back toward it): pbrt's ``OffsetRayOrigin``."""
@@ -357,17 +368,12 @@ def generate_light_rays(
         base = k * S
         cls = _facing_class(px, py, pz, nx, ny, nz, grazing[k], shape, center, u, v, radius) if own_blocks[k] else 1
         if cls == -1:  # every sample leaves through the back of the pixel's own (occluder) triangle
-            fx, fy, fz = np.float32(nx), np.float32(ny), np.float32(nz)
             for s in range(S):
                 q = base + s
                 org[q, 0] = ox32
                 org[q, 1] = oy32
                 org[q, 2] = oz32
-                dirs[q, 0] = fx
-                dirs[q, 1] = fy
-                dirs[q, 2] = fz
-                dist[q] = 0.0
-                geo[q] = -1.0
+                _blocked_ray(dirs, dist, geo, q, nx, ny, nz)
             continue
         # the stratified, jittered point (a, b) of every sample (jitter_pair, vectorised)
         key = point_key(seed, pix[k])
@@ -426,11 +432,7 @@ def generate_light_rays(
             org[q, 2] = oz32
             if check and cp <= g:
                 # leaves through the back of the pixel's own (occluder) triangle: blocked
-                dirs[q, 0] = nx
-                dirs[q, 1] = ny
-                dirs[q, 2] = nz
-                dist[q] = 0.0
-                geo[q] = -1.0
+                _blocked_ray(dirs, dist, geo, q, nx, ny, nz)
                 continue
             rx, ry, rz = sx[s] - ox32, sy[s] - oy32, sz[s] - oz32
             rl = np.sqrt(rx * rx + ry * ry + rz * rz)
