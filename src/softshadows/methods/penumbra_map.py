@@ -57,6 +57,8 @@ class ShadowMapPass:
     occluder_depth: np.ndarray
     surface_depth: np.ndarray
     border_clipped: bool = False
+    #: max-depth pyramid of ``surface_depth`` (:func:`build_zmax_pyramid`), made in the same pass
+    zmax_pyramid: tuple | None = None
 
 
 def penumbra_map_view(
@@ -110,6 +112,13 @@ def penumbra_map_view(
     return hv, view, (pl, pr, pt, pb), bool(cl or cr or ct or cb)
 
 
+def _receiver_only_faces(flat) -> np.ndarray:
+    """The faces that receive but do not occlude (contiguous, read-only: cached per geometry)."""
+    faces = np.ascontiguousarray(flat.faces[flat.receiver & ~flat.occluder])
+    faces.flags.writeable = False
+    return faces
+
+
 def shadow_map_pass(scene, map_size: int, light_radius: float, base_view: View | None = None) -> ShadowMapPass:
     """Pass 1: the occluders' shadow map from the light center (``hard``'s view and texels) and the
     depth ``Z_P`` of the foremost surface per texel of the bordered view. Every occluder lies
@@ -123,15 +132,16 @@ def shadow_map_pass(scene, map_size: int, light_radius: float, base_view: View |
     flat = scene.flat
     occ_faces = flat.faces_where(flat.occluder)  # once per geometry
     d_occ, _ = rasterize_depth(hv, flat.vertices, occ_faces, cull="none")
-    only_recv = flat.receiver & ~flat.occluder
-    if only_recv.any():
-        zp, _ = rasterize_depth(view, flat.vertices, np.ascontiguousarray(flat.faces[only_recv]), cull="none")
+    recv_faces = flat.cached(("penumbra_map_receiver_only_faces",), lambda: _receiver_only_faces(flat))
+    if len(recv_faces):
+        zp, _ = rasterize_depth(view, flat.vertices, recv_faces, cull="none")
     else:
         zp = np.full((view.height, view.width), np.inf, np.float32)
     pl, _, pt, _ = border
-    inner = zp[pt : pt + hv.height, pl : pl + hv.width]
-    np.minimum(inner, d_occ, out=inner)
-    return ShadowMapPass(hv, view, border, d_occ, zp, clipped)
+    # Z_P = min(receivers, occluder map) inside hard's window, and the pyramid's first level, in
+    # one parallel pass over the map
+    pyr = build_zmax_pyramid(zp, d_occ, (pt, pl))
+    return ShadowMapPass(hv, view, border, d_occ, zp, clipped, pyr)
 
 
 # ==============================================================================================
@@ -525,9 +535,18 @@ def _max_down_row(src, s0, sw, sh, dst, d0, dw, i):
 
 
 @kernel(parallel=True)
-def _pyramid_level1(zp_flat, H, W, data, w2):
-    """Level 1 (2x2 max of ``Z_P``) straight from the map, rows in parallel."""
+def _pyramid_level1(zp_flat, H, W, data, w2, occ_flat, h, w, pt, pl):
+    """Level 1 (2x2 max of ``Z_P``) straight from the map, rows in parallel. With an occluder map
+    ``occ_flat`` (h, w) placed at row ``pt``, column ``pl`` (h > 0), each pair of rows first takes
+    the minimum with it in place (as ``np.minimum``: NaN wins), then reduces."""
     for i in prange((H + 1) // 2):
+        for rr in range(2 * i, min(2 * i + 2, H)):
+            ro = rr - pt
+            if 0 <= ro < h:
+                for c in range(w):
+                    a = zp_flat[rr * W + pl + c]
+                    b = occ_flat[ro * w + c]
+                    zp_flat[rr * W + pl + c] = a if (a < b or a != a) else b
         _max_down_row(zp_flat, 0, W, H, data, 0, w2, i)
 
 
@@ -539,11 +558,28 @@ def _pyramid_coarser(data, offs, ws, hs):
             _max_down_row(data, offs[L - 1], ws[L - 1], hs[L - 1], data, offs[L], ws[L], i)
 
 
-def build_zmax_pyramid(zp: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def build_zmax_pyramid(
+    zp: np.ndarray, occluder_depth: np.ndarray | None = None, at: tuple = (0, 0)
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Max-depth mip pyramid of ``Z_P`` (empty texels count as 0: nothing behind them), as flat
     float32 data, level offsets, widths, heights. Level 0 (``Z_P`` itself) is not stored (offset
-    -1): queries start at level 1. The last level is one texel, the largest finite ``Z_P``."""
+    -1): queries start at level 1. The last level is one texel, the largest finite ``Z_P``.
+    With ``occluder_depth`` (h, w) float32 and its position ``at`` = (row, column) in ``zp``
+    (float32, C-contiguous; inside it), ``zp`` first becomes, in place and in the same pass, the
+    minimum of the two there (``shadow_map_pass``)."""
     h, w = zp.shape
+    if occluder_depth is not None:
+        if zp.dtype != np.float32 or not zp.flags.c_contiguous:
+            raise ValueError("zp must be a C-contiguous float32 array to be updated in place")
+        occ = np.ascontiguousarray(occluder_depth, dtype=np.float32)
+        oh, ow = occ.shape
+        r0, c0 = int(at[0]), int(at[1])
+        if not (r0 >= 0 and r0 + oh <= h and c0 >= 0 and c0 + ow <= w):
+            raise ValueError(f"occluder map {occ.shape} at {at} is not inside {zp.shape}")
+        if h < 2 and w < 2:  # no level 1: the minimum alone
+            np.minimum(zp[r0 : r0 + oh, c0 : c0 + ow], occ, out=zp[r0 : r0 + oh, c0 : c0 + ow])
+    else:
+        occ, oh, ow, r0, c0 = _E_OCC, 0, 0, 0, 0
     ws, hs, offs = [w], [h], [-1]
     total = 0
     while ws[-1] > 1 or hs[-1] > 1:
@@ -554,9 +590,13 @@ def build_zmax_pyramid(zp: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarr
     data = np.zeros(max(total, 1), np.float32)
     offs, ws, hs = np.array(offs, np.int64), np.array(ws, np.int64), np.array(hs, np.int64)
     if len(offs) > 1:
-        _pyramid_level1(np.ascontiguousarray(zp, dtype=np.float32).reshape(-1), h, w, data, ws[1])
+        zf = zp.reshape(-1) if occluder_depth is not None else np.ascontiguousarray(zp, dtype=np.float32).reshape(-1)
+        _pyramid_level1(zf, h, w, data, ws[1], occ.reshape(-1), oh, ow, r0, c0)
         _pyramid_coarser(data, offs, ws, hs)
     return data, offs, ws, hs
+
+
+_E_OCC = np.zeros((0, 0), np.float32)
 
 
 def pyramid_max(pyr) -> float:
@@ -906,12 +946,13 @@ def render_penumbra_map(
     with phase("penumbra_map"):
         pm = np.ones((view.height, view.width), np.float32)  # clear to white
         zp = smp.surface_depth
-        pyr = build_zmax_pyramid(zp)  # its last level is the farthest Z_P
+        # its last level is the farthest Z_P (shadow_map_pass makes it in its last pass)
+        pyr = smp.zmax_pyramid if smp.zmax_pyramid is not None else build_zmax_pyramid(zp)
         zmax = pyramid_max(pyr)
         z_far = zmax * (1.0 + 1e-6) if zmax > 0.0 else float(view.far)
         if not early_reject:
             pyr = None
-        faces = flat.faces if flat.occluder.all() else flat.faces[flat.occluder]
+        faces = flat.faces if flat.occluder.all() else flat.faces_where(flat.occluder)  # once per geometry
         cones = build_cones(view, flat.vertices[sil.vertices], light_radius, z_far, cone_segments, pyr)
         sheets = build_sheets(
             view, flat.vertices, faces, sil, light_radius, z_far, sheet_tolerance, sheet_max_subdiv, pyr
