@@ -339,8 +339,10 @@ def _sheet_quads(V, faces, edges, edge_faces, o, r, u, f, near, z_far, lr):
     q0 = np.empty((S, 3))
     q1 = np.empty((S, 3))
     for e in range(S):
-        q0[e, 0], q0[e, 1], q0[e, 2] = _to_view(V[edges[e, 0]], o, r, u, f)
-        q1[e, 0], q1[e, 1], q1[e, 2] = _to_view(V[edges[e, 1]], o, r, u, f)
+        a = edges[e, 0]
+        b = edges[e, 1]
+        q0[e, 0], q0[e, 1], q0[e, 2] = _to_view_xyz(V[a, 0], V[a, 1], V[a, 2], o, r, u, f)
+        q1[e, 0], q1[e, 1], q1[e, 2] = _to_view_xyz(V[b, 0], V[b, 1], V[b, 2], o, r, u, f)
     ok = np.zeros(S, np.bool_)
     a0 = np.zeros((S, 2))
     a1 = np.zeros((S, 2))
@@ -376,7 +378,7 @@ def _sheet_quads(V, faces, edges, edge_faces, o, r, u, f, near, z_far, lr):
             cx = ((V[faces[fi, 0], 0] + V[faces[fi, 1], 0]) + V[faces[fi, 2], 0]) / 3.0
             cy = ((V[faces[fi, 0], 1] + V[faces[fi, 1], 1]) + V[faces[fi, 2], 1]) / 3.0
             cz = ((V[faces[fi, 0], 2] + V[faces[fi, 1], 2]) + V[faces[fi, 2], 2]) / 3.0
-            qx, qy, qz = _to_view(np.array((cx, cy, cz)), o, r, u, f)
+            qx, qy, qz = _to_view_xyz(cx, cy, cz, o, r, u, f)  # (no array per face)
             zc = max(qz, 1e-12)
             c2x = qx * z_far / zc
             c2y = qy * z_far / zc
@@ -437,10 +439,10 @@ def _sheet_quads(V, faces, edges, edge_faces, o, r, u, f, near, z_far, lr):
 
 
 @kernel
-def _to_view(p, o, r, u, f):
-    dx = p[0] - o[0]
-    dy = p[1] - o[1]
-    dz = p[2] - o[2]
+def _to_view_xyz(x, y, z, o, r, u, f):
+    dx = x - o[0]
+    dy = y - o[1]
+    dz = z - o[2]
     return (dx * r[0] + dy * r[1] + dz * r[2], dx * u[0] + dy * u[1] + dz * u[2], dx * f[0] + dy * f[1] + dz * f[2])
 
 
@@ -771,7 +773,7 @@ def _sheet_reject_kernel(sx, sy, zc, z_far, iters, pieces, eps, data, offs, ws, 
         zmin = min(zc[i, 0], zc[i, 1])
         u = 1.0
         for _ in range(iters):
-            zm = _sheet_zmax(sx[i], sy[i], zc[i], z_far, 0.0, u, data, offs, ws, hs)
+            zm = _sheet_zmax(sx, sy, zc, i, z_far, 0.0, u, data, offs, ws, hs)
             uc = (zm - zmin) / (z_far - zmin)
             if uc < u:
                 u = uc
@@ -782,7 +784,7 @@ def _sheet_reject_kernel(sx, sy, zc, z_far, iters, pieces, eps, data, offs, ws, 
             for m in range(pieces - 1, -1, -1):  # the last qualifying slice: search from the end
                 ua = u * m / pieces
                 ub = u * (m + 1) / pieces
-                zm = _sheet_zmax(sx[i], sy[i], zc[i], z_far, ua, ub, data, offs, ws, hs)
+                zm = _sheet_zmax(sx, sy, zc, i, z_far, ua, ub, data, offs, ws, hs)
                 za = (1.0 - ua) * zmin + ua * z_far
                 if zm > za + eps * z_far:
                     last = min(ub, (zm - zmin) / (z_far - zmin))
@@ -792,9 +794,10 @@ def _sheet_reject_kernel(sx, sy, zc, z_far, iters, pieces, eps, data, offs, ws, 
 
 
 @kernel
-def _sheet_zmax(sx, sy, zc, z_far, ua, ub, data, offs, ws, hs):
-    """Max Z_P under the part ua <= u <= ub of a sheet: the hull of the four ruling points there
-    (corners v0, v1, F1, F0 in pixels, ``zc`` the depths of v0, v1; F0, F1 at ``z_far``)."""
+def _sheet_zmax(sx, sy, zc, i, z_far, ua, ub, data, offs, ws, hs):
+    """Max Z_P under the part ua <= u <= ub of sheet ``i``: the hull of the four ruling points there
+    (corners v0, v1, F1, F0 in pixels ``sx[i], sy[i]``, ``zc[i]`` the depths of v0, v1; F0, F1 at
+    ``z_far``; rows indexed here: no array view per call)."""
     xa = 1e300
     xb = -1e300
     ya = 1e300
@@ -802,12 +805,12 @@ def _sheet_zmax(sx, sy, zc, z_far, ua, ub, data, offs, ws, hs):
     for e in range(2):  # ruling at v0 (corners 0 -> 3) and at v1 (corners 1 -> 2)
         c0 = 0 if e == 0 else 1
         c1 = 3 if e == 0 else 2
-        zv = zc[e]
+        zv = zc[i, e]
         for u in (ua, ub):
             # the world point v + u (F - v) projects to a fraction g of the ruling's pixel segment
             g = u * z_far / ((1.0 - u) * zv + u * z_far)
-            px = sx[c0] + (sx[c1] - sx[c0]) * g
-            py = sy[c0] + (sy[c1] - sy[c0]) * g
+            px = sx[i, c0] + (sx[i, c1] - sx[i, c0]) * g
+            py = sy[i, c0] + (sy[i, c1] - sy[i, c0]) * g
             xa = min(xa, px)
             xb = max(xb, px)
             ya = min(ya, py)
