@@ -57,7 +57,8 @@ class ShadowMapPass:
     occluder_depth: np.ndarray
     surface_depth: np.ndarray
     border_clipped: bool = False
-    #: max-depth pyramid of ``surface_depth`` (:func:`build_zmax_pyramid`), made in the same pass
+    #: max-depth pyramid of ``surface_depth`` (:func:`build_zmax_pyramid`), made in the same pass;
+    #: None: :func:`render_penumbra_map` builds it from ``surface_depth``
     zmax_pyramid: tuple | None = None
 
 
