@@ -57,6 +57,9 @@ class ShadowMapPass:
     occluder_depth: np.ndarray
     surface_depth: np.ndarray
     border_clipped: bool = False
+    #: max-depth pyramid of ``surface_depth`` (:func:`build_zmax_pyramid`), made in the same pass;
+    #: None: :func:`render_penumbra_map` builds it from ``surface_depth``
+    zmax_pyramid: tuple | None = None
 
 
 def penumbra_map_view(
@@ -110,6 +113,13 @@ def penumbra_map_view(
     return hv, view, (pl, pr, pt, pb), bool(cl or cr or ct or cb)
 
 
+def _receiver_only_faces(flat) -> np.ndarray:
+    """The faces that receive but do not occlude (contiguous, read-only: cached per geometry)."""
+    faces = np.ascontiguousarray(flat.faces[flat.receiver & ~flat.occluder])
+    faces.flags.writeable = False
+    return faces
+
+
 def shadow_map_pass(scene, map_size: int, light_radius: float, base_view: View | None = None) -> ShadowMapPass:
     """Pass 1: the occluders' shadow map from the light center (``hard``'s view and texels) and the
     depth ``Z_P`` of the foremost surface per texel of the bordered view. Every occluder lies
@@ -123,15 +133,16 @@ def shadow_map_pass(scene, map_size: int, light_radius: float, base_view: View |
     flat = scene.flat
     occ_faces = flat.faces_where(flat.occluder)  # once per geometry
     d_occ, _ = rasterize_depth(hv, flat.vertices, occ_faces, cull="none")
-    only_recv = flat.receiver & ~flat.occluder
-    if only_recv.any():
-        zp, _ = rasterize_depth(view, flat.vertices, np.ascontiguousarray(flat.faces[only_recv]), cull="none")
+    recv_faces = flat.cached(("penumbra_map_receiver_only_faces",), lambda: _receiver_only_faces(flat))
+    if len(recv_faces):
+        zp, _ = rasterize_depth(view, flat.vertices, recv_faces, cull="none")
     else:
         zp = np.full((view.height, view.width), np.inf, np.float32)
     pl, _, pt, _ = border
-    inner = zp[pt : pt + hv.height, pl : pl + hv.width]
-    np.minimum(inner, d_occ, out=inner)
-    return ShadowMapPass(hv, view, border, d_occ, zp, clipped)
+    # Z_P = min(receivers, occluder map) inside hard's window, and the pyramid's first level, in
+    # one parallel pass over the map
+    pyr = build_zmax_pyramid(zp, d_occ, (pt, pl))
+    return ShadowMapPass(hv, view, border, d_occ, zp, clipped, pyr)
 
 
 # ==============================================================================================
@@ -329,8 +340,10 @@ def _sheet_quads(V, faces, edges, edge_faces, o, r, u, f, near, z_far, lr):
     q0 = np.empty((S, 3))
     q1 = np.empty((S, 3))
     for e in range(S):
-        q0[e, 0], q0[e, 1], q0[e, 2] = _to_view(V[edges[e, 0]], o, r, u, f)
-        q1[e, 0], q1[e, 1], q1[e, 2] = _to_view(V[edges[e, 1]], o, r, u, f)
+        a = edges[e, 0]
+        b = edges[e, 1]
+        q0[e, 0], q0[e, 1], q0[e, 2] = _to_view_xyz(V[a, 0], V[a, 1], V[a, 2], o, r, u, f)
+        q1[e, 0], q1[e, 1], q1[e, 2] = _to_view_xyz(V[b, 0], V[b, 1], V[b, 2], o, r, u, f)
     ok = np.zeros(S, np.bool_)
     a0 = np.zeros((S, 2))
     a1 = np.zeros((S, 2))
@@ -366,7 +379,7 @@ def _sheet_quads(V, faces, edges, edge_faces, o, r, u, f, near, z_far, lr):
             cx = ((V[faces[fi, 0], 0] + V[faces[fi, 1], 0]) + V[faces[fi, 2], 0]) / 3.0
             cy = ((V[faces[fi, 0], 1] + V[faces[fi, 1], 1]) + V[faces[fi, 2], 1]) / 3.0
             cz = ((V[faces[fi, 0], 2] + V[faces[fi, 1], 2]) + V[faces[fi, 2], 2]) / 3.0
-            qx, qy, qz = _to_view(np.array((cx, cy, cz)), o, r, u, f)
+            qx, qy, qz = _to_view_xyz(cx, cy, cz, o, r, u, f)  # (no array per face)
             zc = max(qz, 1e-12)
             c2x = qx * z_far / zc
             c2y = qy * z_far / zc
@@ -427,10 +440,10 @@ def _sheet_quads(V, faces, edges, edge_faces, o, r, u, f, near, z_far, lr):
 
 
 @kernel
-def _to_view(p, o, r, u, f):
-    dx = p[0] - o[0]
-    dy = p[1] - o[1]
-    dz = p[2] - o[2]
+def _to_view_xyz(x, y, z, o, r, u, f):
+    dx = x - o[0]
+    dy = y - o[1]
+    dz = z - o[2]
     return (dx * r[0] + dy * r[1] + dz * r[2], dx * u[0] + dy * u[1] + dz * u[2], dx * f[0] + dy * f[1] + dz * f[2])
 
 
@@ -525,9 +538,18 @@ def _max_down_row(src, s0, sw, sh, dst, d0, dw, i):
 
 
 @kernel(parallel=True)
-def _pyramid_level1(zp_flat, H, W, data, w2):
-    """Level 1 (2x2 max of ``Z_P``) straight from the map, rows in parallel."""
+def _pyramid_level1(zp_flat, H, W, data, w2, occ_flat, h, w, pt, pl):
+    """Level 1 (2x2 max of ``Z_P``) straight from the map, rows in parallel. With an occluder map
+    ``occ_flat`` (h, w) placed at row ``pt``, column ``pl`` (h > 0), each pair of rows first takes
+    the minimum with it in place (as ``np.minimum``: NaN wins), then reduces."""
     for i in prange((H + 1) // 2):
+        for rr in range(2 * i, min(2 * i + 2, H)):
+            ro = rr - pt
+            if 0 <= ro < h:
+                for c in range(w):
+                    a = zp_flat[rr * W + pl + c]
+                    b = occ_flat[ro * w + c]
+                    zp_flat[rr * W + pl + c] = a if (a < b or a != a) else b
         _max_down_row(zp_flat, 0, W, H, data, 0, w2, i)
 
 
@@ -539,11 +561,28 @@ def _pyramid_coarser(data, offs, ws, hs):
             _max_down_row(data, offs[L - 1], ws[L - 1], hs[L - 1], data, offs[L], ws[L], i)
 
 
-def build_zmax_pyramid(zp: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def build_zmax_pyramid(
+    zp: np.ndarray, occluder_depth: np.ndarray | None = None, at: tuple = (0, 0)
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Max-depth mip pyramid of ``Z_P`` (empty texels count as 0: nothing behind them), as flat
     float32 data, level offsets, widths, heights. Level 0 (``Z_P`` itself) is not stored (offset
-    -1): queries start at level 1. The last level is one texel, the largest finite ``Z_P``."""
+    -1): queries start at level 1. The last level is one texel, the largest finite ``Z_P``.
+    With ``occluder_depth`` (h, w) float32 and its position ``at`` = (row, column) in ``zp``
+    (float32, C-contiguous; inside it), ``zp`` first becomes, in place and in the same pass, the
+    minimum of the two there (``shadow_map_pass``)."""
     h, w = zp.shape
+    if occluder_depth is not None:
+        if zp.dtype != np.float32 or not zp.flags.c_contiguous:
+            raise ValueError("zp must be a C-contiguous float32 array to be updated in place")
+        occ = np.ascontiguousarray(occluder_depth, dtype=np.float32)
+        oh, ow = occ.shape
+        r0, c0 = int(at[0]), int(at[1])
+        if not (r0 >= 0 and r0 + oh <= h and c0 >= 0 and c0 + ow <= w):
+            raise ValueError(f"occluder map {occ.shape} at {at} is not inside {zp.shape}")
+        if h < 2 and w < 2:  # no level 1: the minimum alone
+            np.minimum(zp[r0 : r0 + oh, c0 : c0 + ow], occ, out=zp[r0 : r0 + oh, c0 : c0 + ow])
+    else:
+        occ, oh, ow, r0, c0 = _E_OCC, 0, 0, 0, 0
     ws, hs, offs = [w], [h], [-1]
     total = 0
     while ws[-1] > 1 or hs[-1] > 1:
@@ -554,9 +593,13 @@ def build_zmax_pyramid(zp: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarr
     data = np.zeros(max(total, 1), np.float32)
     offs, ws, hs = np.array(offs, np.int64), np.array(ws, np.int64), np.array(hs, np.int64)
     if len(offs) > 1:
-        _pyramid_level1(np.ascontiguousarray(zp, dtype=np.float32).reshape(-1), h, w, data, ws[1])
+        zf = zp.reshape(-1) if occluder_depth is not None else np.ascontiguousarray(zp, dtype=np.float32).reshape(-1)
+        _pyramid_level1(zf, h, w, data, ws[1], occ.reshape(-1), oh, ow, r0, c0)
         _pyramid_coarser(data, offs, ws, hs)
     return data, offs, ws, hs
+
+
+_E_OCC = np.zeros((0, 0), np.float32)
 
 
 def pyramid_max(pyr) -> float:
@@ -731,7 +774,7 @@ def _sheet_reject_kernel(sx, sy, zc, z_far, iters, pieces, eps, data, offs, ws, 
         zmin = min(zc[i, 0], zc[i, 1])
         u = 1.0
         for _ in range(iters):
-            zm = _sheet_zmax(sx[i], sy[i], zc[i], z_far, 0.0, u, data, offs, ws, hs)
+            zm = _sheet_zmax(sx, sy, zc, i, z_far, 0.0, u, data, offs, ws, hs)
             uc = (zm - zmin) / (z_far - zmin)
             if uc < u:
                 u = uc
@@ -742,7 +785,7 @@ def _sheet_reject_kernel(sx, sy, zc, z_far, iters, pieces, eps, data, offs, ws, 
             for m in range(pieces - 1, -1, -1):  # the last qualifying slice: search from the end
                 ua = u * m / pieces
                 ub = u * (m + 1) / pieces
-                zm = _sheet_zmax(sx[i], sy[i], zc[i], z_far, ua, ub, data, offs, ws, hs)
+                zm = _sheet_zmax(sx, sy, zc, i, z_far, ua, ub, data, offs, ws, hs)
                 za = (1.0 - ua) * zmin + ua * z_far
                 if zm > za + eps * z_far:
                     last = min(ub, (zm - zmin) / (z_far - zmin))
@@ -752,9 +795,10 @@ def _sheet_reject_kernel(sx, sy, zc, z_far, iters, pieces, eps, data, offs, ws, 
 
 
 @kernel
-def _sheet_zmax(sx, sy, zc, z_far, ua, ub, data, offs, ws, hs):
-    """Max Z_P under the part ua <= u <= ub of a sheet: the hull of the four ruling points there
-    (corners v0, v1, F1, F0 in pixels, ``zc`` the depths of v0, v1; F0, F1 at ``z_far``)."""
+def _sheet_zmax(sx, sy, zc, i, z_far, ua, ub, data, offs, ws, hs):
+    """Max Z_P under the part ua <= u <= ub of sheet ``i``: the hull of the four ruling points there
+    (corners v0, v1, F1, F0 in pixels ``sx[i], sy[i]``, ``zc[i]`` the depths of v0, v1; F0, F1 at
+    ``z_far``; rows indexed here: no array view per call)."""
     xa = 1e300
     xb = -1e300
     ya = 1e300
@@ -762,12 +806,12 @@ def _sheet_zmax(sx, sy, zc, z_far, ua, ub, data, offs, ws, hs):
     for e in range(2):  # ruling at v0 (corners 0 -> 3) and at v1 (corners 1 -> 2)
         c0 = 0 if e == 0 else 1
         c1 = 3 if e == 0 else 2
-        zv = zc[e]
+        zv = zc[i, e]
         for u in (ua, ub):
             # the world point v + u (F - v) projects to a fraction g of the ruling's pixel segment
             g = u * z_far / ((1.0 - u) * zv + u * z_far)
-            px = sx[c0] + (sx[c1] - sx[c0]) * g
-            py = sy[c0] + (sy[c1] - sy[c0]) * g
+            px = sx[i, c0] + (sx[i, c1] - sx[i, c0]) * g
+            py = sy[i, c0] + (sy[i, c1] - sy[i, c0]) * g
             xa = min(xa, px)
             xb = max(xb, px)
             ya = min(ya, py)
@@ -906,12 +950,13 @@ def render_penumbra_map(
     with phase("penumbra_map"):
         pm = np.ones((view.height, view.width), np.float32)  # clear to white
         zp = smp.surface_depth
-        pyr = build_zmax_pyramid(zp)  # its last level is the farthest Z_P
+        # its last level is the farthest Z_P (shadow_map_pass makes it in its last pass)
+        pyr = smp.zmax_pyramid if smp.zmax_pyramid is not None else build_zmax_pyramid(zp)
         zmax = pyramid_max(pyr)
         z_far = zmax * (1.0 + 1e-6) if zmax > 0.0 else float(view.far)
         if not early_reject:
             pyr = None
-        faces = flat.faces if flat.occluder.all() else flat.faces[flat.occluder]
+        faces = flat.faces if flat.occluder.all() else flat.faces_where(flat.occluder)  # once per geometry
         cones = build_cones(view, flat.vertices[sil.vertices], light_radius, z_far, cone_segments, pyr)
         sheets = build_sheets(
             view, flat.vertices, faces, sil, light_radius, z_far, sheet_tolerance, sheet_max_subdiv, pyr
