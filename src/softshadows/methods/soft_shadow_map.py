@@ -552,24 +552,24 @@ def _outside_disk(u0, u1, u2, u3, v0, v1, v2, v3):
 
 
 @kernel(inline=True)
-def _corner_heights(F, fi, fj, x0, x1, y0, y1, zo):
-    """Heights w.q above the plane of the disk facing texel (fi, fj) (``F``: :func:`disk_frames`) of
-    the patch corners (x0,y0) (x1,y0) (x1,y1) (x0,y1) at depth z_O (everything is affine in x, y)."""
-    wx = F[0, fi, fj]
-    wy = F[1, fi, fj]
-    hz = F[2, fi, fj] * zo
+def _quad_heights(wx, wy, wz, x0, x1, y0, y1, zo):
+    """Heights w.q above the plane of the disk of normal w of the patch corners (x0,y0) (x1,y0)
+    (x1,y1) (x0,y1) at depth z_O (everything is affine in x, y)."""
+    hz = wz * zo
     return wx * x0 + wy * y0 + hz, wx * x1 + wy * y0 + hz, wx * x1 + wy * y1 + hz, wx * x0 + wy * y1 + hz
 
 
 @kernel(inline=True)
-def _project_corners(F, fi, fj, x0, x1, y0, y1, zo, h0, h1, h2, h3):
-    """Disk coordinates (u0..u3, v0..v3) (radius 1) of the patch corners projected from the texel's
-    receiver point p onto its facing disk's plane: ``(e1.q, e2.q) / (kappa (|p| - h))``, h the
-    corner's :func:`_corner_heights` (all in (0, |p|))."""
-    hp = F[9, fi, fj]
-    kap = F[10, fi, fj]
-    e1x, e1y, e1z = F[3, fi, fj], F[4, fi, fj], F[5, fi, fj]
-    e2x, e2y, e2z = F[6, fi, fj], F[7, fi, fj], F[8, fi, fj]
+def _corner_heights(F, fi, fj, x0, x1, y0, y1, zo):
+    """:func:`_quad_heights` for the disk facing texel (fi, fj) (``F``: :func:`disk_frames`)."""
+    return _quad_heights(F[0, fi, fj], F[1, fi, fj], F[2, fi, fj], x0, x1, y0, y1, zo)
+
+
+@kernel(inline=True)
+def _project_quad(hp, kap, e1x, e1y, e1z, e2x, e2y, e2z, x0, x1, y0, y1, zo, h0, h1, h2, h3):
+    """Disk coordinates (u0..u3, v0..v3) (radius 1) of the patch corners projected from the receiver
+    point p (|p| = ``hp``, kappa = rho/|p|) onto the plane of its facing disk (axes e1, e2):
+    ``(e1.q, e2.q) / (kappa (|p| - h))``, h the corner's :func:`_quad_heights` (all in (0, |p|))."""
     az = e1z * zo
     bz = e2z * zo
     d0 = 1.0 / (kap * (hp - h0))
@@ -585,6 +585,30 @@ def _project_corners(F, fi, fj, x0, x1, y0, y1, zo, h0, h1, h2, h3):
         (e2x * x1 + e2y * y0 + bz) * d1,
         (e2x * x1 + e2y * y1 + bz) * d2,
         (e2x * x0 + e2y * y1 + bz) * d3,
+    )
+
+
+@kernel(inline=True)
+def _project_corners(F, fi, fj, x0, x1, y0, y1, zo, h0, h1, h2, h3):
+    """:func:`_project_quad` for the disk facing texel (fi, fj) (``F``: :func:`disk_frames`)."""
+    return _project_quad(
+        F[9, fi, fj],
+        F[10, fi, fj],
+        F[3, fi, fj],
+        F[4, fi, fj],
+        F[5, fi, fj],
+        F[6, fi, fj],
+        F[7, fi, fj],
+        F[8, fi, fj],
+        x0,
+        x1,
+        y0,
+        y1,
+        zo,
+        h0,
+        h1,
+        h2,
+        h3,
     )
 
 
@@ -831,7 +855,7 @@ _ROUND32 = 4e-6  # float32 row pass: margin (relative to |q|^2) of the inside / 
 
 
 @kernel(inline=True)
-def _disk_row_pass(F, recv_depth, recv_mesh, ssm, flags, i, j0, j1, x0, x1, y0, y1, zo, pm, check_mesh, pk):
+def _disk_row_pass(F, recv_depth, recv_mesh, ssm, flags, i, base, nl, j0, j1, x0, x1, y0, y1, zo, pm, check_mesh, pk):
     """One SSM row of one micro-patch for :func:`accumulate_soft_shadow_map_sphere`, branch-free, in
     float32 arithmetic (16 vector lanes) and without projecting the corners (no per-corner division).
     ``F``: :func:`disk_frames32` of the texels. With h_c the corners' heights w.q (as in
@@ -845,17 +869,24 @@ def _disk_row_pass(F, recv_depth, recv_mesh, ssm, flags, i, j0, j1, x0, x1, y0, 
     exceeds kappa (|p| - w.c) + s sqrt(1 + kappa^2)). Both tests keep a margin of ``_ROUND32`` |q|^2
     (many times float32's rounding of |q|^2 - h^2), so a texel is only taken as inside or missed
     when it is so in exact arithmetic too. Every other texel (the patch near or across the cone's
-    surface, or not wholly between p and the disk's plane) is flagged in ``flags[j - j0]`` for the
-    exact float64 path. ``pk``: per patch (float32) |q_c|^2 + margin (4), |c|^2 - margin, s,
-    A / (2 pi), and x0, x1, y0, y1, z_O. Returns how many are flagged."""
+    surface, or not wholly between p and the disk's plane) is flagged in ``flags[j - base]`` for the
+    exact float64 path. The loop runs over the ``nl`` texels from ``base`` (``[base, base + nl)``
+    contains the patch's range ``[j0, j1)``; the caller makes ``nl`` a multiple of 16, so the row is
+    whole vectors, no scalar remainder); texels outside ``[j0, j1)`` add 0 and are not flagged. ``pk``: per patch (float32) |q_c|^2 + margin (4), |c|^2 - margin, s,
+    A / (2 pi), and x0, x1, y0, y1, z_O."""
     ii = np.uint64(i)
+    lo = np.uint64(j0 - base)
+    hi = np.uint64(j1 - base)
+    ub = np.uint64(base)
     not_check = not check_mesh
     qq0, qq1, qq2, qq3, cc, sr, ak = pk[0], pk[1], pk[2], pk[3], pk[4], pk[5], pk[6]
     x0, x1, y0, y1, zo = pk[7], pk[8], pk[9], pk[10], pk[11]
-    for jj in range(j1 - j0):
-        jx = np.uint64(j0 + jj)
+    for jj in range(nl):
+        ju = np.uint64(jj)
+        jx = ub + ju
         zr = recv_depth[ii, jx]
-        ok = (zr > zo) & (not_check | (recv_mesh[ii, jx] != pm))  # no short-circuit: it vectorizes
+        # no short-circuit: it vectorizes
+        ok = (zr > zo) & (not_check | (recv_mesh[ii, jx] != pm)) & (ju >= lo) & (ju < hi)
         wx = F[0, ii, jx]
         wy = F[1, ii, jx]
         hz = F[2, ii, jx] * zo
@@ -884,48 +915,43 @@ def _disk_row_pass(F, recv_depth, recv_mesh, ssm, flags, i, j0, j1, x0, x1, y0, 
         area = ak * (zr - zo) * (d1 + d3) / (k2 * (d0 * d1) * (d2 * d3))
         add = area if (ok & inr & ins) else _F0
         ssm[ii, jx] += add
-        need = ok & ~(inr & (miss | ins))
-        flags[jj] = need
-    n = 0  # counted after the loop: a 64-bit count inside it kept LLVM at 8 lanes instead of 16
-    for jj in range(j1 - j0):
-        n += flags[jj]
-    return n
+        flags[jj] = ok & ~(inr & (miss | ins))
 
 
 @kernel(inline=True)
-def _queue_crossings(F, flags, flags64, i, j0, j1, x0, x1, y0, y1, zo, G, Q, rows, cols, m):
+def _queue_crossings(recv_depth, flags, flags64, i, base, nl, x0, x1, y0, y1, zo, Q, rows, cols, m):
     """Append the texels of row ``i`` that :func:`_disk_row_pass` flagged (patch across the cone's
-    surface) to the queue at position ``m``: their frames to ``G`` (11, 1, n), the patch to ``Q``
-    (5, n), the texel to ``rows``, ``cols`` (contiguous copies: the batch's vector loop needs no
-    gathers). ``flags64``: ``flags`` viewed as uint64, to skip 8 unflagged texels at a time.
-    Returns the new length."""
-    n = j1 - j0
-    for blk in range((n + 7) // 8):
+    surface) to the queue at position ``m``: the texel to ``rows``, ``cols``, the patch and the
+    texel's receiver depth to ``Q`` (6, n) (contiguous: the batch's vector loop needs no gathers;
+    the batch recomputes the texel's frame, cheaper than copying its 11 planes). ``flags64``:
+    ``flags`` viewed as uint64, to skip 8 unflagged texels at a time. Returns the new length."""
+    for blk in range((nl + 7) // 8):
         if flags64[blk] == 0:
             continue
-        for jj in range(8 * blk, min(8 * blk + 8, n)):
+        for jj in range(8 * blk, min(8 * blk + 8, nl)):
             if not flags[jj]:
                 continue
-            j = j0 + jj
+            j = base + jj
             rows[m] = i
             cols[m] = j
-            for c in range(11):
-                G[c, 0, m] = F[c, i, j]
             Q[0, m] = x0
             Q[1, m] = x1
             Q[2, m] = y0
             Q[3, m] = y1
             Q[4, m] = zo
+            Q[5, m] = np.float64(recv_depth[i, j])
             m += 1
     return m
 
 
 @kernel(inline=True)
-def _crossing_batch(G, Q, vals, bad, m):
-    """The first ``m`` queued texel x patch pairs (:func:`_queue_crossings`): the exact overlap of
-    the projected quadrilateral (:func:`_project_corners`) with the disk over pi, branch-free
-    (:func:`softshadows.analytic.quad_disk_area_small`; vectorizes), into ``vals``; ``bad`` where
-    that does not apply (patch not wholly between p and the disk's plane, or a wide
+def _crossing_batch(Q, rows, cols, vals, bad, m, l, t, dxs, dys, rho):
+    """The first ``m`` queued texel x patch pairs (:func:`_queue_crossings`): the texel's facing
+    disk (:func:`softshadows.analytic.disk_facing_frame` of its receiver point, the same arithmetic
+    as :func:`disk_frames`, so the same values), the projected quadrilateral
+    (:func:`_quad_heights`, :func:`_project_quad`) and its exact overlap with the disk over pi,
+    branch-free (:func:`softshadows.analytic.quad_disk_area_small`; vectorizes), into ``vals``;
+    ``bad`` where that does not apply (patch not wholly between p and the disk's plane, or a wide
     quadrilateral): those take :func:`occlusion_percentage_disk`."""
     for k in range(m):
         kx = np.uint64(k)
@@ -934,10 +960,17 @@ def _crossing_batch(G, Q, vals, bad, m):
         y0 = Q[2, kx]
         y1 = Q[3, kx]
         zo = Q[4, kx]
-        hmax = G[9, 0, kx] * (1.0 - 1e-9)
-        h0, h1, h2, h3 = _corner_heights(G, 0, kx, x0, x1, y0, y1, zo)
+        zr = Q[5, kx]
+        ux = l + (cols[kx] + 0.5) * dxs
+        uy = t - (rows[kx] + 0.5) * dys
+        wx, wy, wz, e1x, e1y, e1z, e2x, e2y, e2z, hp = disk_facing_frame(ux * zr, uy * zr, zr)
+        kap = rho / hp
+        hmax = hp * (1.0 - 1e-9)
+        h0, h1, h2, h3 = _quad_heights(wx, wy, wz, x0, x1, y0, y1, zo)
         inr = (h0 > 0.0) & (h1 > 0.0) & (h2 > 0.0) & (h3 > 0.0) & (h0 < hmax) & (h1 < hmax) & (h2 < hmax) & (h3 < hmax)
-        u0, u1, u2, u3, v0, v1, v2, v3 = _project_corners(G, 0, kx, x0, x1, y0, y1, zo, h0, h1, h2, h3)
+        u0, u1, u2, u3, v0, v1, v2, v3 = _project_quad(
+            hp, kap, e1x, e1y, e1z, e2x, e2y, e2z, x0, x1, y0, y1, zo, h0, h1, h2, h3
+        )
         a, ok = quad_disk_area_small(u0, u1, u2, u3, v0, v1, v2, v3)
         good = inr & ok
         vals[kx] = a / math.pi if good else 0.0
@@ -945,10 +978,10 @@ def _crossing_batch(G, Q, vals, bad, m):
 
 
 @kernel(inline=True)
-def _flush_crossings(F, G, Q, rows, cols, vals, bad, m, ssm, sx, sy, sz, sh, tx, ty, tz, th):
+def _flush_crossings(F, Q, rows, cols, vals, bad, m, ssm, l, t, dxs, dys, rho, sx, sy, sz, sh, tx, ty, tz, th):
     """Add the queued pairs' occlusion (:func:`_crossing_batch`, else :func:`occlusion_percentage_disk`)
     to ``ssm``, in queue order."""
-    _crossing_batch(G, Q, vals, bad, m)
+    _crossing_batch(Q, rows, cols, vals, bad, m, l, t, dxs, dys, rho)
     for k in range(m):
         c = vals[k]
         if bad[k]:
@@ -1019,13 +1052,19 @@ def accumulate_soft_shadow_map_sphere(
     rtz,
     check_mesh,
     ssm,
+    svp,
+    rho,
     nslot=1,
 ):
     """:func:`accumulate_soft_shadow_map` for a sphere light: the fragment program is
     :func:`occlusion_percentage_disk` (float64 arithmetic; the sum is stored in float32, or
     rounded to half precision with ``fp16``). Same bands, order and skipping rules. ``frames``:
-    :func:`disk_frames` of the texels, ``frames32`` their :func:`disk_frames32`."""
+    :func:`disk_frames` of the texels, ``frames32`` their :func:`disk_frames32`; ``svp``: the SSM's
+    view parameters, ``rho``: the light's radius (the crossing pairs' frames are recomputed)."""
     H, W = recv_depth.shape
+    l, r, b, t = svp[VP_L], svp[VP_R], svp[VP_B], svp[VP_T]
+    dxs = (r - l) / W
+    dys = (t - b) / H
     n_bands = band_ptr.shape[0] - 1
     touched = np.zeros(n_bands, np.int64)
     for slot in prange(nslot):
@@ -1044,8 +1083,7 @@ def accumulate_soft_shadow_map_sphere(
         cols = np.zeros(cap, np.int64)
         vals = np.zeros(cap)
         bad = np.zeros(cap, np.bool_)
-        G = np.empty((11, 1, cap))
-        Q = np.empty((5, cap))
+        Q = np.empty((6, cap + 24))  # row stride not a multiple of 4 KiB: no cache-set conflicts
         pk = np.empty(12, np.float32)
         for bnd in range(slot, n_bands, nslot):
             r0 = bnd * band_rows
@@ -1058,11 +1096,18 @@ def accumulate_soft_shadow_map_sphere(
                 pm = pmesh[p]
                 i0 = max(ext[p, 0], r0)
                 i1 = min(ext[p, 1], r1)
+                j0 = ext[p, 2]
+                j1 = ext[p, 3] + 1
+                # the row pass runs over whole vectors of 16 texels from ``base``
+                nl = 16 * ((j1 - j0 + 15) // 16)
+                if nl <= W:
+                    base = min(j0, W - nl)
+                else:
+                    base = j0
+                    nl = j1 - j0
                 if not fp16:
                     _patch_constants(x0, x1, y0, y1, zo, pk)
                 for i in range(i0, i1 + 1):
-                    j0 = ext[p, 2]
-                    j1 = ext[p, 3] + 1
                     cnt += j1 - j0
                     if fp16:
                         for j in range(j0, j1):
@@ -1079,18 +1124,62 @@ def accumulate_soft_shadow_map_sphere(
                     # area where it projects inside the disk, nothing where it misses the cone, and
                     # flags the other texels (a few per row), which are queued and computed in
                     # batches (vectorized), added after the band's other contributions
-                    n_exact = _disk_row_pass(
-                        frames32, recv_depth, recv_mesh, ssm, flags, i, j0, j1, x0, x1, y0, y1, zo, pm, check_mesh, pk
+                    _disk_row_pass(
+                        frames32,
+                        recv_depth,
+                        recv_mesh,
+                        ssm,
+                        flags,
+                        i,
+                        base,
+                        nl,
+                        j0,
+                        j1,
+                        x0,
+                        x1,
+                        y0,
+                        y1,
+                        zo,
+                        pm,
+                        check_mesh,
+                        pk,
                     )
-                    if n_exact:
+                    flagged = np.uint64(0)
+                    for blk in range((nl + 7) // 8):
+                        flagged |= flags64[blk]
+                    if flagged:
                         if m + (j1 - j0) > cap:
                             _flush_crossings(
-                                frames, G, Q, rows, cols, vals, bad, m, ssm, sx, sy, sz, sh, tx, ty, tz, th
+                                frames,
+                                Q,
+                                rows,
+                                cols,
+                                vals,
+                                bad,
+                                m,
+                                ssm,
+                                l,
+                                t,
+                                dxs,
+                                dys,
+                                rho,
+                                sx,
+                                sy,
+                                sz,
+                                sh,
+                                tx,
+                                ty,
+                                tz,
+                                th,
                             )
                             m = 0
-                        m = _queue_crossings(frames, flags, flags64, i, j0, j1, x0, x1, y0, y1, zo, G, Q, rows, cols, m)
+                        m = _queue_crossings(
+                            recv_depth, flags, flags64, i, base, nl, x0, x1, y0, y1, zo, Q, rows, cols, m
+                        )
             if m:
-                _flush_crossings(frames, G, Q, rows, cols, vals, bad, m, ssm, sx, sy, sz, sh, tx, ty, tz, th)
+                _flush_crossings(
+                    frames, Q, rows, cols, vals, bad, m, ssm, l, t, dxs, dys, rho, sx, sy, sz, sh, tx, ty, tz, th
+                )
             touched[bnd] = cnt
     return touched
 
@@ -1238,6 +1327,8 @@ def compute_soft_shadow_map(
                     rtz,
                     check_mesh,
                     ssm,
+                    svp,
+                    hx,
                     nslot,
                 )
             else:
