@@ -3,13 +3,20 @@
 Every kernel is compiled with the same flags (``FLAGS``): cached on disk, IEEE arithmetic
 (no fastmath, so results do not depend on the compiler's reassociation), NumPy's error model
 (division by zero gives inf/NaN instead of raising, and no zero-checks in hot loops).
-Use ``@kernel``, ``@kernel(parallel=True)``, ``@kernel(inline=True)`` or
+Use ``@kernel``, ``@kernel(parallel=True)``, ``@kernel(inline=True)`` (or ``inline="ir"``) or
 ``@kernel(parallel=True, nogil=True)``.
 
-``inline=True`` inlines at the Numba IR level (``inline="always"``). That multiplies compile time,
-but dropping it (``SOFTSHADOWS_IR_INLINE=0``, kept for measuring) made the rasterizer's and
-``irregular``'s frames up to 2x slower (docs/results/cold-start.md), so it stays on. Every kernel
-is recorded in ``KERNELS`` (the cold-cache check and the warm-up in :mod:`softshadows._warm`).
+``inline=True`` has LLVM inline the helper into its callers (Numba's ``forceinline``: the helper is
+typed and lowered once, marked ``alwaysinline``, and inlined where its code is linked in);
+``inline="ir"`` has Numba inline it in its own IR (``inline="always"``: typed and lowered again at
+every call site). V is the same bit for bit either way. IR inlining costs compile time (a cold
+``compare`` compiled in a fifth less CPU time with LLVM inlining everywhere), but a few helpers in
+``irregular``'s innermost loop ran 1.2-1.3x slower when LLVM inlined them, so those say
+``inline="ir"`` (docs/results/cold-start.md). ``SOFTSHADOWS_INLINE`` (``ir``, ``llvm``: every
+helper one way; ``none``: no inlining, frames up to 2x slower) is kept for measuring.
+
+Every kernel is recorded in ``KERNELS`` (the cold-cache check and the warm-up in
+:mod:`softshadows._warm`).
 """
 
 from __future__ import annotations
@@ -20,22 +27,27 @@ import numpy as np
 from numba import njit
 
 FLAGS = dict(cache=True, fastmath=False, error_model="numpy")
-IR_INLINE = os.environ.get("SOFTSHADOWS_IR_INLINE", "1") != "0"
+INLINE = os.environ.get("SOFTSHADOWS_INLINE", "")  # "" (as declared), "ir", "llvm" or "none"
 KERNELS: list = []  # every dispatcher made by @kernel, in import order
 
 
-def kernel(fn=None, *, parallel: bool = False, inline: bool = False, nogil: bool = False):
+def kernel(fn=None, *, parallel: bool = False, inline: bool | str = False, nogil: bool = False):
     """``njit`` with the project's flags (see the module docstring)."""
-    opts = dict(FLAGS)
+    if inline not in (False, True, "ir"):
+        raise ValueError(f"kernel: inline={inline!r} (expected False, True or 'ir')")
+    o = dict(FLAGS)
     if parallel:
-        opts["parallel"] = True
-    if inline and IR_INLINE:
-        opts["inline"] = "always"
+        o["parallel"] = True
     if nogil:
-        opts["nogil"] = True
+        o["nogil"] = True
+    how = INLINE or ("ir" if inline == "ir" else "llvm")
+    if inline and how == "ir":
+        o["inline"] = "always"
+    elif inline and how == "llvm":
+        o["forceinline"] = True
 
     def wrap(f):
-        d = njit(**opts)(f)
+        d = njit(**o)(f)
         KERNELS.append(d)
         return d
 
