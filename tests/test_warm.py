@@ -143,3 +143,32 @@ def test_front_end_compiles_once_for_read_only_and_writable_geometry():
     assert np.array_equal(d1, d2) and np.isfinite(d1).any()
     kernels = [r._vertex_screen, r._select, r._setup_count, r._bin_fill]
     assert [len(k.signatures) for k in kernels] == [1] * len(kernels)
+
+
+KEYS = """
+import hashlib
+from numba.core.serialize import dumps
+from softshadows.compare import resolve_methods
+from softshadows._jit import KERNELS
+resolve_methods("all")
+for d in KERNELS:
+    f = d.py_func
+    if f.__closure__:
+        cvars = tuple(c.cell_contents for c in f.__closure__)
+        print(f.__module__ + "." + f.__qualname__, hashlib.sha256(dumps(cvars)).hexdigest())
+"""
+
+
+def test_closure_kernels_have_the_same_cache_key_in_every_process():
+    # Numba keys a closure kernel's cache entry on its pickled closure variables
+    # (numba.core.caching._CacheImpl._index_key). A kernel closing over another dispatcher pickles
+    # that dispatcher's per-process random id, so it missed the on-disk cache in every new process
+    # and was compiled again on every run (the min-blend tile kernel: ~5 s per penumbra-map run).
+    # Two fresh processes must compute the same key for every closure kernel.
+    env = dict(os.environ, PYTHONPATH=SRC)
+    runs = [
+        subprocess.run([sys.executable, "-c", KEYS], env=env, capture_output=True, text=True, check=True).stdout
+        for _ in range(2)
+    ]
+    assert runs[0].strip(), "no closure kernel found: the test checks nothing"
+    assert runs[0] == runs[1]

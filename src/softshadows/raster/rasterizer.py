@@ -23,7 +23,7 @@ from numba import prange
 from .._jit import frozen, kernel
 from .gbuffer import Fragments, GBuffer
 from .kernels import view_coords, view_coords_to_screen
-from .programs import PROGRAMS, discard_depth, run_program, value_lower_bound
+from .programs import PROGRAM_ATTRIBUTE, PROGRAM_PENUMBRA, PROGRAMS, discard_depth, run_program, value_lower_bound
 from .view import (
     VP_B,
     VP_FAR,
@@ -1507,12 +1507,13 @@ def _tiles_fragments(fe, sc, foff, fpix, ftri, fbary, fdepth):
 
 
 def _make_min_blend_kernel(prog):
-    """rasterize_min_blend's tile kernel for fragment program ``prog`` (a constant of the closure:
-    each kernel compiles only its own program, which inlines into the vector loops)."""
+    """The slot kernel of rasterize_min_blend's tile pass for fragment program ``prog`` (a constant
+    of the closure: each kernel compiles only its own program, which inlines into the vector loops;
+    a closure over an int is cached across processes)."""
 
     @kernel
     def slot_fn(slot, tid, fe, sc, mb):
-        """Slot ``slot`` (on thread ``tid``) of :func:`tiles`: the body of its prange, a serial kernel
+        """Slot ``slot`` (on thread ``tid``) of a min-blend tile kernel (``_MIN_BLEND_KERNELS``): the body of its prange, a serial kernel
         (Numba's parfor passes then see a one-line loop: docs/results/cold-start.md)."""
         vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, _normals, rowbits, sh, tri = fe
         zbuf, _tbuf, spbuf, ibuf, lbuf, nslot = sc
@@ -1629,22 +1630,39 @@ def _make_min_blend_kernel(prog):
                 for k in range(brow.shape[0]):
                     brow[k] = zb[i - y0, k]
 
-    @kernel(parallel=True)
-    def tiles(fe, sc, mb):
-        """Run the program per fragment and MIN-blend its value into ``mb.out``; ``mb.stats[tile]`` +=
-        (fragments and kept fragments of the triangles below / from ``mb.split``, pieces culled by
-        depth, by value). With ``mb.cull_discarded``, the pieces of a tile whose every fragment lies at
-        or beyond the depth where the program discards (``discard_depth``, max over the tile) are
-        skipped, and so are the pieces with a constant attribute whose value bound
-        (``value_lower_bound``) is at least the tile's largest value: the output is the same. With a
-        texel mask (``fe.rowbits``), only its texels are shaded, the others keep their value."""
-        for slot in prange(sc[5]):  # sc.nslot: one slot per thread
-            slot_fn(np.uint64(slot), numba.get_thread_id(), fe, sc, mb)
-
-    return tiles
+    return slot_fn
 
 
-_MIN_BLEND_KERNELS = {p: _make_min_blend_kernel(p) for p in PROGRAMS}
+# The min-blend tile kernels, one per program: a one-line prange over the slots, each a serial
+# kernel (above). Module-level functions, not closures over the slot kernel: Numba keys a
+# closure's cache entry on the pickled closure variables, and a pickled dispatcher carries a
+# per-process random id, so a closure kernel missed the cache in every new process (penumbra-map
+# recompiled it on every run, about 5 s).
+_MIN_BLEND_SLOT_ATTRIBUTE = _make_min_blend_kernel(PROGRAM_ATTRIBUTE)
+_MIN_BLEND_SLOT_PENUMBRA = _make_min_blend_kernel(PROGRAM_PENUMBRA)
+
+
+@kernel(parallel=True)
+def _tiles_min_blend_attribute(fe, sc, mb):
+    for slot in prange(sc[5]):  # sc.nslot: one slot per thread
+        _MIN_BLEND_SLOT_ATTRIBUTE(np.uint64(slot), numba.get_thread_id(), fe, sc, mb)
+
+
+@kernel(parallel=True)
+def _tiles_min_blend_penumbra(fe, sc, mb):
+    for slot in prange(sc[5]):  # sc.nslot: one slot per thread
+        _MIN_BLEND_SLOT_PENUMBRA(np.uint64(slot), numba.get_thread_id(), fe, sc, mb)
+
+
+# fragment program -> its tile kernel. Each kernel: run the program per fragment and MIN-blend its
+# value into ``mb.out``; ``mb.stats[tile]`` += (fragments and kept fragments of the triangles below /
+# from ``mb.split``, pieces culled by depth, by value). With ``mb.cull_discarded``, the pieces of a
+# tile whose every fragment lies at or beyond the depth where the program discards
+# (``discard_depth``, max over the tile) are skipped, and so are the pieces with a constant attribute
+# whose value bound (``value_lower_bound``) is at least the tile's largest value: the output is the
+# same. With a texel mask (``fe.rowbits``), only its texels are shaded, the others keep their value.
+_MIN_BLEND_KERNELS = {PROGRAM_ATTRIBUTE: _tiles_min_blend_attribute, PROGRAM_PENUMBRA: _tiles_min_blend_penumbra}
+assert tuple(_MIN_BLEND_KERNELS) == PROGRAMS
 
 
 # ----------------------------------------------------------------------------------------------
