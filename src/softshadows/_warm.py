@@ -61,6 +61,29 @@ def say_if_cold(stream=None) -> bool:
     return cold
 
 
+# Rough compile CPU seconds of each method's own kernels on a cold cache (2-core x86_64,
+# 2026-12-02, a compile event log of a cold ``compare bunny``; docs/results/cold-start.md). Only
+# the order matters: the helper takes the costliest method first (longest job first), so that the
+# last method to finish compiling is a small one and neither process waits long for the other.
+COMPILE_COST = {
+    "irregular": 36.0,
+    "coherent-raytrace": 11.0,
+    "occlusion-textures": 8.0,
+    "penumbra-map": 7.0,
+    "layered-attenuation": 5.5,
+    "pcss": 5.0,
+    "soft-shadow-map": 5.0,
+    "hard": 1.0,
+}
+
+
+def helper_order(names) -> list:
+    """The order in which the helper claims ``names`` (the main process's order): costliest first
+    (:data:`COMPILE_COST`, unknown methods 5 s), ties from the end of the list."""
+    names = list(names)
+    return sorted(reversed(names), key=lambda m: -COMPILE_COST.get(m, 5.0))
+
+
 class Claims:
     """Which process renders (so compiles) which method first: a file ``claim-<method>`` made with
     O_EXCL in a folder both processes know; the one whose create succeeds renders it, the other
@@ -129,7 +152,7 @@ def start_warmup(scene, light_shape: str, width: int, height: int, names, params
         "light": light_shape,
         "width": int(width),
         "height": int(height),
-        "methods": list(reversed(list(names))),
+        "methods": helper_order(names),
         "params": {m: params.get(m, {}) for m in names},
     }
     env = dict(os.environ)
@@ -225,7 +248,7 @@ def _main(argv) -> int:
         if os.getppid() != parent:  # the main process is gone (killed): stop warming for nobody
             return 0
         if not claims.claim(m):
-            return 0  # the main process has reached the methods from the front: the rest is its
+            continue  # the main process has it
         # the main process reports failures; the helper only warms the cache
         with contextlib.suppress(Exception):
             render(sc, m, job["width"], job["height"], **job["params"].get(m, {}))
