@@ -172,3 +172,18 @@ def test_closure_kernels_have_the_same_cache_key_in_every_process():
     ]
     assert runs[0].strip(), "no closure kernel found: the test checks nothing"
     assert runs[0] == runs[1]
+
+
+def test_helper_takes_the_costliest_method_first():
+    # longest job first (softshadows._warm.COMPILE_COST): the helper's first claim is the method
+    # with the most compile work, the rest by cost, ties (unknown methods: 5 s) from the list's end
+    sys.path.insert(0, SRC)
+    from softshadows._warm import COMPILE_COST, helper_order
+
+    names = ["hard", "pcss", "irregular", "x-new", "coherent-raytrace", "y-new"]
+    order = helper_order(names)
+    assert sorted(order) == sorted(names)
+    assert order[0] == max(COMPILE_COST, key=COMPILE_COST.get) == "irregular"
+    costs = [COMPILE_COST.get(m, 5.0) for m in order]
+    assert costs == sorted(costs, reverse=True)
+    assert order.index("y-new") < order.index("x-new")  # equal cost: from the end of the list
