@@ -3,9 +3,11 @@
 Numba holds the GIL while it compiles, so a cold ``compare`` compiles its ~100 kernels one after
 the other on one core. :func:`start_warmup` starts a helper process (``python -m softshadows._warm``)
 that compiles the rasterizer's tile kernels the main process needs only after the eye G-buffer
-(:func:`warm_raster_modes`), then renders the same methods in the *reverse* order of the main process, which
-writes their kernels into the on-disk cache (the package's normal ``__pycache__``/user cache or
-``NUMBA_CACHE_DIR``: the helper inherits the environment and so the same locator); when the main
+(:func:`warm_raster_modes`), then renders the same methods, costliest first (:func:`helper_order`),
+while the main process takes them from the front; a method goes to whichever process claims it
+first (:class:`Claims`). The helper writes its kernels into the on-disk cache (the package's
+normal ``__pycache__``/user cache or ``NUMBA_CACHE_DIR``: the helper inherits the environment and
+so the same locator); when the main
 process reaches a method, Numba loads what the helper already compiled instead of compiling it
 again. Nothing changes in the results (the same kernels, from the same cache). The helper is only
 started when the cache is cold, writable and there is more than one core; ``SOFTSHADOWS_WARMUP=0``
@@ -134,8 +136,8 @@ class Warmup:
 
 def start_warmup(scene, light_shape: str, width: int, height: int, names, params: dict):
     """Start the helper (a :class:`Warmup`) when worth it, else None. ``names`` in the main
-    process's order; the helper claims them from the end, the main process from the front
-    (:class:`Claims`), so no method is compiled by both. ``scene``: a built-in name or file path
+    process's order; the helper claims them costliest first (:func:`helper_order`), the main
+    process from the front (:class:`Claims`), so no method is compiled by both. ``scene``: a built-in name or file path
     (any other Scene: the built-in ``bunny``; kernel types do not depend on the scene)."""
     if os.environ.get("SOFTSHADOWS_WARMUP", "1") == "0" or (os.cpu_count() or 1) < 2 or not names:
         return None

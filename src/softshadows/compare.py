@@ -233,7 +233,7 @@ def compare(
 
     t_start = time.perf_counter()
     say_if_cold()
-    # a cold cache: a helper process compiles the methods in reverse order while this one traces
+    # a cold cache: a helper process compiles methods, costliest first, while this one traces
     # the ground truth and compiles from the front (softshadows._warm)
     helper = start_warmup(scene, sc.light.shape, width, height, names, resolved)
     try:
@@ -245,7 +245,7 @@ def compare(
 
 def _render_all(sc, names, resolved, width, height, seed, progress, verbose, say, helper=None):
     """Ground truth, then each method. With a warm-up ``helper`` (a cold cache), the methods it has
-    claimed (from the end of the list) are rendered last, once it has cached their kernels, so that
+    claimed (costliest first, softshadows._warm.helper_order) are rendered last, once it has cached their kernels, so that
     no kernel is compiled by both processes; the results keep the order of ``names``."""
     from . import render
 

@@ -1506,15 +1506,16 @@ def _tiles_fragments(fe, sc, foff, fpix, ftri, fbary, fdepth):
                             lo, hi = _next_span(scan, hi, j1, e0, e1, e2, r0, r1, r2)
 
 
-def _make_min_blend_kernel(prog):
+def _make_min_blend_slot(prog):
     """The slot kernel of rasterize_min_blend's tile pass for fragment program ``prog`` (a constant
     of the closure: each kernel compiles only its own program, which inlines into the vector loops;
     a closure over an int is cached across processes)."""
 
     @kernel
     def slot_fn(slot, tid, fe, sc, mb):
-        """Slot ``slot`` (on thread ``tid``) of a min-blend tile kernel (``_MIN_BLEND_KERNELS``): the body of its prange, a serial kernel
-        (Numba's parfor passes then see a one-line loop: docs/results/cold-start.md)."""
+        """Slot ``slot`` (on thread ``tid``) of a min-blend tile kernel (``_MIN_BLEND_KERNELS``): the
+        body of its prange, a serial kernel (Numba's parfor passes then see a one-line loop:
+        docs/results/cold-start.md)."""
         vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, _normals, rowbits, sh, tri = fe
         zbuf, _tbuf, spbuf, ibuf, lbuf, nslot = sc
         pparams, cattr, img, blend, bstats, split, cull_discarded = mb
@@ -1638,8 +1639,8 @@ def _make_min_blend_kernel(prog):
 # closure's cache entry on the pickled closure variables, and a pickled dispatcher carries a
 # per-process random id, so a closure kernel missed the cache in every new process (penumbra-map
 # recompiled it on every run, about 5 s).
-_MIN_BLEND_SLOT_ATTRIBUTE = _make_min_blend_kernel(PROGRAM_ATTRIBUTE)
-_MIN_BLEND_SLOT_PENUMBRA = _make_min_blend_kernel(PROGRAM_PENUMBRA)
+_MIN_BLEND_SLOT_ATTRIBUTE = _make_min_blend_slot(PROGRAM_ATTRIBUTE)
+_MIN_BLEND_SLOT_PENUMBRA = _make_min_blend_slot(PROGRAM_PENUMBRA)
 
 
 @kernel(parallel=True)
