@@ -11,6 +11,7 @@ deviations and measured limits: ``docs/methods/irregular.md``.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import ClassVar
 
@@ -21,6 +22,7 @@ from numba import prange, types
 from numba.extending import intrinsic
 
 from .._jit import kernel
+from ..analytic import atan2_upper
 from ..geometry.silhouette import build_adjacency, facing, find_silhouette
 from ..raster.view import VP_B, VP_FORWARD, VP_L, VP_ORIGIN, VP_R, VP_RIGHT, VP_T, VP_UP, View, light_frame, light_view
 from .base import Method, MethodOutput, Param, register
@@ -977,7 +979,7 @@ def segment_area(d, w0, w1):
     the paper's acos((d^2 + w0 w1) / sqrt((d^2 + w0^2)(d^2 + w1^2))), is taken as the angle between
     (w0, d) and (w1, d) by atan2 (same angle, no square root or division, and accurate near 0 where
     acos loses half the digits)."""
-    theta = np.arctan2(d * (w1 - w0), d * d + w0 * w1)
+    theta = atan2_upper(d * (w1 - w0), d * d + w0 * w1)
     return (theta - d * (w1 - w0)) / (2.0 * np.pi)
 
 
@@ -1021,26 +1023,26 @@ def sample_row(shape, center, nrm_l, sp, j, rows, k):
     (layout: _R*): p and the light frame (w: the facing disk's normal for the sphere, the
     rectangle's normal for the rectangle; L; c - p). Filled per bin into a per-worker scratch
     (``_penumbra_kernel``), not for the whole frame at once."""
-    rows[k, _RP] = sp[j, 0]
-    rows[k, _RP + 1] = sp[j, 1]
-    rows[k, _RP + 2] = sp[j, 2]
+    rows[_RP, k] = sp[j, 0]
+    rows[_RP + 1, k] = sp[j, 1]
+    rows[_RP + 2, k] = sp[j, 2]
     cx, cy, cz = center[0] - sp[j, 0], center[1] - sp[j, 1], center[2] - sp[j, 2]
-    rows[k, _RC] = cx
-    rows[k, _RC + 1] = cy
-    rows[k, _RC + 2] = cz
+    rows[_RC, k] = cx
+    rows[_RC + 1, k] = cy
+    rows[_RC + 2, k] = cz
     if shape == 1:
         L = np.sqrt(cx * cx + cy * cy + cz * cz)
-        rows[k, _RW] = cx / L
-        rows[k, _RW + 1] = cy / L
-        rows[k, _RW + 2] = cz / L
-        rows[k, _RL] = L
+        rows[_RW, k] = cx / L
+        rows[_RW + 1, k] = cy / L
+        rows[_RW + 2, k] = cz / L
+        rows[_RL, k] = L
     else:
         L = cx * nrm_l[0] + cy * nrm_l[1] + cz * nrm_l[2]
         s = 1.0 if L >= 0.0 else -1.0
-        rows[k, _RW] = s * nrm_l[0]
-        rows[k, _RW + 1] = s * nrm_l[1]
-        rows[k, _RW + 2] = s * nrm_l[2]
-        rows[k, _RL] = abs(L)
+        rows[_RW, k] = s * nrm_l[0]
+        rows[_RW + 1, k] = s * nrm_l[1]
+        rows[_RW + 2, k] = s * nrm_l[2]
+        rows[_RL, k] = abs(L)
 
 
 @kernel(inline="ir")
@@ -1070,7 +1072,7 @@ def _disk_term(rw, j, radius, rax, ray, raz, rbx, rby, rbz, nx, ny, nz, nw, m2, 
     """V~ of the edge for the disk of radius r facing p (Eq. 3), given the plane (p, edge): its normal
     n, n . w and |n|^2 - (n . w)^2 (> 0), n . (c - p) (!= 0). The edge's line is the trace of the
     plane in the disk's plane; its endpoints are projected from p onto it."""
-    wx, wy, wz, L = rw[j, _RW], rw[j, _RW + 1], rw[j, _RW + 2], rw[j, _RL]
+    wx, wy, wz, L = rw[_RW, j], rw[_RW + 1, j], rw[_RW + 2, j], rw[_RL, j]
     ha = rax * wx + ray * wy + raz * wz
     hb = rbx * wx + rby * wy + rbz * wz
     if ha <= 0.0 and hb <= 0.0:
@@ -1111,7 +1113,7 @@ def _rect_term(rw, j, lu, lv, hu, hv, rax, ray, raz, rbx, rby, rbz, nu, nv, nc, 
     """V~ of the edge for the rectangle (2 hu x 2 hv, axes lu, lv): the exact area of the rectangle
     clipped to the far side of the edge's line (n . (c - p) + nu U + nv V against the sign of
     n . (c - p)) and to the angle the projected edge subtends at the centre (``_clip_poly``)."""
-    wx, wy, wz, L = rw[j, _RW], rw[j, _RW + 1], rw[j, _RW + 2], rw[j, _RL]
+    wx, wy, wz, L = rw[_RW, j], rw[_RW + 1, j], rw[_RW + 2, j], rw[_RL, j]
     ha = rax * wx + ray * wy + raz * wz
     hb = rbx * wx + rby * wy + rbz * wz
     if ha <= 0.0 and hb <= 0.0:
@@ -1119,7 +1121,7 @@ def _rect_term(rw, j, lu, lv, hu, hv, rax, ray, raz, rbx, rby, rbz, nu, nv, nc, 
     so = 1.0 if nc > 0.0 else -1.0
     ux, uy, uz, vx, vy, vz = lu[0], lu[1], lu[2], lv[0], lv[1], lv[2]
     # directions (from the centre) of the projected endpoints
-    cpx, cpy, cpz = -rw[j, _RC], -rw[j, _RC + 1], -rw[j, _RC + 2]  # p - c
+    cpx, cpy, cpz = -rw[_RC, j], -rw[_RC + 1, j], -rw[_RC + 2, j]  # p - c
     dax = day = dbx = dby = 0.0
     if ha > 0.0:
         k = L / ha
@@ -1181,7 +1183,7 @@ def sample_edge_term(shape, rw, j, lu, lv, radius, hu, hv, e, ea, eb, tv_start, 
     Cheap exits first, each giving the exact 0 the full term would: for fold candidates (two or
     more counted triangles) the triangles usually cancel as seen from p (``_side_sum``); for
     silhouettes first whether the edge's line misses the light's footprint."""
-    p0, p1, p2 = rw[j, _RP], rw[j, _RP + 1], rw[j, _RP + 2]
+    p0, p1, p2 = rw[_RP, j], rw[_RP + 1, j], rw[_RP + 2, j]
     rax, ray, raz = ea[e, 0] - p0, ea[e, 1] - p1, ea[e, 2] - p2
     rbx, rby, rbz = eb[e, 0] - p0, eb[e, 1] - p1, eb[e, 2] - p2
     nx = ray * rbz - raz * rby
@@ -1193,11 +1195,11 @@ def sample_edge_term(shape, rw, j, lu, lv, radius, hu, hv, e, ea, eb, tv_start, 
         wsum = _side_sum(nx, ny, nz, p0, p1, p2, e, tv_start, tv)
         if wsum == 0.0:
             return 0.0
-    nc = nx * rw[j, _RC] + ny * rw[j, _RC + 1] + nz * rw[j, _RC + 2]  # n . (c - p)
+    nc = nx * rw[_RC, j] + ny * rw[_RC + 1, j] + nz * rw[_RC + 2, j]  # n . (c - p)
     if nc == 0.0:
         return 0.0
     if shape == 1:
-        nw = nx * rw[j, _RW] + ny * rw[j, _RW + 1] + nz * rw[j, _RW + 2]
+        nw = nx * rw[_RW, j] + ny * rw[_RW + 1, j] + nz * rw[_RW + 2, j]
         m2 = nx * nx + ny * ny + nz * nz - nw * nw
         if m2 <= 0.0 or nc * nc >= m2 * (radius * radius):
             return 0.0  # the line misses the disk (d >= 1)
@@ -1220,6 +1222,74 @@ def sample_edge_term(shape, rw, j, lu, lv, radius, hu, hv, e, ea, eb, tv_start, 
         return 0.0
     so = 1.0 if nc > 0.0 else -1.0
     return -so * wsum * vt
+
+
+@kernel(inline=True)
+def _sign(s):
+    """+1.0 / -1.0 / 0.0 by the sign of s (0.0 for NaN), as a select."""
+    return np.float64(s > 0.0) - np.float64(s < 0.0)
+
+
+@kernel(inline=True)
+def disk_edge_terms(cp, m, center, radius, e, ea, eb, tv_start, tv, out):
+    """``sample_edge_term`` for the disk (``shape == 1``) at the m samples whose positions are
+    ``cp[:, :m]`` (copied contiguous when the candidates are compacted), for one edge with one or
+    two counted triangles, into ``out[:m]``: the same arithmetic in the same order (``sample_row``'s
+    c - p, L and w included), every early exit made a select (``ok``), so that the loop runs
+    branch-free on contiguous data and vectorizes. Bit for bit the values of the scalar path."""
+    rr = radius * radius
+    ax, ay, az, bx, by, bz = ea[e, 0], ea[e, 1], ea[e, 2], eb[e, 0], eb[e, 1], eb[e, 2]
+    k1 = tv_start[e]
+    two = tv_start[e + 1] - k1 == 2
+    k2 = k1 + 1 if two else k1
+    v1x, v1y, v1z, v2x, v2y, v2z = tv[k1, 0], tv[k1, 1], tv[k1, 2], tv[k2, 0], tv[k2, 1], tv[k2, 2]
+    c0, c1, c2 = center[0], center[1], center[2]
+    for i in range(m):
+        p0, p1, p2 = cp[0, i], cp[1, i], cp[2, i]
+        # sample_row
+        cx, cy, cz = c0 - p0, c1 - p1, c2 - p2
+        L = math.sqrt(cx * cx + cy * cy + cz * cz)
+        wx, wy, wz = cx / L, cy / L, cz / L
+        # sample_edge_term
+        rax, ray, raz = ax - p0, ay - p1, az - p2
+        rbx, rby, rbz = bx - p0, by - p1, bz - p2
+        nx = ray * rbz - raz * rby
+        ny = raz * rbx - rax * rbz
+        nz = rax * rby - ray * rbx
+        w2 = _sign(nx * (v2x - p0) + ny * (v2y - p1) + nz * (v2z - p2))
+        wsum = 0.0 + _sign(nx * (v1x - p0) + ny * (v1y - p1) + nz * (v1z - p2))  # _side_sum
+        wsum = wsum + w2 if two else wsum
+        nc = nx * cx + ny * cy + nz * cz
+        nw = nx * wx + ny * wy + nz * wz
+        m2 = nx * nx + ny * ny + nz * nz - nw * nw
+        ok = (wsum != 0.0) & (nc != 0.0) & ~(m2 <= 0.0) & ~(nc * nc >= m2 * rr)
+        # _disk_term
+        ha = rax * wx + ray * wy + raz * wz
+        hb = rbx * wx + rby * wy + rbz * wz
+        ok &= ~((ha <= 0.0) & (hb <= 0.0))
+        imr = 1.0 / (math.sqrt(m2) * radius)
+        d = abs(nc) * imr
+        ok &= ~(d >= 1.0)
+        tx = wy * nz - wz * ny
+        ty = wz * nx - wx * nz
+        tz = wx * ny - wy * nx
+        k = L * imr
+        sa = (rax * tx + ray * ty + raz * tz) * k / ha
+        sb = (rbx * tx + rby * ty + rbz * tz) * k / hb
+        sa = sa if ha > 0.0 else 0.0
+        sb = sb if hb > 0.0 else 0.0
+        ox, oy, oz = _far_end(rax, ray, raz, rbx, rby, rbz, ha, hb)
+        inf = np.inf if (ox * tx + oy * ty + oz * tz) >= 0.0 else -np.inf
+        sa = inf if ha <= 0.0 else sa
+        sb = inf if (hb <= 0.0) & ~(ha <= 0.0) else sb
+        h = math.sqrt(1.0 - d * d)
+        w0 = max(min(sa, sb), -h)
+        w1 = min(max(sa, sb), h)
+        ok &= w1 > w0
+        vt = segment_area(d, w0, w1)
+        so = 1.0 if nc > 0.0 else -1.0
+        c = -so * wsum * vt
+        out[i] = c if ok else 0.0
 
 
 @kernel(inline=True)
@@ -1316,9 +1386,11 @@ def _penumbra_kernel(
     kf = slice_scale(dlo, dhi, S)
     for _worker in prange(n_workers):  # each takes the next bin of bin_order until none is left
         buf = np.zeros((4, 8))  # scratch, once per worker
-        cand = np.empty(max_col, np.int64)
+        cand = np.empty(max_bin, np.int64)
+        cval = np.empty(max_bin)
+        cp = np.empty((3, max_bin))  # the candidates' positions, contiguous
         keep = np.empty(max_col, np.int8)
-        rw = np.empty((max_bin, _ROW))  # the current bin's sample rows and 1 / distance
+        rw = np.empty((_ROW, max_bin))  # the current bin's sample rows (one row per field) and 1 / distance
         sinv = np.empty(max_bin)
         while True:
             q = next_item(counter)
@@ -1367,6 +1439,7 @@ def _penumbra_kernel(
                     cx_hi = int(min(np.floor((qcx + ex - l) / cw) + 2.0, cx_hi))
                     cy_lo = int(max(np.floor((t - qcy - ey) / ch) - 1.0, cy_lo))
                     cy_hi = int(min(np.floor((t - qcy + ey) / ch) + 2.0, cy_hi))
+                m = 0  # candidates of this edge in this bin: cand[:m]
                 for cy in range(cy_lo, cy_hi):
                     y1 = t - cy * ch
                     y0 = y1 - ch
@@ -1398,7 +1471,6 @@ def _penumbra_kernel(
                         # edge's image against the angular radius at its own distance (stretch
                         # from its own off-axis angle and the edge's endpoints); branch-free, the
                         # survivors' indices compacted into ``cand``
-                        m = 0
                         if dr > 0.0:
                             # unsigned indices (no negative-index wrap-around code) and selects:
                             # the loop vectorizes (1.45x on this loop alone), same values and flags
@@ -1415,18 +1487,28 @@ def _penumbra_kernel(
                                 keep[np.uint64(i)] = np.int8(rs >= 0.0) & np.int8(ox * ox + oy * oy <= rs * rs)
                             for i in range(j1 - j0):
                                 cand[m] = j0 + i
+                                cp[0, m], cp[1, m], cp[2, m] = spos[j0 + i, 0], spos[j0 + i, 1], spos[j0 + i, 2]
                                 m += keep[i]
                         else:
                             for j in range(j0, j1):
                                 cand[m] = j
+                                cp[0, m], cp[1, m], cp[2, m] = spos[j, 0], spos[j, 1], spos[j, 2]
                                 m += 1
-                        nev += m
-                        for i in range(m):
-                            j = cand[i]
-                            c = sample_edge_term(shape, rw, j - jb, u, v, radius, hu, hv, e, ea, eb, tv_start, tv, buf)
-                            if c != 0.0:
-                                nh += 1
-                                pen[j] += c
+                # the edge's candidates in this bin, every cell's together (longer vector loops)
+                nev += m
+                nt_e = tv_start[e + 1] - tv_start[e]
+                if shape == 1 and (nt_e == 1 or nt_e == 2):
+                    disk_edge_terms(cp, m, center, radius, e, ea, eb, tv_start, tv, cval)
+                else:
+                    for i in range(m):
+                        cval[i] = sample_edge_term(
+                            shape, rw, cand[i] - jb, u, v, radius, hu, hv, e, ea, eb, tv_start, tv, buf
+                        )
+                for i in range(m):
+                    c = cval[i]
+                    if c != 0.0:
+                        nh += 1
+                        pen[cand[i]] += c
             frags[bi] = nf
             tests[bi] = nt
             hits[bi] = nh
