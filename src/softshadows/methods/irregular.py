@@ -189,34 +189,63 @@ def receivers_box(col_box):
     return lo, hi
 
 
-@kernel
+#: chunks of the samples' parallel min/max passes (``_extent``, ``_window_of``): a few per thread
+_CHUNKS = 64
+
+
+@kernel(parallel=True)
 def _extent(pts, c):
+    """(lo (3,), hi (3,), d0, d1): the samples' bounding box and their smallest and largest distance
+    to c, by chunks in parallel (min and max are exact: any order gives the same bits)."""
+    n = pts.shape[0]
+    part = np.empty((_CHUNKS, 8))
+    for q in prange(_CHUNKS):
+        lo0 = lo1 = lo2 = d0 = np.inf
+        hi0 = hi1 = hi2 = -np.inf
+        d1 = 0.0
+        for k in range(q * n // _CHUNKS, (q + 1) * n // _CHUNKS):
+            x, y, z = pts[k, 0], pts[k, 1], pts[k, 2]
+            lo0, lo1, lo2 = min(lo0, x), min(lo1, y), min(lo2, z)
+            hi0, hi1, hi2 = max(hi0, x), max(hi1, y), max(hi2, z)
+            dx, dy, dz = x - c[0], y - c[1], z - c[2]
+            d = np.sqrt(dx * dx + dy * dy + dz * dz)
+            d0, d1 = min(d0, d), max(d1, d)
+        part[q, 0], part[q, 1], part[q, 2], part[q, 3] = lo0, lo1, lo2, d0
+        part[q, 4], part[q, 5], part[q, 6], part[q, 7] = hi0, hi1, hi2, d1
     lo = np.full(3, np.inf)
     hi = np.full(3, -np.inf)
     d0, d1 = np.inf, 0.0
-    for k in range(pts.shape[0]):
+    for q in range(_CHUNKS):
         for i in range(3):
-            lo[i] = min(lo[i], pts[k, i])
-            hi[i] = max(hi[i], pts[k, i])
-        dx, dy, dz = pts[k, 0] - c[0], pts[k, 1] - c[1], pts[k, 2] - c[2]
-        d = np.sqrt(dx * dx + dy * dy + dz * dz)
-        d0, d1 = min(d0, d), max(d1, d)
-    if pts.shape[0] == 0:
+            lo[i] = min(lo[i], part[q, i])
+            hi[i] = max(hi[i], part[q, 4 + i])
+        d0, d1 = min(d0, part[q, 3]), max(d1, part[q, 7])
+    if n == 0:
         d0, d1 = 1.0, 1.0
     return lo, hi, d0, d1
 
 
-@kernel
+@kernel(parallel=True)
 def _window_of(pts, o, r, u, f, near):
+    """The image-plane window (x0, x1, y0, y1) and depth range (z0, z1) of the samples in front of
+    the view (o; r, u, f), by chunks in parallel."""
+    n = pts.shape[0]
+    part = np.empty((_CHUNKS, 6))
+    for q in prange(_CHUNKS):
+        x0, x1, y0, y1, z0, z1 = np.inf, -np.inf, np.inf, -np.inf, np.inf, -np.inf
+        for k in range(q * n // _CHUNKS, (q + 1) * n // _CHUNKS):
+            dx, dy, dz = pts[k, 0] - o[0], pts[k, 1] - o[1], pts[k, 2] - o[2]
+            z = dx * f[0] + dy * f[1] + dz * f[2]
+            if z > near:
+                x = (dx * r[0] + dy * r[1] + dz * r[2]) / z
+                y = (dx * u[0] + dy * u[1] + dz * u[2]) / z
+                x0, x1, y0, y1 = min(x0, x), max(x1, x), min(y0, y), max(y1, y)
+                z0, z1 = min(z0, z), max(z1, z)
+        part[q, 0], part[q, 1], part[q, 2], part[q, 3], part[q, 4], part[q, 5] = x0, x1, y0, y1, z0, z1
     x0, x1, y0, y1, z0, z1 = np.inf, -np.inf, np.inf, -np.inf, np.inf, -np.inf
-    for k in range(pts.shape[0]):
-        dx, dy, dz = pts[k, 0] - o[0], pts[k, 1] - o[1], pts[k, 2] - o[2]
-        z = dx * f[0] + dy * f[1] + dz * f[2]
-        if z > near:
-            x = (dx * r[0] + dy * r[1] + dz * r[2]) / z
-            y = (dx * u[0] + dy * u[1] + dz * u[2]) / z
-            x0, x1, y0, y1 = min(x0, x), max(x1, x), min(y0, y), max(y1, y)
-            z0, z1 = min(z0, z), max(z1, z)
+    for q in range(_CHUNKS):
+        x0, x1, y0, y1 = min(x0, part[q, 0]), max(x1, part[q, 1]), min(y0, part[q, 2]), max(y1, part[q, 3])
+        z0, z1 = min(z0, part[q, 4]), max(z1, part[q, 5])
     return x0, x1, y0, y1, z0, z1
 
 
@@ -669,40 +698,73 @@ def fold_candidates(flat, counted, lo, hi, center, radius) -> np.ndarray:
       h / max(|a - c|, |b - c|) <= r / dmin (dmin: distance from the centre to the edge).
     """
     _occ, adj, _sheet, _t, _o = _topology(flat)
-    two = np.flatnonzero(adj.count == 2)
-    f0 = adj.edge_faces[adj.offsets[two]]
-    f1 = adj.edge_faces[adj.offsets[two] + 1]
-    both = counted[f0] & counted[f1]
-    two, f0, f1 = two[both], f0[both], f1[both]
-    V = flat.vertices
-    c = np.asarray(center, np.float64)
-    a, b = V[adj.edges[two, 0]], V[adj.edges[two, 1]]
-    u = b - a
-    t = np.clip(np.einsum("ek,ek->e", c - a, u) / np.maximum(np.einsum("ek,ek->e", u, u), 1e-300), 0.0, 1.0)
-    dmin = np.linalg.norm(a + t[:, None] * u - c, axis=1)
-    dfar = np.maximum(np.linalg.norm(a - c, axis=1), np.linalg.norm(b - c, axis=1))
-
-    def plane_h(f):
-        n = adj.normals[f]
-        return np.abs(np.einsum("ek,ek->e", n, adj.anchors[f] - c)) / np.maximum(np.linalg.norm(n, axis=1), 1e-300)
-
-    h = np.minimum(plane_h(f0), plane_h(f1))
-    grazing = (dmin <= radius) | (h * dmin <= radius * dfar * (1.0 + 1e-6) + 1e-12)
-    two, f0, f1 = two[grazing], f0[grazing], f1[grazing]  # the side test only where it can matter
-    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
-
-    def side(f):
-        s = (
-            np.einsum("fk,ck->fc", adj.normals[f], corners)
-            - np.einsum("fk,fk->f", adj.normals[f], adj.anchors[f])[:, None]
-        )
-        pos, neg = (s > 0).all(1), (s < 0).all(1)
-        return np.where(pos, 1, np.where(neg, -1, 0))
-
-    s0, s1 = side(f0), side(f1)
-    out = np.zeros(adj.n_edges, bool)
-    out[two[(s0 == 0) | (s1 == 0) | (s0 != s1)]] = True
+    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])], np.float64)
+    out = np.zeros(adj.n_edges, np.bool_)
+    _fold_kernel(
+        adj.count,
+        adj.edges,
+        adj.edge_faces,
+        adj.offsets,
+        counted,
+        flat.vertices,
+        adj.normals,
+        adj.anchors,
+        np.asarray(center, np.float64),
+        float(radius),
+        corners,
+        out,
+    )
     return out
+
+
+@kernel(inline=True)
+def _plane_h(normals, anchors, f, c):
+    """|n . (anchor - c)| / |n|: the distance from c to face f's plane."""
+    n0, n1, n2 = normals[f, 0], normals[f, 1], normals[f, 2]
+    num = abs(n0 * (anchors[f, 0] - c[0]) + n1 * (anchors[f, 1] - c[1]) + n2 * (anchors[f, 2] - c[2]))
+    return num / max(np.sqrt(n0 * n0 + n1 * n1 + n2 * n2), 1e-300)
+
+
+@kernel(inline=True)
+def _box_side(normals, anchors, f, corners):
+    """+1 / -1 when every corner of the box is strictly above / below face f's plane, else 0."""
+    n0, n1, n2 = normals[f, 0], normals[f, 1], normals[f, 2]
+    d = n0 * anchors[f, 0] + n1 * anchors[f, 1] + n2 * anchors[f, 2]
+    pos = True
+    neg = True
+    for k in range(corners.shape[0]):
+        s = (n0 * corners[k, 0] + n1 * corners[k, 1] + n2 * corners[k, 2]) - d
+        pos = pos and s > 0.0
+        neg = neg and s < 0.0
+    return 1 if pos else (-1 if neg else 0)
+
+
+@kernel(parallel=True)
+def _fold_kernel(count, edges, edge_faces, offsets, counted, V, normals, anchors, c, radius, corners, out):
+    """:func:`fold_candidates` per manifold edge (one thread per edge)."""
+    for e in prange(count.shape[0]):
+        if count[e] != 2:
+            continue
+        f0 = edge_faces[offsets[e]]
+        f1 = edge_faces[offsets[e] + 1]
+        if not (counted[f0] and counted[f1]):
+            continue
+        a0, a1, a2 = V[edges[e, 0], 0], V[edges[e, 0], 1], V[edges[e, 0], 2]
+        b0, b1, b2 = V[edges[e, 1], 0], V[edges[e, 1], 1], V[edges[e, 1], 2]
+        u0, u1, u2 = b0 - a0, b1 - a1, b2 - a2
+        t = ((c[0] - a0) * u0 + (c[1] - a1) * u1 + (c[2] - a2) * u2) / max(u0 * u0 + u1 * u1 + u2 * u2, 1e-300)
+        t = min(max(t, 0.0), 1.0)
+        q0, q1, q2 = a0 + t * u0 - c[0], a1 + t * u1 - c[1], a2 + t * u2 - c[2]
+        dmin = np.sqrt(q0 * q0 + q1 * q1 + q2 * q2)
+        da = np.sqrt((a0 - c[0]) ** 2 + (a1 - c[1]) ** 2 + (a2 - c[2]) ** 2)
+        db = np.sqrt((b0 - c[0]) ** 2 + (b1 - c[1]) ** 2 + (b2 - c[2]) ** 2)
+        dfar = max(da, db)
+        h = min(_plane_h(normals, anchors, f0, c), _plane_h(normals, anchors, f1, c))
+        if not ((dmin <= radius) or (h * dmin <= radius * dfar * (1.0 + 1e-6) + 1e-12)):
+            continue  # the side test only where it can matter
+        s0 = _box_side(normals, anchors, f0, corners)
+        s1 = _box_side(normals, anchors, f1, corners)
+        out[e] = (s0 == 0) or (s1 == 0) or (s0 != s1)
 
 
 def select_silhouette_edges(
@@ -885,41 +947,60 @@ def _bin_box(vp, gx, gy, B, bx, by):
     return x0, x1, y0, y1
 
 
+@kernel(inline=True)
+def _quad_bin_range(qd, e, radius, dmax, corner2, vp, gx, gy, B):
+    """(by0, by1, bx0, bx1): the screen bins the bounding box of quad e (grown by its half-width for
+    every receiver, ``dmax``) touches; an empty range when the quad has no fragment."""
+    if qd[e, 6] > 0.0:
+        Rg = quad_half_width(qd, e, radius, dmax, corner2)
+        if Rg > 0.0:
+            if np.isfinite(Rg):
+                x0 = min(qd[e, 0], qd[e, 2]) - Rg
+                x1 = max(qd[e, 0], qd[e, 2]) + Rg
+                y0 = min(qd[e, 1], qd[e, 3]) - Rg
+                y1 = max(qd[e, 1], qd[e, 3]) + Rg
+                cx0, cx1, cy0, cy1 = _cell_range(x0, x1, y0, y1, vp, gx, gy)
+            else:
+                cx0, cx1, cy0, cy1 = 0, gx - 1, 0, gy - 1
+            if cx0 <= cx1 and cy0 <= cy1:
+                return cy0 // B, cy1 // B + 1, cx0 // B, cx1 // B + 1
+    return 0, 0, 0, 0
+
+
 @kernel(parallel=True)
-def _quad_bins(qd, radius, dmax, corner2, bin_maxd, per_bin, vp, gx, gy, B, nbx, fill, offs, out):
-    """The screen bins quad e overlaps (refined per bin with ``per_bin``): their number into
-    ``out[e]`` (``fill`` False), or the bins themselves into ``out[offs[e]:offs[e + 1]]`` (``fill``
-    True, after a counting pass with the same arguments). One pass of the same loop for both."""
+def _quad_bin_slots(qd, radius, dmax, corner2, vp, gx, gy, B, slots):
+    """Per quad: the number of bins its bounding box touches (``_quad_bin_range``), the slots the
+    test pass may fill."""
+    for e in prange(qd.shape[0]):
+        by0, by1, bx0, bx1 = _quad_bin_range(qd, e, radius, dmax, corner2, vp, gx, gy, B)
+        slots[e] = (by1 - by0) * (bx1 - bx0)
+
+
+@kernel(parallel=True)
+def _quad_bins(qd, radius, dmax, corner2, bin_maxd, per_bin, vp, gx, gy, B, nbx, offs, out, counts):
+    """The screen bins quad e overlaps (refined per bin with ``per_bin``), in bin order, into its
+    slots ``out[offs[e]:offs[e + 1]]`` (the rest of them -1) and their number into ``counts[e]``.
+    One pass of the tests."""
     for e in prange(qd.shape[0]):
         n = 0
-        k = offs[e] if fill else 0
-        if qd[e, 6] > 0.0:
-            Rg = quad_half_width(qd, e, radius, dmax, corner2)
-            if Rg > 0.0:
-                if np.isfinite(Rg):
-                    x0 = min(qd[e, 0], qd[e, 2]) - Rg
-                    x1 = max(qd[e, 0], qd[e, 2]) + Rg
-                    y0 = min(qd[e, 1], qd[e, 3]) - Rg
-                    y1 = max(qd[e, 1], qd[e, 3]) + Rg
-                    cx0, cx1, cy0, cy1 = _cell_range(x0, x1, y0, y1, vp, gx, gy)
-                else:
-                    cx0, cx1, cy0, cy1 = 0, gx - 1, 0, gy - 1
-                if cx0 <= cx1 and cy0 <= cy1:
-                    for by in range(cy0 // B, cy1 // B + 1):
-                        for bx in range(cx0 // B, cx1 // B + 1):
-                            bi = by * nbx + bx
-                            if bin_maxd[bi] <= 0.0:
-                                continue
-                            bx0, bx1, by0, by1 = _bin_box(vp, gx, gy, B, bx, by)
-                            R = Rg
-                            if per_bin:
-                                R = quad_half_width(qd, e, radius, bin_maxd[bi], box_corner2(bx0, bx1, by0, by1))
-                            if quad_overlaps_box(qd, e, R, bx0, bx1, by0, by1):
-                                if fill and k + n < offs[e + 1]:
-                                    out[k + n] = bi
-                                n += 1
-        if not fill:
-            out[e] = n
+        k = offs[e]
+        by0, by1, bx0, bx1 = _quad_bin_range(qd, e, radius, dmax, corner2, vp, gx, gy, B)
+        Rg = quad_half_width(qd, e, radius, dmax, corner2)
+        for by in range(by0, by1):
+            for bx in range(bx0, bx1):
+                bi = by * nbx + bx
+                if bin_maxd[bi] <= 0.0:
+                    continue
+                x0, x1, y0, y1 = _bin_box(vp, gx, gy, B, bx, by)
+                R = Rg
+                if per_bin:
+                    R = quad_half_width(qd, e, radius, bin_maxd[bi], box_corner2(x0, x1, y0, y1))
+                if quad_overlaps_box(qd, e, R, x0, x1, y0, y1):
+                    out[k + n] = bi
+                    n += 1
+        for i in range(k + n, offs[e + 1]):
+            out[i] = -1
+        counts[e] = n
 
 
 def window_corner2(vp) -> float:
@@ -959,11 +1040,11 @@ def bin_penumbra_quads(grid: SampleGrid, qd: np.ndarray, light_radius: float, pe
         grid.nbx,
     )
     offs = np.zeros(E + 1, np.int64)
-    _quad_bins(*args, False, offs, counts)
-    np.cumsum(counts, out=offs[1:])
-    pair_bin = np.empty(offs[-1], np.int64)
-    _quad_bins(*args, True, offs, pair_bin)
-    return _pairs_by_bin(counts, pair_bin, grid.n_bins)
+    _quad_bin_slots(qd, light_radius, grid.dmax, args[3], grid.vp, grid.gx, grid.gy, grid.bins, offs[1:])
+    np.cumsum(offs[1:], out=offs[1:])
+    slots = np.empty(offs[-1], np.int64)
+    _quad_bins(*args, offs, slots, counts)
+    return _pairs_by_bin(counts, slots[slots >= 0], grid.n_bins)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -1402,7 +1483,8 @@ def _penumbra_kernel(
             jb = g_start[bi * B * B * S]  # the bin's first sample: rw and sinv are indexed from it
             if not count_only:
                 for j in range(jb, g_start[(bi + 1) * B * B * S]):
-                    sample_row(shape, center, nrm_l, spos, j, rw, j - jb)
+                    if shape != 1:  # the disk's rows are made where needed (disk_edge_terms, fallback)
+                        sample_row(shape, center, nrm_l, spos, j, rw, j - jb)
                     sinv[j - jb] = 1.0 / sdist[j]
             bx0, bx1, by0, by1 = _bin_box(vp, gx, gy, B, bx, by)
             bc2 = box_corner2(bx0, bx1, by0, by1)
@@ -1487,20 +1569,22 @@ def _penumbra_kernel(
                                 keep[np.uint64(i)] = np.int8(rs >= 0.0) & np.int8(ox * ox + oy * oy <= rs * rs)
                             for i in range(j1 - j0):
                                 cand[m] = j0 + i
-                                cp[0, m], cp[1, m], cp[2, m] = spos[j0 + i, 0], spos[j0 + i, 1], spos[j0 + i, 2]
                                 m += keep[i]
                         else:
                             for j in range(j0, j1):
                                 cand[m] = j
-                                cp[0, m], cp[1, m], cp[2, m] = spos[j, 0], spos[j, 1], spos[j, 2]
                                 m += 1
                 # the edge's candidates in this bin, every cell's together (longer vector loops)
                 nev += m
                 nt_e = tv_start[e + 1] - tv_start[e]
                 if shape == 1 and (nt_e == 1 or nt_e == 2):
+                    for i in range(m):  # the candidates' positions, contiguous: the terms' loop vectorizes
+                        cp[0, i], cp[1, i], cp[2, i] = spos[cand[i], 0], spos[cand[i], 1], spos[cand[i], 2]
                     disk_edge_terms(cp, m, center, radius, e, ea, eb, tv_start, tv, cval)
                 else:
                     for i in range(m):
+                        if shape == 1:
+                            sample_row(shape, center, nrm_l, spos, cand[i], rw, cand[i] - jb)
                         cval[i] = sample_edge_term(
                             shape, rw, cand[i] - jb, u, v, radius, hu, hv, e, ea, eb, tv_start, tv, buf
                         )
