@@ -94,7 +94,10 @@ def slice_of(d, dlo, kf, slices):
 
 
 @kernel(parallel=True)
-def _sample_keys(pts, vp, gx, gy, B, nbx, slices, dlo, dhi, near, ix, iy, dist, key):
+def _sample_keys(pts, vp, gx, gy, B, nbx, slices, dlo, dhi, near, rec, key):
+    """Per sample: its grid key (bin, cell in bin, slice; -1 behind the view) and its record
+    ``rec[k]`` = (image x, image y, distance to the light centre, position): one row, so that the
+    counting sort's gather reads one cache line per sample."""
     n = pts.shape[0]
     l, r, b, t = vp[VP_L], vp[VP_R], vp[VP_B], vp[VP_T]
     kf = slice_scale(dlo, dhi, slices)
@@ -106,20 +109,25 @@ def _sample_keys(pts, vp, gx, gy, B, nbx, slices, dlo, dhi, near, ix, iy, dist, 
         y = dx * vp[VP_UP] + dy * vp[VP_UP + 1] + dz * vp[VP_UP + 2]
         z = dx * vp[VP_FORWARD] + dy * vp[VP_FORWARD + 1] + dz * vp[VP_FORWARD + 2]
         d = np.sqrt(dx * dx + dy * dy + dz * dz)
-        dist[k] = d
+        rec[k, 2] = d
+        rec[k, 3] = pts[k, 0]
+        rec[k, 4] = pts[k, 1]
+        rec[k, 5] = pts[k, 2]
         if not (z > near):
             key[k] = -1
-            ix[k] = 0.0
-            iy[k] = 0.0
+            rec[k, 0] = 0.0
+            rec[k, 1] = 0.0
             continue
         xx = x / z
         yy = y / z
-        ix[k] = xx
-        iy[k] = yy
+        rec[k, 0] = xx
+        rec[k, 1] = yy
         cx = int(min(max(np.floor((xx - l) / (r - l) * gx), 0.0), gx - 1.0))
         cy = int(min(max(np.floor((t - yy) / (t - b) * gy), 0.0), gy - 1.0))
-        bi = (cy // B) * nbx + cx // B
-        loc = (cy % B) * B + cx % B
+        # cell -> (bin, cell in bin): unsigned division (the cells are >= 0; no floor-division fix-ups)
+        ux, uy, ub = np.uint64(cx), np.uint64(cy), np.uint64(B)
+        bi = np.int64((uy // ub) * np.uint64(nbx) + ux // ub)
+        loc = np.int64((uy % ub) * ub + ux % ub)
         key[k] = (bi * B * B + loc) * slices + slice_of(d, dlo, kf, slices)
 
 
@@ -144,15 +152,15 @@ def counting_sort(key, n_keys):
 
 
 @kernel(parallel=True)
-def _gather_sorted(order, pts, ix, iy, dist, sx, sy, sp, sd):
+def _gather_sorted(order, rec, sx, sy, sp, sd):
     for j in prange(order.shape[0]):
         k = order[j]
-        sx[j] = ix[k]
-        sy[j] = iy[k]
-        sp[j, 0] = pts[k, 0]
-        sp[j, 1] = pts[k, 1]
-        sp[j, 2] = pts[k, 2]
-        sd[j] = dist[k]
+        sx[j] = rec[k, 0]
+        sy[j] = rec[k, 1]
+        sd[j] = rec[k, 2]
+        sp[j, 0] = rec[k, 3]
+        sp[j, 1] = rec[k, 4]
+        sp[j, 2] = rec[k, 5]
 
 
 @kernel(parallel=True)
@@ -274,18 +282,16 @@ def build_sample_grid(light, pts: np.ndarray, grid: int, bins: int, slices: int)
     nbx = nby = -(-grid // bins)
     dlo = max(d0 * (1 - 1e-9), 1e-12)
     dhi = max(d1 * (1 + 1e-9), dlo * (1 + 1e-9))
-    ix = np.empty(n)
-    iy = np.empty(n)
-    dist = np.empty(n)
+    rec = np.empty((n, 6))
     key = np.empty(n, np.int64)
     near = view.near
-    _sample_keys(pts, vp, grid, grid, bins, nbx, slices, dlo, dhi, near, ix, iy, dist, key)
+    _sample_keys(pts, vp, grid, grid, bins, nbx, slices, dlo, dhi, near, rec, key)
     n_keys = nbx * nby * bins * bins * slices
     start, order = counting_sort(key, n_keys)
     m = len(order)
     sx, sy, sd = np.empty(m), np.empty(m), np.empty(m)
     sp = np.empty((m, 3))
-    _gather_sorted(order, pts, ix, iy, dist, sx, sy, sp, sd)
+    _gather_sorted(order, rec, sx, sy, sp, sd)
     cbox, cmax = _column_boxes(start, sp, sd, slices)
     bmax = cmax.reshape(nbx * nby, bins * bins).max(axis=1)
     return SampleGrid(
@@ -587,7 +593,7 @@ def _umbra_kernel(
                 t2 = _tie(sg * (ax - cx2), sg * (ay - cy2))
                 for cy in range(cy0, cy1 + 1):
                     for cx in range(cx0, cx1 + 1):
-                        col = (bi * B * B + (cy % B) * B + cx % B) * S
+                        col = (bi * B * B + (cy - by * B) * B + cx - bx * B) * S  # cy % B = cy - by B: no division
                         for j in range(g_start[col + s0], g_start[col + S]):
                             ntest += 1
                             px, py = sx[j], sy[j]
@@ -1528,12 +1534,14 @@ def _penumbra_kernel(
                     for cx in range(cx_lo, cx_hi):
                         x0 = l + cx * cw
                         x1 = x0 + cw
-                        col = (bi * B * B + (cy % B) * B + cx % B) * S
+                        col = (bi * B * B + (cy - by * B) * B + cx - bx * B) * S  # cy % B = cy - by B: no division
                         if g_start[col] == g_start[col + S]:
                             continue
                         if not (every or axes_overlap_box(ux, uy, qcx, qcy, hl, hw, x0, x1, y0, y1)):
                             continue
-                        if cancels_in_box(e, ea, eb, tv_start, tv, col_box, col // S):
+                        if cancels_in_box(
+                            e, ea, eb, tv_start, tv, col_box, bi * B * B + (cy - by * B) * B + cx - bx * B
+                        ):
                             continue
                         nf += 1
                         s0 = 0
