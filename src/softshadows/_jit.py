@@ -15,6 +15,12 @@ every call site). V is the same bit for bit either way. IR inlining costs compil
 ``inline="ir"`` (docs/results/cold-start.md). ``SOFTSHADOWS_INLINE`` (``ir``, ``llvm``: every
 helper one way; ``none``: no inlining, frames up to 2x slower) is kept for measuring.
 
+``nrt=False`` compiles without Numba's reference counting. A serial function called from a parallel
+kernel's body (to keep a large body out of the parfor, whose compile time grows faster than its
+size) otherwise increfs and decrefs every array its IR-inlined helpers receive, at every
+iteration: atomic operations that made such a function up to 2x slower than the same loop inside
+the parfor (``irregular.scalar_edge_terms``). Such a function must not allocate.
+
 Every kernel is recorded in ``KERNELS`` (the cold-cache check and the warm-up in
 :mod:`softshadows._warm`).
 """
@@ -31,8 +37,10 @@ INLINE = os.environ.get("SOFTSHADOWS_INLINE", "")  # "" (as declared), "ir", "ll
 KERNELS: list = []  # every dispatcher made by @kernel, in import order
 
 
-def kernel(fn=None, *, parallel: bool = False, inline: bool | str = False, nogil: bool = False):
-    """``njit`` with the project's flags (see the module docstring)."""
+def kernel(fn=None, *, parallel: bool = False, inline: bool | str = False, nogil: bool = False, nrt: bool = True):
+    """``njit`` with the project's flags (see the module docstring). ``nrt=False``: no reference
+    counting of arrays (the function must not allocate); for serial work functions called from a
+    parallel kernel's body (see the module docstring)."""
     if inline not in (False, True, "ir"):
         raise ValueError(f"kernel: inline={inline!r} (expected False, True or 'ir')")
     o = dict(FLAGS)
@@ -40,6 +48,8 @@ def kernel(fn=None, *, parallel: bool = False, inline: bool | str = False, nogil
         o["parallel"] = True
     if nogil:
         o["nogil"] = True
+    if not nrt:
+        o["_nrt"] = False
     how = INLINE or ("ir" if inline == "ir" else "llvm")
     if inline and how == "ir":
         o["inline"] = "always"
