@@ -22,6 +22,7 @@ from typing import ClassVar
 import numba
 import numpy as np
 from numba import prange
+from numba.cpython.unsafe.numbers import trailing_zeros
 
 from .._jit import kernel
 from ..analytic import disk_facing_frame, polygon_disk_area, quad_disk_area_small
@@ -935,13 +936,18 @@ def _queue_crossings(recv_depth, flags, flags64, i, base, nl, x0, x1, y0, y1, zo
     surface) to the queue at position ``m``: the texel to ``rows``, ``cols``, the patch and the
     texel's receiver depth to ``Q`` (6, n) (contiguous: the batch's vector loop needs no gathers;
     the batch recomputes the texel's frame, cheaper than copying its 11 planes). ``flags64``:
-    ``flags`` viewed as uint64, to skip 8 unflagged texels at a time. Returns the new length."""
+    ``flags`` viewed as uint64: the flagged bytes of each 8 are found by their lowest set bit.
+    Returns the new length."""
     for blk in range((nl + 7) // 8):
-        if flags64[blk] == 0:
-            continue
-        for jj in range(8 * blk, min(8 * blk + 8, nl)):
-            if not flags[jj]:
-                continue
+        x = flags64[blk]
+        rest = nl - 8 * blk
+        if rest < 8:  # bytes past nl: stale flags of a longer row
+            x &= (np.uint64(1) << np.uint64(8 * rest)) - np.uint64(1)
+        # the flagged bytes of the block one by one (lowest first, little-endian): one iteration
+        # per flagged texel, instead of a hard-to-predict branch per texel
+        while x:
+            jj = 8 * blk + (np.int64(trailing_zeros(x)) >> 3)
+            x &= x - np.uint64(1)
             j = base + jj
             rows[m] = i
             cols[m] = j
