@@ -265,26 +265,28 @@ def _sphere_extent(x0, x1, y0, y1, z, rho, lzb, z_max, svp):
     if z > lzb:
         # the shadows at z_max are divided by z_max once, after the min / max: dividing by a
         # positive number is monotone and correctly rounded, so the bounds are those of dividing
-        # each one (4 divisions instead of 32)
+        # each one (4 divisions instead of 32). l_x and l_y take the values +-rho independently:
+        # the x and y bounds are separate, so one loop over +-rho serves both
         X_lo = np.inf
         X_hi = -np.inf
         Y_lo = np.inf
         Y_hi = -np.inf
-        for c in range(8):
-            lx = rho if (c & 1) else -rho
-            ly = rho if (c & 2) else -rho
-            lz = lzb if (c & 4) else -lzb
+        for cz in range(2):  # the box's 8 corners: s depends on l_z only (2 divisions, not 8)
+            lz = lzb if cz else -lzb
             s = (z_max - lz) / (z - lz)
-            for cx in range(2):
-                qx = x0 if cx == 0 else x1
-                X = lx + (qx - lx) * s
-                X_lo = min(X_lo, X)
-                X_hi = max(X_hi, X)
-            for cy in range(2):
-                qy = y0 if cy == 0 else y1
-                Y = ly + (qy - ly) * s
-                Y_lo = min(Y_lo, Y)
-                Y_hi = max(Y_hi, Y)
+            for c in range(2):
+                lx = rho if c else -rho
+                for cx in range(2):
+                    qx = x0 if cx == 0 else x1
+                    X = lx + (qx - lx) * s
+                    X_lo = min(X_lo, X)
+                    X_hi = max(X_hi, X)
+                ly = lx
+                for cy in range(2):
+                    qy = y0 if cy == 0 else y1
+                    Y = ly + (qy - ly) * s
+                    Y_lo = min(Y_lo, Y)
+                    Y_hi = max(Y_hi, Y)
         x_lo = min(min(x0 / z, x1 / z), X_lo / z_max)
         x_hi = max(max(x0 / z, x1 / z), X_hi / z_max)
         y_lo = min(min(y0 / z, y1 / z), Y_lo / z_max)
