@@ -968,11 +968,13 @@ def _queue_crossings(recv_depth, flags, flags64, i, base, nl, x0, x1, y0, y1, zo
 def _crossing_batch(Q, rows, cols, vals, bad, UV, m, l, t, dxs, dys, rho):
     """The first ``m`` queued texel x patch pairs (:func:`_queue_crossings`): the texel's facing
     disk (:func:`softshadows.analytic.disk_facing_frame` of its receiver point, the same arithmetic
-    as :func:`disk_frames`, so the same values), the projected quadrilateral
-    (:func:`_quad_heights`, :func:`_project_quad`) and its exact overlap with the disk over pi,
-    branch-free (:func:`softshadows.analytic.quad_disk_area_small`; vectorizes), into ``vals``;
-    ``bad`` where that does not apply (patch not wholly between p and the disk's plane, or a wide
-    quadrilateral): those take :func:`occlusion_percentage_disk`."""
+    as :func:`disk_frames`, so the same values) and the projected quadrilateral
+    (:func:`_quad_heights`, :func:`_project_quad`) in float64, its corners stored in float32 to
+    ``UV`` (8, n), then in a second loop its exact overlap with the disk over pi, branch-free, in
+    float32 (:func:`softshadows.analytic.quad_disk_area_small32`; 16 lanes), into ``vals``
+    (float32); ``bad`` where that does not apply (patch not wholly between p and the disk's plane,
+    or a wide quadrilateral): those take :func:`occlusion_percentage_disk`. (The frame and
+    projection in float32 too moved V by up to 6.8e-6 on `bunny` for 3% less time: not done.)"""
     for k in range(m):
         kx = np.uint64(k)
         x0 = Q[0, kx]
