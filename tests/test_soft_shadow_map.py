@@ -311,6 +311,39 @@ def test_quad_disk_area_small_matches_polygon_disk_area():
     assert n_ok >= 380  # small quads take the fast form
 
 
+def test_quad_disk_area_small32_matches_polygon_disk_area():
+    """The float32 form of the small-quadrilateral overlap (the crossing pairs' batch) against the
+    float64 sector form, on quads given in float32 (as the batch hands them over): it takes the
+    same quads as the float64 form, and its error is a few float32 ulps of the O(size) terms
+    (their sum cancels to the O(size^2) area): at most 16 ulps of the size, i.e. below 6e-8 for
+    sizes up to 0.06, 2e-8 of the light after dividing by pi, far below the 1e-5 asked of V even
+    summed over a texel's pairs."""
+    from softshadows.analytic import polygon_disk_area, quad_disk_area_small, quad_disk_area_small32
+
+    rng = np.random.default_rng(12)
+    n_ok, worst = 0, 0.0
+    for k in range(400):
+        ang0 = rng.uniform(0, 2 * np.pi)
+        c = rng.uniform(0.9, 1.1) * np.array([np.cos(ang0), np.sin(ang0)])
+        size = 0.2 if k % 50 == 0 else rng.uniform(0.002, 0.06)
+        a = np.sort(rng.uniform(0, 2 * np.pi, 4))
+        quad = c + size * np.c_[np.cos(a), np.sin(a)] * rng.uniform(0.5, 1.0, (4, 1))
+        quad = quad.astype(np.float32).astype(np.float64)  # the batch's float32 corners
+        if k % 2:
+            quad = quad[::-1]
+        ref = polygon_disk_area(quad[:, 0].copy(), quad[:, 1].copy(), 4, 1.0)
+        got, ok = quad_disk_area_small32(*quad[:, 0].astype(np.float32), *quad[:, 1].astype(np.float32))
+        _, ok64 = quad_disk_area_small(*quad[:, 0], *quad[:, 1])
+        assert isinstance(got, np.float32 | float)
+        if ok:
+            n_ok += 1
+            worst = max(worst, abs(float(got) - ref) / size)
+        if size < 0.1:
+            assert ok == ok64
+    assert n_ok >= 380
+    assert worst <= 16 * 2.0**-24  # per unit of size: a few float32 ulps of each O(size) term
+
+
 def test_sphere_accumulation_equals_per_pair_sum():
     """The sphere accumulation's shortcuts (row pass: cone test on corner heights, the inside area
     in closed form; crossing pairs in vectorized batches; narrowed extents) change nothing but
@@ -476,3 +509,90 @@ def test_disk_facing_frame_is_orthonormal_and_faces_the_point():
         m = np.array([w, e1, e2])
         assert np.allclose(m @ m.T, np.eye(3), atol=1e-14, rtol=0)
         assert np.allclose(np.cross(w, e1), e2, atol=1e-14, rtol=0)
+
+
+def test_disk_frames32_rounds_the_float64_frames():
+    """The float32 planes the row pass reads, now made from the receiver depths directly, are
+    the float64 frames (:func:`disk_frames`: w, |p|, kappa, sqrt(1 + kappa^2)) rounded to float32,
+    bit for bit: the same arithmetic, one rounding."""
+    sc = ss.load_scene("bunny", light="sphere")
+    _ov, sv = ssm.compute_map_views(sc, 32, 48)
+    rdepth, _ = ssm.compute_receiver_depth_map(sc, sv)
+    rd0 = np.where(np.isfinite(rdepth), rdepth, 0).astype(np.float32)
+    assert (rd0 > 0).sum() > 500  # receivers are there
+    f64 = ssm.disk_frames(rd0, sv.params(), sc.light.radius)
+    f32 = ssm.disk_frames32(rd0, sv.params(), sc.light.radius)
+    assert np.array_equal(f32, f64[[0, 1, 2, 9, 10, 11]].astype(np.float32))
+
+
+def _sphere_extent_reference(x0, x1, y0, y1, z, rho, lzb, z_max, svp):
+    """:func:`ssm._sphere_extent` as first written: each of the 32 corner shadows divided by z_max."""
+    from softshadows.raster.view import VP_B, VP_H, VP_L, VP_R, VP_T, VP_W
+
+    l, r, b, t = svp[VP_L], svp[VP_R], svp[VP_B], svp[VP_T]
+    dxs, dys = (r - l) / svp[VP_W], (t - b) / svp[VP_H]
+    if not (z < z_max):
+        return 1.0, 0.0, 1.0, 0.0
+    if not z > lzb:
+        x_lo, x_hi, y_lo, y_hi = l, r, b, t
+    else:
+        xs, ys = [x0 / z, x1 / z], [y0 / z, y1 / z]
+        for c in range(8):
+            lx = rho if (c & 1) else -rho
+            ly = rho if (c & 2) else -rho
+            lz = lzb if (c & 4) else -lzb
+            s = (z_max - lz) / (z - lz)
+            xs += [(lx + (q - lx) * s) / z_max for q in (x0, x1)]
+            ys += [(ly + (q - ly) * s) / z_max for q in (y0, y1)]
+        x_lo, x_hi, y_lo, y_hi = min(xs), max(xs), min(ys), max(ys)
+    fj0 = max(np.ceil((x_lo - l) / dxs - 0.5), 0.0)
+    fj1 = min(np.floor((x_hi - l) / dxs - 0.5), svp[VP_W] - 1.0)
+    fi0 = max(np.ceil((t - y_hi) / dys - 0.5), 0.0)
+    fi1 = min(np.floor((t - y_lo) / dys - 0.5), svp[VP_H] - 1.0)
+    return fi0, fi1, fj0, fj1
+
+
+def test_sphere_extent_divides_once_with_the_same_bounds():
+    """Dividing the min / max by z_max once (and one s per light depth) gives the texel ranges of
+    dividing each of the 32 shadows: division by a positive number is monotone and correctly
+    rounded. Random patches, light sizes and depths, including patches near the light box."""
+    rng = np.random.default_rng(7)
+    sv = ssm.View.frame((0, 0, 0), (0, 0, 1), (0, 1, 0), (-1.3, 1.1, -0.9, 1.2), 1e-3, 10.0, 96, 80)
+    svp = sv.params()
+    n_diff = 0
+    for _ in range(4000):
+        rho = rng.uniform(0.05, 1.0)
+        z = rng.uniform(0.5 * rho, 6.0)
+        x0, y0 = rng.uniform(-2, 2, 2) * z
+        w, h = rng.uniform(1e-3, 0.1, 2) * z
+        lzb = rho * rng.uniform(0.0, 1.0)
+        z_max = z * rng.uniform(0.8, 3.0)
+        got = ssm._sphere_extent(x0, x0 + w, y0, y0 + h, z, rho, lzb, z_max, svp)
+        ref = _sphere_extent_reference(x0, x0 + w, y0, y0 + h, z, rho, lzb, z_max, svp)
+        n_diff += tuple(float(v) for v in got) != tuple(float(v) for v in ref)
+    assert n_diff == 0
+
+
+def test_queue_crossings_takes_the_flagged_texels_in_order():
+    """The queue walks each 8-texel block's flagged bytes by their lowest set bit: it must take
+    exactly the flagged texels of ``[0, nl)``, in column order, and ignore stale flags past ``nl``
+    (left by a longer row)."""
+    from numba import njit
+
+    W = 64
+    rd = np.arange(2 * W, dtype=np.float32).reshape(2, W) + 1.0
+    flags = np.zeros(W, np.bool_)
+    rng = np.random.default_rng(3)
+    queue = njit(lambda f, nl, base, Q, rows, cols: ssm._queue_crossings(
+        rd, f, f.view(np.uint64), 1, base, nl, 0.1, 0.2, 0.3, 0.4, 0.5, Q, rows, cols, 2
+    ))  # fmt: skip
+    for nl, base in ((64, 0), (37, 5), (8, 40), (3, 0), (16, 48)):
+        flags[:] = rng.random(W) < 0.3
+        flags[nl:] = True  # stale
+        Q, rows, cols = np.zeros((6, 80)), np.full(80, -1), np.full(80, -1)
+        m = queue(flags, nl, base, Q, rows, cols)
+        want = base + np.flatnonzero(flags[:nl])
+        assert m == 2 + len(want)
+        assert np.array_equal(cols[2:m], want) and np.all(rows[2:m] == 1)
+        assert np.array_equal(Q[5, 2:m], rd[1, want].astype(np.float64))
+        assert np.all(Q[0, 2:m] == 0.1) and np.all(Q[4, 2:m] == 0.5)
