@@ -3,17 +3,19 @@
 Every kernel is compiled with the same flags (``FLAGS``): cached on disk, IEEE arithmetic
 (no fastmath, so results do not depend on the compiler's reassociation), NumPy's error model
 (division by zero gives inf/NaN instead of raising, and no zero-checks in hot loops).
-Use ``@kernel``, ``@kernel(parallel=True)``, ``@kernel(inline=True)`` (or ``inline="ir"``) or
-``@kernel(parallel=True, nogil=True)``.
+Use ``@kernel``, ``@kernel(parallel=True)``, ``@kernel(inline=True)`` (or ``inline="ir"``; with
+``nrt=False`` for a hot helper that takes arrays) or ``@kernel(parallel=True, nogil=True)``.
 
 ``inline=True`` has LLVM inline the helper into its callers (Numba's ``forceinline``: the helper is
 typed and lowered once, marked ``alwaysinline``, and inlined where its code is linked in);
 ``inline="ir"`` has Numba inline it in its own IR (``inline="always"``: typed and lowered again at
 every call site). V is the same bit for bit either way. IR inlining costs compile time (a cold
-``compare`` compiled in a fifth less CPU time with LLVM inlining everywhere), but a few helpers in
-``irregular``'s innermost loop ran 1.2-1.3x slower when LLVM inlined them, so those say
-``inline="ir"`` (docs/results/cold-start.md). ``SOFTSHADOWS_INLINE`` (``ir``, ``llvm``: every
-helper one way; ``none``: no inlining, frames up to 2x slower) is kept for measuring.
+``compare`` compiled in a fifth less CPU time with LLVM inlining everywhere). A helper that takes
+arrays and runs in an innermost loop should say ``nrt=False`` too: LLVM-inlined with Numba's
+reference counting, ``irregular``'s sample-loop helpers ran 1.2-1.3x slower (the increfs and
+decrefs of their array arguments stay in the loop), without it as fast as IR-inlined
+(docs/results/cold-start.md). ``SOFTSHADOWS_INLINE`` (``ir``, ``llvm``: every helper one way;
+``none``: no inlining, frames up to 2x slower) is kept for measuring.
 
 ``nrt=False`` compiles without Numba's reference counting. A serial function called from a parallel
 kernel's body (to keep a large body out of the parfor, whose compile time grows faster than its

@@ -1058,9 +1058,11 @@ def bin_penumbra_quads(grid: SampleGrid, qd: np.ndarray, light_radius: float, pe
 # ---------------------------------------------------------------------------------------------
 # (d) final penumbra: exact signed edge integrals
 # ---------------------------------------------------------------------------------------------
-# The sample loop's helpers (to sample_edge_term) are inlined in Numba's IR: inlined by LLVM the
-# soft kernel ran 1.2-1.3x slower (softshadows/_jit.py, docs/results/cold-start.md).
-@kernel(inline="ir")
+# The sample loop's helpers (to sample_edge_term) are inlined by LLVM and compiled without reference
+# counting (nrt=False): with Numba's refcounting of the arrays they receive, LLVM-inlined they ran
+# 1.2-1.3x slower and were inlined in Numba's IR instead, which cost compile time
+# (softshadows/_jit.py, docs/results/cold-start.md).
+@kernel(inline=True, nrt=False)
 def segment_area(d, w0, w1):
     """Eq. 3: normalised area between a chord segment and the arc of the unit circle, inside the angle
     the segment [w0, w1] (positions along the chord line, at distance d >= 0 from the centre,
@@ -1072,7 +1074,7 @@ def segment_area(d, w0, w1):
     return (theta - d * (w1 - w0)) / (2.0 * np.pi)
 
 
-@kernel(inline="ir")
+@kernel(inline=True, nrt=False)
 def _clip_poly(buf, src, n, a, b, c, dst):
     """Clip the polygon in rows (2 src, 2 src + 1) of ``buf`` (x, y; n >= 1 vertices) to
     a*x + b*y + c >= 0 into rows (2 dst, 2 dst + 1); returns the new count. Each vertex's value of
@@ -1106,7 +1108,7 @@ def _clip_poly(buf, src, n, a, b, c, dst):
 _RP, _RW, _RL, _RC, _ROW = 0, 3, 6, 7, 10
 
 
-@kernel(inline=True)
+@kernel(inline=True, nrt=False)
 def sample_row(shape, center, nrm_l, sp, j, rows, k):
     """Row k of ``rows`` := everything the term evaluation reads for sorted sample j, contiguous
     (layout: _R*): p and the light frame (w: the facing disk's normal for the sphere, the
@@ -1134,7 +1136,7 @@ def sample_row(shape, center, nrm_l, sp, j, rows, k):
         rows[_RL, k] = abs(L)
 
 
-@kernel(inline="ir")
+@kernel(inline=True, nrt=False)
 def _side_sum(nx, ny, nz, p0, p1, p2, e, tv_start, tv):
     """Sum over the edge's counted triangles of the side of their third vertex relative to the plane
     through p and the edge (normal n): +1 / -1, 0 when in the plane."""
@@ -1148,7 +1150,7 @@ def _side_sum(nx, ny, nz, p0, p1, p2, e, tv_start, tv):
     return wsum
 
 
-@kernel(inline="ir")
+@kernel(inline=True, nrt=False)
 def _far_end(rax, ray, raz, rbx, rby, rbz, ha, hb):
     """The point of the edge in p's plane parallel to the light (where its projection runs to
     infinity), relative to p."""
@@ -1156,7 +1158,7 @@ def _far_end(rax, ray, raz, rbx, rby, rbz, ha, hb):
     return rax + t0 * (rbx - rax), ray + t0 * (rby - ray), raz + t0 * (rbz - raz)
 
 
-@kernel(inline="ir")
+@kernel(inline=True, nrt=False)
 def _disk_term(rw, j, radius, rax, ray, raz, rbx, rby, rbz, nx, ny, nz, nw, m2, nc):
     """V~ of the edge for the disk of radius r facing p (Eq. 3), given the plane (p, edge): its normal
     n, n . w and |n|^2 - (n . w)^2 (> 0), n . (c - p) (!= 0). The edge's line is the trace of the
@@ -1197,7 +1199,7 @@ def _disk_term(rw, j, radius, rax, ray, raz, rbx, rby, rbz, nx, ny, nz, nw, m2, 
     return segment_area(d, w0, w1)
 
 
-@kernel(inline="ir")
+@kernel(inline=True, nrt=False)
 def _rect_term(rw, j, lu, lv, hu, hv, rax, ray, raz, rbx, rby, rbz, nu, nv, nc, buf):
     """V~ of the edge for the rectangle (2 hu x 2 hv, axes lu, lv): the exact area of the rectangle
     clipped to the far side of the edge's line (n . (c - p) + nu U + nv V against the sign of
@@ -1261,7 +1263,7 @@ def _rect_term(rw, j, lu, lv, hu, hv, rax, ray, raz, rbx, rby, rbz, nu, nv, nc, 
     return abs(area) * 0.5 / (4.0 * hu * hv)
 
 
-@kernel(inline="ir")
+@kernel(inline=True, nrt=False)
 def sample_edge_term(shape, rw, j, lu, lv, radius, hu, hv, e, ea, eb, tv_start, tv, buf):
     """Signed penumbral occlusion of edge e at sample j (row ``rw[j]``): sum over the edge's counted
     triangles of (+V~ when the light centre is outside the triangle's side of the edge, -V~
@@ -1398,7 +1400,7 @@ def scalar_edge_terms(
         out[i] = sample_edge_term(shape, rw, cand[i] - jb, lu, lv, radius, hu, hv, e, ea, eb, tv_start, tv, buf)
 
 
-@kernel(inline=True)
+@kernel(inline=True, nrt=False)
 def cancels_in_box(e, ea, eb, tv_start, tv, box, c):
     """True when edge e's counted triangles cancel at every point of 3D box ``c``: the sign of a
     sample's term for triangle (a, b, v) is -sign(((b - a) x (v - a)) . (p - a)); when every such
