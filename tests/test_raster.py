@@ -810,3 +810,24 @@ def test_min_blend_texel_lists_equal_row_passes(kind, ortho, monkeypatch):
                 assert res[0][1] == res[1][1]
                 runs += (res[0][0] != start).sum() > 0
     assert runs >= 10  # the passes do change texels (not a comparison of two untouched images)
+
+
+def test_tile_row_bits_words_equal_bytes():
+    """The texel mask's row bits per tile, read 8 texels a word (``_byte_bits``: any nonzero byte,
+    not only 1) and texel by texel, against a loop over the texels; widths that are and are not
+    multiples of 8 and of the tile."""
+    from softshadows.raster import rasterizer as R
+
+    rng = np.random.default_rng(3)
+    for H, W in ((37, 40), (50, 64), (33, 77), (16, 8)):
+        m = ((rng.random((H, W)) < 0.3) * rng.integers(1, 256, (H, W))).astype(np.uint8)
+        ntx, nty = (W + R.TILE - 1) // R.TILE, (H + R.TILE - 1) // R.TILE
+        ref = np.zeros((ntx * nty, R.TILE), np.int64)
+        for i, j in zip(*np.nonzero(m)):
+            ref[(i // R.TILE) * ntx + j // R.TILE, i % R.TILE] |= 1 << (j % R.TILE)
+        for words in ((m.view(np.uint64) if W % 8 == 0 else R._E2U64), R._E2U64):
+            bits = np.empty_like(ref)
+            anyt = np.empty(ntx * nty, np.uint8)
+            R._tile_row_bits(m, words, R.TILE, ntx, nty, bits, anyt)
+            np.testing.assert_array_equal(bits, ref)
+            np.testing.assert_array_equal(anyt, (ref != 0).any(axis=1))

@@ -360,21 +360,46 @@ def _setup_one(u, t, verts, faces, vp, near, cull, NC, box, edges, zinfo, planes
 # ----------------------------------------------------------------------------------------------
 # binning
 # ----------------------------------------------------------------------------------------------
+#: the bytes of a little-endian word x to bits: with y = (((x & _LOW7) + _LOW7) | x) & _HIGH1 (bit 7
+#: of a byte set where the byte is nonzero; no carry leaves a byte) and b = y >> 7 (bytes of 0 or 1),
+#: (b * _PACK) >> 56 has bit k set where byte k is nonzero (the product's terms land on distinct
+#: bits, so nothing carries into the top byte)
+_LOW7 = np.uint64(0x7F7F7F7F7F7F7F7F)
+_HIGH1 = np.uint64(0x8080808080808080)
+_PACK = np.uint64(0x0102040810204080)
+_SEVEN = np.uint64(7)
+_PACK_SHIFT = np.uint64(56)
+
+
+@kernel(inline=True)
+def _byte_bits(x):
+    """Bit k set where byte k of the uint64 ``x`` (little-endian) is nonzero (see _PACK)."""
+    b = ((((x & _LOW7) + _LOW7) | x) & _HIGH1) >> _SEVEN
+    return np.int64((b * _PACK) >> _PACK_SHIFT)
+
+
 @kernel(parallel=True)
-def _tile_row_bits(mask, T, ntx, nty, bits, tile_any):
-    """bits[tile, li]: bit k set where texel (li, k) of the tile is set in ``mask`` (H,W) uint8;
-    tile_any[tile]: any of them."""
+def _tile_row_bits(mask, words, T, ntx, nty, bits, tile_any):
+    """bits[tile, li]: bit k set where texel (li, k) of the tile is set (nonzero) in ``mask`` (H,W)
+    uint8; tile_any[tile]: any of them. ``words``: ``mask`` viewed as (H, W / 8) uint64 where W is a
+    multiple of 8 (8 texels a word, :func:`_byte_bits`), else empty (texel by texel)."""
     H, W = mask.shape
+    nwords = words.shape[1] if words.shape[0] == H else 0
     for tile in prange(ntx * nty):
         ty = tile // ntx
         tx = tile - ty * ntx
+        x0 = tx * T
+        nw = min(T, W - x0)
+        nfull = min(nw // 8, nwords - (x0 >> 3)) if nwords > 0 else 0
         a = 0
         for li in range(T):
             i = ty * T + li
             b = 0
             if i < H:
-                for k in range(min(T, W - tx * T)):
-                    b |= np.int64(mask[i, tx * T + k] != 0) << k
+                for w in range(nfull):
+                    b |= _byte_bits(words[i, (x0 >> 3) + w]) << (8 * w)
+                for k in range(8 * nfull, nw):
+                    b |= np.int64(mask[i, x0 + k] != 0) << k
             bits[tile, li] = b
             a |= b
         tile_any[tile] = a != 0
@@ -694,8 +719,11 @@ def _bin_fill(NC, box, T, ntx, chunk, off, bins, nslot, tile_any, use_bits, sh):
 # ----------------------------------------------------------------------------------------------
 # tiles: the helpers the tile kernels share (coverage, depth, barycentrics; all inlined)
 # ----------------------------------------------------------------------------------------------
-# rows of a thread's span scratch SP (int64, (5, TILE)), indexed by the row of the tile
+# rows of a thread's span scratch SP (int64, (_SP_ROWS, TILE)), indexed by the row of the tile
 _SP_LO, _SP_HI, _SP_EX, _SP_RW, _SP_RN = 0, 1, 2, 3, 4
+# and (min-blend texel lists) SP[_SP_OR + a, b]: the texel bits of tile rows a..b ORed (a <= b)
+_SP_OR = 5
+_SP_ROWS = _SP_OR + TILE
 
 
 @kernel(inline=True)
@@ -1355,7 +1383,7 @@ _TL_ROWS = 8
 def _texel_list(prog, pparams, blend, img, rect, vw, SP, TL):
     """The texels to shade of the tile ``rect`` (SP[_SP_RN]) as a list in TL, row-major, padded with
     entries that no piece covers to a multiple of 8 (the vector width); tile row li's texels are
-    TL[:, SP[_SP_LO, li]:SP[_SP_HI, li]]. Returns (n, the coarse tests' bounds as
+    TL[:, SP[_SP_LO, li]:SP[_SP_HI, li]]; the texel bits of rows a..b in SP[_SP_OR + a, b]. Returns (n, the coarse tests' bounds as
     :func:`_load_blend_tile`, over the same texels in the same order)."""
     y0, y1, x0, _x1 = rect
     _W, _H, _ortho, _far, wl, wt, wsx, wsy = vw
@@ -1390,6 +1418,11 @@ def _texel_list(prog, pparams, blend, img, rect, vw, SP, TL):
             smax = sv if (sv > smax and sv < np.inf) else smax
             cmax = bv if bv > cmax else cmax
         SP[_SP_HI, li] = n
+    for a in range(y1 - y0 + 1):
+        acc = np.int64(0)
+        for b in range(a, y1 - y0 + 1):
+            acc |= SP[_SP_RN, b]
+            SP[_SP_OR + a, b] = acc
     for q in range(n, (n + 7) & ~7):
         TL[_TL_PY, q] = -1.0  # below every piece's rows
         TL[_TL_PJ, q] = -1.0
@@ -1657,7 +1690,7 @@ def _list_tile(prog, pparams, blend, img, rect, vw, near, tile, SP, TL, fe, mb):
         i0, i1, j0, j1 = prect
         if i0 > i1 or j0 > j1:
             continue
-        if not _rect_has_bits(SP, i0 - y0, i1 - y0, j0 - x0, j1 - x0):
+        if ((SP[_SP_OR + i0 - y0, i1 - y0] >> (j0 - x0)) & ((np.int64(1) << (j1 - j0 + 1)) - 1)) == 0:
             continue  # no texel to shade in the piece's rectangle of the tile
         zlo, zhi = _depth_bounds(zinfo, ct, ortho, near)
         pl = _plane(planes, t)
@@ -2000,6 +2033,7 @@ class _Blend(NamedTuple):
 
 
 _E2I64 = np.empty((0, 0), dtype=np.int64)
+_E2U64 = np.empty((0, 0), dtype=np.uint64)
 _NO_ZT = np.empty((0, 0), dtype=np.float64)
 _NO_FT = np.empty((0, 0), dtype=np.int32)
 #: rasterize_depth draws the small triangles directly (``_tiny_depth``); False: all through setup
@@ -2012,7 +2046,7 @@ _E1U = np.empty(0, dtype=np.uint8)
 
 
 def _front_end(vp, W, H, verts, fcs, code, near, mask=None, tiny=False):
-    """setup + binning: the arrays the tile kernels read. ``mask`` (H,W) uint8: bin a piece only
+    """setup + binning: the arrays the tile kernels read. ``mask`` (H,W) bool (or uint8, nonzero: set): bin a piece only
     to the tiles where its bounding box holds a set texel (min-blend's texel mask). ``tiny`` (the
     depth modes): the small triangles go to the tiny path instead of setup; returns (FrontEnd,
     tiny) with ``tiny`` = (tstart, tface, tlist) for :func:`_tiny_depth` (None without: fewer
@@ -2071,7 +2105,9 @@ def _front_end(vp, W, H, verts, fcs, code, near, mask=None, tiny=False):
     if mask is not None:
         rowbits = np.empty((ntx * nty, T), dtype=np.int64)
         tile_any = np.empty(ntx * nty, dtype=np.uint8)
-        _tile_row_bits(mask, T, ntx, nty, rowbits, tile_any)
+        m8 = np.ascontiguousarray(mask).view(np.uint8)  # bool or uint8
+        words = m8.view(np.uint64) if W % 8 == 0 and m8.ctypes.data % 8 == 0 else _E2U64
+        _tile_row_bits(m8, words, T, ntx, nty, rowbits, tile_any)
     else:
         rowbits = _E2I64
         tile_any = _E1U
@@ -2113,7 +2149,7 @@ def _scratch(T) -> _Scratch:
     return _Scratch(
         np.empty((n, T, T), dtype=np.float64),
         np.empty((n, T, T), dtype=np.int32),
-        np.empty((n, 5, T), dtype=np.int64),
+        np.empty((n, _SP_ROWS, T), dtype=np.int64),
         np.zeros((n, T, T), dtype=np.float32),
         np.zeros((n, T), dtype=np.float64),
         int(numba.get_num_threads()),
