@@ -760,3 +760,74 @@ def test_tiny_path_is_bit_identical_to_the_tile_pass(ortho, monkeypatch):
             assert (t1[at_plane] < q0).sum() > 20
             assert np.isin(t1[at_plane], [q0, q0 + 1]).sum() > 20
             assert not ((t1[at_plane] >= q0 + 2) & (t1[at_plane] < n // 2 + 2)).any()
+
+
+@pytest.mark.parametrize("kind", ["grid", "axis", "sliver", "huge", "random"])
+@pytest.mark.parametrize("ortho", [True, False])
+def test_min_blend_texel_lists_equal_row_passes(kind, ortho, monkeypatch):
+    """With a texel mask, the min-blend shades a tile with few texels from a list of them
+    (``_texel_list``, ``_blend_list``: coverage by the per-pixel edge tests, culling bounds over the
+    list) instead of row by row (spans). Both must give the same values and the same counts
+    (fragments, kept, culled pieces), bit for bit: on the coverage test cases (edge functions
+    exactly 0, axis-aligned edges, slivers, edge functions that may overflow), with pieces clipped
+    by the near plane (perspective), both programs, masks from sparse (every tile on the lists) to
+    dense (tiles over MIN_BLEND_LIST_MAX on the row passes), with and without the coarse culling."""
+    from softshadows.raster import rasterize_min_blend
+    from softshadows.raster import rasterizer as R
+    from softshadows.raster.programs import PROGRAM_ATTRIBUTE, PROGRAM_PENUMBRA
+
+    rng = np.random.default_rng(17 + len(kind))
+    W, H, n = 83, 61, 300
+    xy = _random_screen_triangles(rng, n, W, H, kind)
+    z = rng.uniform(0.3, 3.0, size=len(xy))  # near = 0.5: some faces cross it (two pieces)
+    if ortho:
+        V = np.stack([-xy[:, 0], H - xy[:, 1], z], 1)
+        view = View.frame([0, 0, 0], [0, 0, 1], [0, 1, 0], (0, W, 0, H), 0.0, 10.0, W, H, ortho=True)
+    else:
+        V = np.stack([(1 - 2 * xy[:, 0] / W) * z, (1 - 2 * xy[:, 1] / H) * z, z], 1)
+        view = View.frame([0, 0, 0], [0, 0, 1], [0, 1, 0], (-1, 1, -1, 1), 0.5, 10.0, W, H)
+    F = np.arange(3 * n, dtype=np.int64).reshape(n, 3)
+    za = rng.uniform(0.3, 2.5, size=(n, 3))
+    za[: n // 2] = za[: n // 2, :1]  # constant attributes (cones): the coarse value test applies
+    zp = rng.uniform(0.5, 3.5, size=(H, W)).astype(np.float32)
+    zp[rng.random((H, W)) < 0.1] = np.inf
+    start = rng.uniform(0.2, 1.0, size=(H, W)).astype(np.float32)
+    runs = 0
+    for density in (0.03, 0.2, 0.8):
+        mask = rng.random((H, W)) < density
+        mask[16:32, 16:48] = density > 0.5  # whole tiles empty, or full (256 texels: row passes)
+        for prog, params in ((PROGRAM_PENUMBRA, np.array([0.5, 0.01, 1.0])), (PROGRAM_ATTRIBUTE, np.zeros(1))):
+            for cd in (False, True):
+                res = []
+                for lmax in (-1, 248):
+                    monkeypatch.setattr(R, "MIN_BLEND_LIST_MAX", lmax)
+                    o = start.copy()
+                    st = rasterize_min_blend(
+                        view, V, F, prog, za, zp, params, o, split=n // 3, cull_discarded=cd, mask=mask
+                    )
+                    res.append((o, st))
+                np.testing.assert_array_equal(res[0][0], res[1][0])
+                assert res[0][1] == res[1][1]
+                runs += (res[0][0] != start).sum() > 0
+    assert runs >= 10  # the passes do change texels (not a comparison of two untouched images)
+
+
+def test_tile_row_bits_words_equal_bytes():
+    """The texel mask's row bits per tile, read 8 texels a word (``_byte_bits``: any nonzero byte,
+    not only 1) and texel by texel, against a loop over the texels; widths that are and are not
+    multiples of 8 and of the tile."""
+    from softshadows.raster import rasterizer as R
+
+    rng = np.random.default_rng(3)
+    for H, W in ((37, 40), (50, 64), (33, 77), (16, 8)):
+        m = ((rng.random((H, W)) < 0.3) * rng.integers(1, 256, (H, W))).astype(np.uint8)
+        ntx, nty = (W + R.TILE - 1) // R.TILE, (H + R.TILE - 1) // R.TILE
+        ref = np.zeros((ntx * nty, R.TILE), np.int64)
+        for i, j in zip(*np.nonzero(m)):
+            ref[(i // R.TILE) * ntx + j // R.TILE, i % R.TILE] |= 1 << (j % R.TILE)
+        for words in ((m.view(np.uint64) if W % 8 == 0 else R._E2U64), R._E2U64):
+            bits = np.empty_like(ref)
+            anyt = np.empty(ntx * nty, np.uint8)
+            R._tile_row_bits(m, words, R.TILE, ntx, nty, bits, anyt)
+            np.testing.assert_array_equal(bits, ref)
+            np.testing.assert_array_equal(anyt, (ref != 0).any(axis=1))

@@ -231,7 +231,9 @@ def warm_raster_modes() -> None:
     r._fragments(fe, W, H)
     out = np.zeros((H, W), np.float32)
     stats = np.zeros((1, 6), dtype=np.int64)
-    mb = r._Blend(np.zeros(3), np.zeros((0, 3)), np.zeros((H, W), np.float32), out, stats, 0, False)
+    mb = r._Blend(
+        np.zeros(3), np.zeros((0, 3)), np.zeros((H, W), np.float32), out, stats, 0, False, r._texel_scratch(), 0
+    )
     r._MIN_BLEND_KERNELS[PROGRAM_PENUMBRA](fe, r._scratch(fe.tile), mb)
 
 

@@ -19,6 +19,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 from numba import prange
+from numba.cpython.unsafe.numbers import trailing_zeros
 
 from .._jit import frozen, kernel
 from .gbuffer import Fragments, GBuffer
@@ -49,6 +50,10 @@ _CULL = {"none": 0, "back": 1, "front": 2}
 #: min-blend coarse value test: the tile's largest value is recomputed (after pieces have changed
 #: it) only when a piece's value bound comes within this of the stale one
 _VALUE_RECOMPUTE = 0.05
+#: min-blend with a texel mask: a tile with at most this many texels to shade is shaded texel by
+#: texel from a list of them (_texel_list, _blend_list) instead of row by row (the same output and
+#: counts; read at each call: -1 keeps every tile on the row passes, for the tests that prove it)
+MIN_BLEND_LIST_MAX = 128
 
 # ----------------------------------------------------------------------------------------------
 # the setup arrays' columns. A triangle t has two piece slots, 2t and 2t + 1 (clipping by the near
@@ -355,21 +360,46 @@ def _setup_one(u, t, verts, faces, vp, near, cull, NC, box, edges, zinfo, planes
 # ----------------------------------------------------------------------------------------------
 # binning
 # ----------------------------------------------------------------------------------------------
+#: the bytes of a little-endian word x to bits: with y = (((x & _LOW7) + _LOW7) | x) & _HIGH1 (bit 7
+#: of a byte set where the byte is nonzero; no carry leaves a byte) and b = y >> 7 (bytes of 0 or 1),
+#: (b * _PACK) >> 56 has bit k set where byte k is nonzero (the product's terms land on distinct
+#: bits, so nothing carries into the top byte)
+_LOW7 = np.uint64(0x7F7F7F7F7F7F7F7F)
+_HIGH1 = np.uint64(0x8080808080808080)
+_PACK = np.uint64(0x0102040810204080)
+_SEVEN = np.uint64(7)
+_PACK_SHIFT = np.uint64(56)
+
+
+@kernel(inline=True)
+def _byte_bits(x):
+    """Bit k set where byte k of the uint64 ``x`` (little-endian) is nonzero (see _PACK)."""
+    b = ((((x & _LOW7) + _LOW7) | x) & _HIGH1) >> _SEVEN
+    return np.int64((b * _PACK) >> _PACK_SHIFT)
+
+
 @kernel(parallel=True)
-def _tile_row_bits(mask, T, ntx, nty, bits, tile_any):
-    """bits[tile, li]: bit k set where texel (li, k) of the tile is set in ``mask`` (H,W) uint8;
-    tile_any[tile]: any of them."""
+def _tile_row_bits(mask, words, T, ntx, nty, bits, tile_any):
+    """bits[tile, li]: bit k set where texel (li, k) of the tile is set (nonzero) in ``mask`` (H,W)
+    uint8; tile_any[tile]: any of them. ``words``: ``mask`` viewed as (H, W / 8) uint64 where W is a
+    multiple of 8 (8 texels a word, :func:`_byte_bits`), else empty (texel by texel)."""
     H, W = mask.shape
+    nwords = words.shape[1] if words.shape[0] == H else 0
     for tile in prange(ntx * nty):
         ty = tile // ntx
         tx = tile - ty * ntx
+        x0 = tx * T
+        nw = min(T, W - x0)
+        nfull = min(nw // 8, nwords - (x0 >> 3)) if nwords > 0 else 0
         a = 0
         for li in range(T):
             i = ty * T + li
             b = 0
             if i < H:
-                for k in range(min(T, W - tx * T)):
-                    b |= np.int64(mask[i, tx * T + k] != 0) << k
+                for w in range(nfull):
+                    b |= _byte_bits(words[i, (x0 >> 3) + w]) << (8 * w)
+                for k in range(8 * nfull, nw):
+                    b |= np.int64(mask[i, x0 + k] != 0) << k
             bits[tile, li] = b
             a |= b
         tile_any[tile] = a != 0
@@ -689,8 +719,11 @@ def _bin_fill(NC, box, T, ntx, chunk, off, bins, nslot, tile_any, use_bits, sh):
 # ----------------------------------------------------------------------------------------------
 # tiles: the helpers the tile kernels share (coverage, depth, barycentrics; all inlined)
 # ----------------------------------------------------------------------------------------------
-# rows of a thread's span scratch SP (int64, (5, TILE)), indexed by the row of the tile
+# rows of a thread's span scratch SP (int64, (_SP_ROWS, TILE)), indexed by the row of the tile
 _SP_LO, _SP_HI, _SP_EX, _SP_RW, _SP_RN = 0, 1, 2, 3, 4
+# and (min-blend texel lists) SP[_SP_OR + a, b]: the texel bits of tile rows a..b ORed (a <= b)
+_SP_OR = 5
+_SP_ROWS = _SP_OR + TILE
 
 
 @kernel(inline=True)
@@ -1339,6 +1372,133 @@ def _blend_row(prog, pparams, zb, ib, rn, span, cols, yw, zrow, pl, q, ca, zr, o
     return cin, ckp
 
 
+# rows of a thread's texel-list scratch TL ((_TL_ROWS, TILE * TILE) float64): per texel to shade,
+# in row-major order, its pixel center (i + 0.5, j + 0.5), window coordinates, current value, input
+# image value and pixel (i, j)
+_TL_PY, _TL_PJ, _TL_XW, _TL_YW, _TL_ZB, _TL_S, _TL_I, _TL_J = range(8)
+_TL_ROWS = 8
+
+
+@kernel(inline=True)
+def _texel_list(prog, pparams, blend, img, rect, vw, SP, TL):
+    """The texels to shade of the tile ``rect`` (SP[_SP_RN]) as a list in TL, row-major, padded with
+    entries that no piece covers to a multiple of 8 (the vector width); tile row li's texels are
+    TL[:, SP[_SP_LO, li]:SP[_SP_HI, li]]; the texel bits of rows a..b in SP[_SP_OR + a, b]. Returns (n, the coarse tests' bounds as
+    :func:`_load_blend_tile`, over the same texels in the same order)."""
+    y0, y1, x0, _x1 = rect
+    _W, _H, _ortho, _far, wl, wt, wsx, wsy = vw
+    tthr = -np.inf
+    smax = -np.inf
+    cmax = -np.inf
+    n = 0
+    for li in range(y1 - y0 + 1):
+        SP[_SP_LO, li] = n
+        rb = SP[_SP_RN, li]
+        i = y0 + li
+        py = i + 0.5
+        yw = wt - py * wsy
+        while rb != 0:
+            k = trailing_zeros(rb)
+            rb &= rb - 1
+            j = x0 + k
+            pj = j + 0.5
+            bv = np.float64(blend[i, j])
+            sv = np.float64(img[i, j])
+            TL[_TL_PY, n] = py
+            TL[_TL_PJ, n] = pj
+            TL[_TL_XW, n] = wl + pj * wsx
+            TL[_TL_YW, n] = yw
+            TL[_TL_ZB, n] = bv
+            TL[_TL_S, n] = sv
+            TL[_TL_I, n] = i
+            TL[_TL_J, n] = j
+            n += 1
+            d = discard_depth(prog, pparams, sv)
+            tthr = d if d > tthr else tthr
+            smax = sv if (sv > smax and sv < np.inf) else smax
+            cmax = bv if bv > cmax else cmax
+        SP[_SP_HI, li] = n
+    for a in range(y1 - y0 + 1):
+        acc = np.int64(0)
+        for b in range(a, y1 - y0 + 1):
+            acc |= SP[_SP_RN, b]
+            SP[_SP_OR + a, b] = acc
+    for q in range(n, (n + 7) & ~7):
+        TL[_TL_PY, q] = -1.0  # below every piece's rows
+        TL[_TL_PJ, q] = -1.0
+        TL[_TL_XW, q] = 0.0
+        TL[_TL_YW, q] = 0.0
+        TL[_TL_ZB, q] = 0.0
+        TL[_TL_S, q] = 0.0
+    return n, tthr, smax, cmax
+
+
+@kernel(inline=True)
+def _list_max(TL, n):
+    """The largest current value of the texel list (as :func:`_tile_max` over the same texels)."""
+    cmax = -np.inf
+    for q in range(n):
+        c = TL[_TL_ZB, q]
+        cmax = c if c > cmax else cmax
+    return cmax
+
+
+@kernel(inline=True)
+def _edge_out(e, py, pj):
+    """not :func:`_edge_in` of edge e at the pixel center (pj, py) (the same operations, branch-free)."""
+    v = e[E_SG] * (e[E_DX] * (py - e[E_AY]) - e[E_DY] * (pj - e[E_AX]))
+    return (v < 0.0) | ((v == 0.0) & (e[E_OWN] == 0.0))
+
+
+@kernel(inline=True)
+def _blend_list(prog, pparams, TL, qa, qb, prect, full, e0, e1, e2, pl, q, ca, zr, ortho, cconst):
+    """:func:`_blend_row` over the texel list entries qa..qb - 1 (TL, see :func:`_texel_list`) for
+    one piece: the texels in the piece's rectangle ``prect`` whose centers its edges cover (every one
+    where ``full``), each with the same operations as a row pass gives it. Returns (fragments, kept
+    fragments, texels lowered)."""
+    i0, i1, j0, j1 = prect
+    pya = i0 + 0.5
+    pyb = i1 + 0.5
+    pja = j0 + 0.5
+    pjb = j1 + 0.5
+    zlo, zhi, far = zr
+    ca0, ca1, ca2 = ca
+    # views of the entries (indices from 0: known non-negative, no wrap-around selects in the vector loop)
+    PY = TL[_TL_PY, qa:qb]
+    PJ = TL[_TL_PJ, qa:qb]
+    XW = TL[_TL_XW, qa:qb]
+    YW = TL[_TL_YW, qa:qb]
+    ZB = TL[_TL_ZB, qa:qb]
+    S = TL[_TL_S, qa:qb]
+    cin = 0
+    ckp = 0
+    clow = 0
+    for k in range(ZB.shape[0]):
+        py = PY[k]
+        pj = PJ[k]
+        xw = XW[k]
+        yw = YW[k]
+        inr = (py >= pya) & (py <= pyb) & (pj >= pja) & (pj <= pjb)
+        out = _edge_out(e0, py, pj) | _edge_out(e1, py, pj) | _edge_out(e2, py, pj)
+        cov = inr if full else (inr & (not out))
+        z = _clamp_depth(_frag_depth(ortho, pl, _row_depth(ortho, pl, yw), xw), zlo, zhi)
+        if cconst:
+            a = ca0
+        else:
+            b1, b2 = _bary(q, xw, yw, z, ortho)
+            a = (1.0 - b1 - b2) * ca0 + b1 * ca1 + b2 * ca2
+        val = run_program(prog, pparams, a, S[k], z)
+        inside = cov & (not (z > far))
+        kept = inside & (val == val)
+        zc = ZB[k]
+        low = kept & (val < zc)
+        cin += inside
+        ckp += kept
+        clow += low
+        ZB[k] = val if low else zc
+    return cin, ckp, clow
+
+
 # ----------------------------------------------------------------------------------------------
 # the tile kernels, one per mode. Load balance (see docs/rasterizer.md): Numba splits a prange into
 # equal contiguous parts, one per thread, while the work sits where the geometry is; so each kernel
@@ -1506,6 +1666,90 @@ def _tiles_fragments(fe, sc, foff, fpix, ftri, fbary, fdepth):
                             lo, hi = _next_span(scan, hi, j1, e0, e1, e2, r0, r1, r2)
 
 
+@kernel(inline=True)
+def _list_tile(prog, pparams, blend, img, rect, vw, near, tile, SP, TL, fe, mb):
+    """A tile with few texels to shade (SP[_SP_RN]): its pieces shaded texel by texel from a list
+    of them (:func:`_texel_list`, :func:`_blend_list`), with the culling, counts and values of
+    the row passes (``slot_fn`` of :func:`_make_min_blend_slot`)."""
+    _vp, _T, _ntx, _nty, _near, start, bins, box, edges, zinfo, planes, _normals, _rowbits, sh, tri = fe
+    _pparams, cattr, _img, _blend, bstats, split, cull_discarded, _tlbuf, _lmax = mb
+    W, H, ortho, far, _wl, _wt, _wsx, _wsy = vw
+    y0, _y1, x0, _x1 = rect
+    n, tthr, smax, cmax = _texel_list(prog, pparams, blend, img, rect, vw, SP, TL)
+    dirty = False  # whether pieces have lowered values since cmax was computed
+    na = 0
+    nb = 0
+    ka = 0
+    kb = 0
+    nculled = 0
+    nvculled = 0
+    for bi in range(start[tile], start[tile + 1]):
+        ct = bins[bi]
+        t = ct >> sh
+        prect = _piece_rect(box, ct, rect)
+        i0, i1, j0, j1 = prect
+        if i0 > i1 or j0 > j1:
+            continue
+        if ((SP[_SP_OR + i0 - y0, i1 - y0] >> (j0 - x0)) & ((np.int64(1) << (j1 - j0 + 1)) - 1)) == 0:
+            continue  # no texel to shade in the piece's rectangle of the tile
+        zlo, zhi = _depth_bounds(zinfo, ct, ortho, near)
+        pl = _plane(planes, t)
+        ot = tri[t]  # the face
+        ca = (cattr[ot, 0], cattr[ot, 1], cattr[ot, 2])
+        cconst = (ca[0] == ca[1]) & (ca[0] == ca[2])
+        if cull_discarded:
+            # the coarse depth and value tests of the row passes (see slot_fn)
+            zc_min = min(max(_rect_min_depth(ortho, pl, vw, prect), zlo), zhi)
+            if zc_min >= tthr:
+                nculled += 1
+                continue
+            if cconst:
+                vb = value_lower_bound(prog, pparams, ca[0], zc_min, smax)
+                if dirty and vb >= cmax - _VALUE_RECOMPUTE:
+                    cmax = _list_max(TL, n)
+                    dirty = False
+                if vb >= cmax:
+                    nvculled += 1
+                    continue
+        full = False
+        if (i1 - i0 + 1) * (j1 - j0 + 1) > 16:
+            reject, full = _rect_edge_test(edges, ct, i0, i1, j0, j1, W + 0.0, H + 0.0)
+            if reject:
+                continue
+        e0 = _edge(edges, ct, 0)
+        e1 = _edge(edges, ct, 1)
+        e2 = _edge(edges, ct, 2)
+        # the list entries of the piece's rows, widened to whole vectors (the entries of other
+        # rows and the padding fail the rectangle test)
+        qa = SP[_SP_LO, i0 - y0] & ~7
+        qb = (SP[_SP_HI, i1 - y0] + 7) & ~7
+        q = _dual(planes, t)
+        zr = (zlo, zhi, far)
+        if ortho:
+            cin, ckp, clow = _blend_list(prog, pparams, TL, qa, qb, prect, full, e0, e1, e2, pl, q, ca, zr, True, False)
+        elif cconst:
+            cin, ckp, clow = _blend_list(prog, pparams, TL, qa, qb, prect, full, e0, e1, e2, pl, q, ca, zr, False, True)
+        else:
+            cin, ckp, clow = _blend_list(
+                prog, pparams, TL, qa, qb, prect, full, e0, e1, e2, pl, q, ca, zr, False, False
+            )
+        dirty = dirty | (clow != 0)
+        if ot < split:
+            na += cin
+            ka += ckp
+        else:
+            nb += cin
+            kb += ckp
+    bstats[tile, 0] += na
+    bstats[tile, 1] += nb
+    bstats[tile, 2] += ka
+    bstats[tile, 3] += kb
+    bstats[tile, 4] += nculled
+    bstats[tile, 5] += nvculled
+    for k in range(n):
+        blend[int(TL[_TL_I, k]), int(TL[_TL_J, k])] = TL[_TL_ZB, k]
+
+
 def _make_min_blend_slot(prog):
     """The slot kernel of rasterize_min_blend's tile pass for fragment program ``prog`` (a constant
     of the closure: each kernel compiles only its own program, which inlines into the vector loops;
@@ -1518,7 +1762,7 @@ def _make_min_blend_slot(prog):
         docs/results/cold-start.md)."""
         vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, _normals, rowbits, sh, tri = fe
         zbuf, _tbuf, spbuf, ibuf, lbuf, nslot = sc
-        pparams, cattr, img, blend, bstats, split, cull_discarded = mb
+        pparams, cattr, img, blend, bstats, split, cull_discarded, tlbuf, list_max = mb
         vw = _view_window(vp)
         W, H, ortho, far, wl, wt, wsx, wsy = vw
         use_mask = rowbits.size > 0
@@ -1527,6 +1771,7 @@ def _make_min_blend_slot(prog):
         ib = ibuf[tid]
         SP = spbuf[tid]
         CM = lbuf[tid]
+        TL = tlbuf[tid]
         for tile in range(slot, ntiles, nslot):  # tiles dealt round-robin: the work sits in few
             if start[tile] == start[tile + 1]:
                 continue  # nothing binned here: ``blend`` unchanged
@@ -1535,6 +1780,17 @@ def _make_min_blend_slot(prog):
             y0, y1, x0, x1 = rect
             if not _texels_to_shade(SP, rowbits, tile, use_mask, y1 - y0, x1 - x0):
                 continue  # no texel to shade: ``blend`` unchanged
+            nlist = list_max + 1
+            if use_mask and list_max >= 0:
+                nlist = 0
+                for li in range(y1 - y0 + 1):
+                    rb = SP[_SP_RN, li]
+                    while rb != 0:
+                        rb &= rb - 1
+                        nlist += 1
+            if nlist <= list_max:
+                _list_tile(prog, pparams, blend, img, rect, vw, near, tile, SP, TL, fe, mb)
+                continue
             tthr, smax, cmax = _load_blend_tile(prog, pparams, blend, img, rect, SP, zb, ib)
             dirty = False  # whether pieces have lowered values since cmax was computed
             cols = (x0, wl, wsx)
@@ -1772,9 +2028,12 @@ class _Blend(NamedTuple):
     stats: np.ndarray  #: (ntiles, 6) int64 counts per tile
     split: int  #: triangles below it count as "a", the others as "b"
     cull_discarded: bool  #: hierarchical culling
+    texels: np.ndarray  #: (n, _TL_ROWS, TILE * TILE) float64 per-thread texel lists (_texel_list)
+    list_max: int  #: tiles with at most this many texels to shade use the lists (MIN_BLEND_LIST_MAX)
 
 
 _E2I64 = np.empty((0, 0), dtype=np.int64)
+_E2U64 = np.empty((0, 0), dtype=np.uint64)
 _NO_ZT = np.empty((0, 0), dtype=np.float64)
 _NO_FT = np.empty((0, 0), dtype=np.int32)
 #: rasterize_depth draws the small triangles directly (``_tiny_depth``); False: all through setup
@@ -1787,7 +2046,7 @@ _E1U = np.empty(0, dtype=np.uint8)
 
 
 def _front_end(vp, W, H, verts, fcs, code, near, mask=None, tiny=False):
-    """setup + binning: the arrays the tile kernels read. ``mask`` (H,W) uint8: bin a piece only
+    """setup + binning: the arrays the tile kernels read. ``mask`` (H,W) bool (or uint8, nonzero: set): bin a piece only
     to the tiles where its bounding box holds a set texel (min-blend's texel mask). ``tiny`` (the
     depth modes): the small triangles go to the tiny path instead of setup; returns (FrontEnd,
     tiny) with ``tiny`` = (tstart, tface, tlist) for :func:`_tiny_depth` (None without: fewer
@@ -1846,7 +2105,9 @@ def _front_end(vp, W, H, verts, fcs, code, near, mask=None, tiny=False):
     if mask is not None:
         rowbits = np.empty((ntx * nty, T), dtype=np.int64)
         tile_any = np.empty(ntx * nty, dtype=np.uint8)
-        _tile_row_bits(mask, T, ntx, nty, rowbits, tile_any)
+        m8 = np.ascontiguousarray(mask).view(np.uint8)  # bool or uint8
+        words = m8.view(np.uint64) if W % 8 == 0 and m8.ctypes.data % 8 == 0 else _E2U64
+        _tile_row_bits(m8, words, T, ntx, nty, rowbits, tile_any)
     else:
         rowbits = _E2I64
         tile_any = _E1U
@@ -1888,11 +2149,16 @@ def _scratch(T) -> _Scratch:
     return _Scratch(
         np.empty((n, T, T), dtype=np.float64),
         np.empty((n, T, T), dtype=np.int32),
-        np.empty((n, 5, T), dtype=np.int64),
+        np.empty((n, _SP_ROWS, T), dtype=np.int64),
         np.zeros((n, T, T), dtype=np.float32),
         np.zeros((n, T), dtype=np.float64),
         int(numba.get_num_threads()),
     )
+
+
+def _texel_scratch() -> np.ndarray:
+    """The min-blend's per-thread texel lists (see :func:`_texel_list`)."""
+    return np.empty((numba.config.NUMBA_NUM_THREADS, _TL_ROWS, TILE * TILE), dtype=np.float64)
 
 
 def rasterize(view, vertices, faces, cull: str = "none") -> GBuffer:
@@ -2025,7 +2291,18 @@ def rasterize_min_blend(
     kern = _MIN_BLEND_KERNELS[int(program)]
     fe = _front_end(vp, W, H, verts, fcs, code, near, mk)
     bstats = np.zeros((fe.ntx * fe.nty, 6), dtype=np.int64)
-    mb = _Blend(np.asarray(params, dtype=np.float64), ca, im, out, bstats, int(split), bool(cull_discarded))
+    lmax = min(int(MIN_BLEND_LIST_MAX), TILE * TILE - 8)  # the lists' padding fits in the scratch
+    mb = _Blend(
+        np.asarray(params, dtype=np.float64),
+        ca,
+        im,
+        out,
+        bstats,
+        int(split),
+        bool(cull_discarded),
+        _texel_scratch(),
+        lmax,
+    )
     kern(fe, _scratch(fe.tile), mb)
     tot = bstats.sum(axis=0)
     return {
