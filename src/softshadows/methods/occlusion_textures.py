@@ -414,7 +414,7 @@ def _mip_fetch(pyr, s, off, size, i, j):
     return pyr[s, off + i * size + j]
 
 
-@kernel
+@kernel(nrt=False)
 def _mip_bilinear(pyr, s, off, size, scale, x, y):
     """Bilinear sample of one mip level at level-0 texel coordinates (x, y)."""
     u = x / scale - 0.5
@@ -430,7 +430,7 @@ def _mip_bilinear(pyr, s, off, size, scale, x, y):
     return (1 - fv) * ((1 - fu) * a + fu * b) + fv * ((1 - fu) * c + fu * e)
 
 
-@kernel
+@kernel(nrt=False)
 def _mip_trilinear(pyr, s, offs, sizes, lod, x, y):
     nl = offs.shape[0]
     if lod <= 0.0:
@@ -454,7 +454,7 @@ def _probe_count(wx, wy, max_probes):
     return max(1, min(n, max_probes))
 
 
-@kernel
+@kernel(nrt=False)
 def lookup_mipmap(pyr, s, offs, sizes, max_aniso, x0, x1, y0, y1):
     """Rectangular kernel through anisotropic mipmap filtering (EXT_texture_filter_anisotropic):
     Pmax, Pmin = footprint sides; N = min(ceil(Pmax/Pmin), max_aniso) trilinear probes along the
@@ -491,7 +491,7 @@ def _mip_support(x0, x1, y0, y1, max_aniso, nl):
     return 1.5 * (1 << lv) + 1e-6
 
 
-@kernel
+@kernel(nrt=False)
 def _nb_box(nb, s, lv, sx, sy):
     """Bilinear lookup of N-Buffer level lv at continuous box origin (sx, sy) (texel (i, j) holds
     the box whose corner is (j, i)); clamp-to-edge."""
@@ -510,7 +510,7 @@ def _nb_box(nb, s, lv, sx, sy):
     )
 
 
-@kernel
+@kernel(nrt=False)
 def _nb_square(nb, s, cx, cy, size):
     """Box response of a size x size square centred at (cx, cy): the two levels bracketing the
     size, interpolated linearly in size."""
@@ -529,7 +529,7 @@ def _nb_square(nb, s, cx, cy, size):
     return (1 - t) * a + t * b
 
 
-@kernel
+@kernel(nrt=False)
 def lookup_nbuffers(nb, s, max_probes, x0, x1, y0, y1):
     """Rectangular kernel from square N-Buffer lookups: ceil(long/short) squares of the short side
     spread along the long side (one for a square light)."""
@@ -550,7 +550,7 @@ def lookup_nbuffers(nb, s, max_probes, x0, x1, y0, y1):
     return acc / n
 
 
-@kernel
+@kernel(nrt=False)
 def _sat_at(sat, s, x, y):
     """The SAT as a continuous function: bilinear between integer corners (exact integral of the
     piecewise-constant texture), clamped (zero occlusion outside the texture)."""
@@ -569,7 +569,7 @@ def _sat_at(sat, s, x, y):
     return (1 - fv) * ((1 - fu) * a + fu * b) + fv * ((1 - fu) * c + fu * e)
 
 
-@kernel
+@kernel(nrt=False)
 def lookup_sat(sat, s, x0, x1, y0, y1):
     """Exact box filter: (S(x1,y1) - S(x0,y1) - S(x1,y0) + S(x0,y0)) / area."""
     area = (x1 - x0) * (y1 - y0)

@@ -608,7 +608,7 @@ def pyramid_max(pyr) -> float:
     return float(data[offs[-1]]) if len(offs) > 1 else 0.0
 
 
-@kernel
+@kernel(nrt=False)
 def _zmax_rect(data, offs, ws, hs, x0, y0, x1, y1):
     """Max of level-0 texels [x0..x1] x [y0..y1] (inclusive, clamped) through the pyramid (an upper
     bound: read at a level >= 1 whose cells cover the rectangle in at most ~9 x 9)."""
@@ -633,7 +633,7 @@ def _zmax_rect(data, offs, ws, hs, x0, y0, x1, y1):
     return float(m)
 
 
-@kernel
+@kernel(nrt=False)
 def _zmax_bbox(data, offs, ws, hs, xa, ya, xb, yb):
     """Max Z_P under the pixel-coordinate box [xa, xb] x [ya, yb], grown by a texel on every side,
     with a relative margin (a safe upper bound for the early rejection)."""
@@ -649,7 +649,7 @@ def _zmax_bbox(data, offs, ws, hs, xa, ya, xb, yb):
     ) * (1.0 + 1e-6)
 
 
-@kernel
+@kernel(nrt=False)
 def _wedge_zmax(wl, wt, sxs, sys_, tx, ty, ux0, uy0, ux1, uy1, fa, fb, data, offs, ws, hs):
     """Max Z_P under the part of a cone wedge between ruling fractions fa < fb (window-space
     fractions from the tip (tx, ty) to the base vertices (ux0, uy0), (ux1, uy1))."""
@@ -759,7 +759,7 @@ def _reject_cones(view, q, zv, bx, by, z_far, pyr):
     return lam, keep
 
 
-@kernel
+@kernel(nrt=False)
 def _sheet_reject_kernel(sx, sy, zc, z_far, iters, pieces, eps, data, offs, ws, hs, ucut):
     """Per sheet: the fraction ``ucut`` of every ruling (from the edge, u = 0, to the far line,
     u = 1) that can carry kept fragments; 0 drops the sheet. ``sx, sy`` (n, 4) pixel coordinates of
@@ -794,7 +794,7 @@ def _sheet_reject_kernel(sx, sy, zc, z_far, iters, pieces, eps, data, offs, ws, 
         ucut[i] = u if u > eps else 0.0
 
 
-@kernel
+@kernel(nrt=False)
 def _sheet_zmax(sx, sy, zc, i, z_far, ua, ub, data, offs, ws, hs):
     """Max Z_P under the part ua <= u <= ub of sheet ``i``: the hull of the four ruling points there
     (corners v0, v1, F1, F0 in pixels ``sx[i], sy[i]``, ``zc[i]`` the depths of v0, v1; F0, F1 at
