@@ -236,7 +236,7 @@ def _clip_plane(f0, f1, s0, s1):
     return s0, s1
 
 
-@kernel
+@kernel(nrt=False)
 def epipolar_segment(vp, ox, oy, oz, lx, ly, lz, t0, t1):
     """The part t in [t0, t1] of the shadow ray o + t (l - o) clipped to the reference view's frustum
     (near, far and the window) and projected: (ok, ax, ay, bx, by, zA, zB, tA, tB), A and B the
@@ -279,7 +279,7 @@ def _t_at(z, zA, zB, tA, tB):
     return tA + (zA - z) / (zA - zB) * (tB - tA)
 
 
-@kernel(inline=True)
+@kernel(inline=True, nrt=False)
 def _add_interval(hid, nh, ta, tb):
     """Append [ta, tb] to the ordered occlusion interval list (merging touching intervals)."""
     if nh > 0 and ta <= hid[nh - 1, 1] + 1e-12:
@@ -294,7 +294,7 @@ def _add_interval(hid, nh, ta, tb):
     return nh + 1
 
 
-@kernel(inline=True)
+@kernel(inline=True, nrt=False)
 def leaf_floors_and_walls(D, k, i, j, ax, ay, dx, dy, wA, wB, gapk):
     """The exact test at a leaf pixel (i, j): the floor (the pixel's depth plane, parallel to the
     image plane) and the wall at the pixel's exit edge, present only when the next pixel's depth
@@ -338,7 +338,7 @@ def leaf_floors_and_walls(D, k, i, j, ax, ay, dx, dy, wA, wB, gapk):
     return False, 0.0, zb > d, za, zb
 
 
-@kernel
+@kernel(nrt=False)
 def traverse_epipolar(k, ax, ay, bx, by, zA, zB, tA, tB, D, MN, MX, CONN, offs, gapk, flags, stack, hid, nh, cnt):
     """Hierarchical traversal of the epipolar segment A -> B in reference image k (coarse to fine,
     children in ray order). At each node: the overlap test of the ray's depth interval with the
@@ -440,7 +440,7 @@ def traverse_epipolar(k, ax, ay, bx, by, zA, zB, tA, tB, D, MN, MX, CONN, offs, 
     return False, 0.0, nh
 
 
-@kernel
+@kernel(nrt=False)
 def rank_reference_images(vps, ox, oy, oz, lx, ly, lz, flags, seg, order):
     """Clip and project the ray in every reference image (``seg[k]`` = ok, A, B, zA, zB, tA, tB) and
     order the images by the length of the clipped epipolar segment, shortest first (the paper's
@@ -467,7 +467,7 @@ def rank_reference_images(vps, ox, oy, oz, lx, ly, lz, flags, seg, order):
                 m -= 1
 
 
-@kernel
+@kernel(nrt=False)
 def trace_shadow_ray(
     ox, oy, oz, lx, ly, lz, vps, D, MN, MX, CONN, offs, gapk, flags, stack, seg, order, hidA, hidB, cnt
 ):
