@@ -1389,9 +1389,9 @@ def scalar_edge_terms(
 ):
     """``sample_edge_term`` at the samples ``cand[:m]`` into ``out[:m]``: the path of the rectangle
     and of edges with more than two counted triangles. A function of its own, called once per (edge,
-    bin), not inlined into ``_penumbra_kernel``: its helpers, inlined here in Numba's IR, stay out of
-    the parallel kernel's body, whose compile time grows faster than its size (about a third less
-    for ``_penumbra_kernel``). Without reference counting (``nrt=False``): with it, Numba increfs and
+    bin), not inlined into ``_penumbra_kernel``: its helpers, inlined here, stay out of the parallel
+    kernel's body, whose compile time grows faster than its size (about a third less for
+    ``_penumbra_kernel``). Without reference counting (``nrt=False``): with it, Numba increfs and
     decrefs the arrays its inlined helpers receive at every sample (atomic operations), and the
     rectangle's pass ran 1.9x slower."""
     for i in range(m):
@@ -1555,14 +1555,13 @@ def _penumbra_kernel(
                     for cx in range(cx_lo, cx_hi):
                         x0 = l + cx * cw
                         x1 = x0 + cw
-                        col = (bi * B * B + (cy - by * B) * B + cx - bx * B) * S  # cy % B = cy - by B: no division
+                        ci = bi * B * B + (cy - by * B) * B + cx - bx * B  # the column (cy % B = cy - by B)
+                        col = ci * S
                         if g_start[col] == g_start[col + S]:
                             continue
                         if not (every or axes_overlap_box(ux, uy, qcx, qcy, hl, hw, x0, x1, y0, y1)):
                             continue
-                        if cancels_in_box(
-                            e, ea, eb, tv_start, tv, col_box, bi * B * B + (cy - by * B) * B + cx - bx * B
-                        ):
+                        if cancels_in_box(e, ea, eb, tv_start, tv, col_box, ci):
                             continue
                         nf += 1
                         s0 = 0
