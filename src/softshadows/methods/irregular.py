@@ -22,7 +22,7 @@ from numba import prange, types
 from numba.extending import intrinsic
 
 from .._jit import kernel
-from ..analytic import atan2_upper
+from ..analytic import atan2_upper, rect_halfplanes_area
 from ..geometry.silhouette import build_adjacency, facing, find_silhouette
 from ..raster.view import VP_B, VP_FORWARD, VP_L, VP_ORIGIN, VP_R, VP_RIGHT, VP_T, VP_UP, View, light_frame, light_view
 from .base import Method, MethodOutput, Param, register
@@ -1383,6 +1383,78 @@ def disk_edge_terms(cp, m, center, radius, e, ea, eb, tv_start, tv, out):
         out[i] = c if ok else 0.0
 
 
+@kernel(inline=True)
+def rect_edge_terms(cp, m, center, nrm_l, lu, lv, hu, hv, e, ea, eb, tv_start, tv, out):
+    """``sample_edge_term`` for the rectangle (``shape == 0``) at the m samples whose positions are
+    ``cp[:, :m]``, for one edge with one or two counted triangles, into ``out[:m]``: the twin of
+    :func:`disk_edge_terms` (``sample_row``'s rectangle part, every early exit a select, branch-free
+    on contiguous data: it vectorizes). ``_rect_term``'s Sutherland-Hodgman clipping (data-dependent
+    vertex counts) is replaced by the same region's area from its boundary
+    (:func:`softshadows.analytic.rect_halfplanes_area`): not the same bits as the scalar path, the
+    same values to rounding (tests/test_irregular.py)."""
+    ax, ay, az, bx, by, bz = ea[e, 0], ea[e, 1], ea[e, 2], eb[e, 0], eb[e, 1], eb[e, 2]
+    k1 = tv_start[e]
+    two = tv_start[e + 1] - k1 == 2
+    k2 = k1 + 1 if two else k1
+    v1x, v1y, v1z, v2x, v2y, v2z = tv[k1, 0], tv[k1, 1], tv[k1, 2], tv[k2, 0], tv[k2, 1], tv[k2, 2]
+    c0, c1, c2 = center[0], center[1], center[2]
+    l0, l1, l2 = nrm_l[0], nrm_l[1], nrm_l[2]
+    ux, uy, uz, vx, vy, vz = lu[0], lu[1], lu[2], lv[0], lv[1], lv[2]
+    mu, mv = hu * (1.0 + _SLACK), hv * (1.0 + _SLACK)
+    norm = 0.5 / (4.0 * hu * hv)
+    for i in range(m):
+        p0, p1, p2 = cp[0, i], cp[1, i], cp[2, i]
+        # sample_row
+        cx, cy, cz = c0 - p0, c1 - p1, c2 - p2
+        Ls = cx * l0 + cy * l1 + cz * l2
+        sl = 1.0 if Ls >= 0.0 else -1.0
+        wx, wy, wz, L = sl * l0, sl * l1, sl * l2, abs(Ls)
+        # sample_edge_term
+        rax, ray, raz = ax - p0, ay - p1, az - p2
+        rbx, rby, rbz = bx - p0, by - p1, bz - p2
+        nx = ray * rbz - raz * rby
+        ny = raz * rbx - rax * rbz
+        nz = rax * rby - ray * rbx
+        w2 = _sign(nx * (v2x - p0) + ny * (v2y - p1) + nz * (v2z - p2))
+        wsum = 0.0 + _sign(nx * (v1x - p0) + ny * (v1y - p1) + nz * (v1z - p2))  # _side_sum
+        wsum = wsum + w2 if two else wsum
+        nc = nx * cx + ny * cy + nz * cz
+        nu = nx * ux + ny * uy + nz * uz
+        nv = nx * vx + ny * vy + nz * vz
+        ok = (wsum != 0.0) & (nc != 0.0) & ~(abs(nc) >= abs(nu) * hu + abs(nv) * hv)
+        # _rect_term: the projected endpoints' directions from the centre (the far end for one behind p)
+        ha = rax * wx + ray * wy + raz * wz
+        hb = rbx * wx + rby * wy + rbz * wz
+        pa, pb = ha > 0.0, hb > 0.0
+        ok &= pa | pb
+        k = L / ha
+        dax = (rax * k - cx) * ux + (ray * k - cy) * uy + (raz * k - cz) * uz
+        day = (rax * k - cx) * vx + (ray * k - cy) * vy + (raz * k - cz) * vz
+        k = L / hb
+        dbx = (rbx * k - cx) * ux + (rby * k - cy) * uy + (rbz * k - cz) * uz
+        dby = (rbx * k - cx) * vx + (rby * k - cy) * vy + (rbz * k - cz) * vz
+        ox, oy, oz = _far_end(rax, ray, raz, rbx, rby, rbz, ha, hb)
+        ix = ox * ux + oy * uy + oz * uz
+        iy = ox * vx + oy * vy + oz * vz
+        dax = dax if pa else ix
+        day = day if pa else iy
+        dbx = ix if pa & ~pb else dbx
+        dby = iy if pa & ~pb else dby
+        # both projected endpoints beyond one side of the rectangle
+        out_u = ((dax > mu) & (dbx > mu)) | ((dax < -mu) & (dbx < -mu))
+        out_v = ((day > mv) & (dby > mv)) | ((day < -mv) & (dby < -mv))
+        ok &= ~(pa & pb & (out_u | out_v))
+        cr = dax * dby - day * dbx
+        ok &= cr != 0.0
+        sw = 1.0 if cr > 0.0 else -1.0
+        so = 1.0 if nc > 0.0 else -1.0
+        # beyond the line (n.(c - p) + nu U + nv V against the sign of n.(c - p)) and inside the
+        # angle at the centre
+        area = rect_halfplanes_area(hu, hv, -so * nu, -so * nv, -so * nc, -sw * day, sw * dax, sw * dby, -sw * dbx)
+        c = -so * wsum * (abs(area) * norm)
+        out[i] = c if ok else 0.0
+
+
 @kernel(nrt=False)
 def scalar_edge_terms(
     shape, center, nrm_l, spos, rw, jb, cand, m, lu, lv, radius, hu, hv, e, ea, eb, tv_start, tv, buf, out
@@ -1609,6 +1681,10 @@ def _penumbra_kernel(
                     for i in range(m):  # the candidates' positions, contiguous: the terms' loop vectorizes
                         cp[0, i], cp[1, i], cp[2, i] = spos[cand[i], 0], spos[cand[i], 1], spos[cand[i], 2]
                     disk_edge_terms(cp, np.int64(m), center, radius, e, ea, eb, tv_start, tv, cval)
+                elif shape == 0 and (nt_e == 1 or nt_e == 2):
+                    for i in range(m):
+                        cp[0, i], cp[1, i], cp[2, i] = spos[cand[i], 0], spos[cand[i], 1], spos[cand[i], 2]
+                    rect_edge_terms(cp, np.int64(m), center, nrm_l, u, v, hu, hv, e, ea, eb, tv_start, tv, cval)
                 else:
                     scalar_edge_terms(
                         shape,
