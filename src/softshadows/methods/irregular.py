@@ -1389,7 +1389,7 @@ def disk_edge_terms(cp, m, center, radius, e, ea, eb, tv_start, tv, out):
 _RH1, _RH2, _RH3, _RF, _RSC = 0, 3, 5, 7, 8
 
 
-@kernel(inline=True)
+@kernel(nrt=False)
 def rect_edge_terms(cp, m, center, nrm_l, lu, lv, hu, hv, e, ea, eb, tv_start, tv, sc, sel, out):
     """``sample_edge_term`` for the rectangle (``shape == 0``) at the m samples whose positions are
     ``cp[:, :m]``, for one edge with one or two counted triangles, into ``out[:m]``: the twin of
@@ -1400,7 +1400,9 @@ def rect_edge_terms(cp, m, center, nrm_l, lu, lv, hu, hv, e, ea, eb, tv_start, t
     same values to rounding (tests/test_irregular.py). In two passes, since most candidates exit
     early (85% on ``bunny``): every exit test and the region's half-planes into the scratch ``sc``
     (rows ``_R*``), then the area only at the survivors (their indices compacted into ``sel``, their
-    rows gathered into ``sc``'s second half), scattered into ``out``."""
+    rows gathered into ``sc``'s second half), scattered into ``out``. A function of its own, like
+    ``scalar_edge_terms`` (inlined into ``_penumbra_kernel`` it added 4.5 s to that kernel's compile
+    time), without reference counting (it allocates nothing)."""
     ax, ay, az, bx, by, bz = ea[e, 0], ea[e, 1], ea[e, 2], eb[e, 0], eb[e, 1], eb[e, 2]
     k1 = tv_start[e]
     two = tv_start[e + 1] - k1 == 2
@@ -1711,16 +1713,15 @@ def _penumbra_kernel(
                 # the edge's candidates in this bin, every cell's together (longer vector loops)
                 nev += m
                 nt_e = tv_start[e + 1] - tv_start[e]
-                if shape == 1 and (nt_e == 1 or nt_e == 2):
+                if nt_e == 1 or nt_e == 2:
                     for i in range(m):  # the candidates' positions, contiguous: the terms' loop vectorizes
                         cp[0, i], cp[1, i], cp[2, i] = spos[cand[i], 0], spos[cand[i], 1], spos[cand[i], 2]
-                    disk_edge_terms(cp, np.int64(m), center, radius, e, ea, eb, tv_start, tv, cval)
-                elif shape == 0 and (nt_e == 1 or nt_e == 2):
-                    for i in range(m):
-                        cp[0, i], cp[1, i], cp[2, i] = spos[cand[i], 0], spos[cand[i], 1], spos[cand[i], 2]
-                    rect_edge_terms(
-                        cp, np.int64(m), center, nrm_l, u, v, hu, hv, e, ea, eb, tv_start, tv, rsc, sel, cval
-                    )
+                    if shape == 1:
+                        disk_edge_terms(cp, np.int64(m), center, radius, e, ea, eb, tv_start, tv, cval)
+                    else:
+                        rect_edge_terms(
+                            cp, np.int64(m), center, nrm_l, u, v, hu, hv, e, ea, eb, tv_start, tv, rsc, sel, cval
+                        )
                 else:
                     scalar_edge_terms(
                         shape,
