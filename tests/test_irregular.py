@@ -313,12 +313,16 @@ def _rect_terms_both_paths(pts, center, nrm, lu, lv, hu, hv, ea, eb, tv_start, t
         buf = np.zeros((4, 8))
         sc = np.empty((16, n))
         sel = np.empty(n, np.int64)
+        out = np.empty(n)
         for j in range(n):
             sample_row(0, center, nrm, pts, j, rw, j)
         for e in range(ea.shape[0]):
             for j in range(n):
                 scalar[e, j] = sample_edge_term(0, rw, j, lu, lv, 0.0, hu, hv, e, ea, eb, tv_start, tv, buf)
-            rect_edge_terms(cp, n, center, nrm, lu, lv, hu, hv, e, ea, eb, tv_start, tv, sc, sel, batch[e])
+            cand = np.arange(n)
+            k = rect_edge_terms(cp, n, center, nrm, lu, lv, hu, hv, e, ea, eb, tv_start, tv, sc, sel, cand, out)
+            batch[e] = 0.0
+            batch[e, cand[:k]] = out[:k]
         return scalar, batch
 
     return both(pts, center, nrm, lu, lv, hu, hv, ea, eb, tv_start, tv)

@@ -1390,9 +1390,9 @@ _RH1, _RH2, _RH3, _RF, _RSC = 0, 3, 5, 7, 8
 
 
 @kernel(nrt=False)
-def rect_edge_terms(cp, m, center, nrm_l, lu, lv, hu, hv, e, ea, eb, tv_start, tv, sc, sel, out):
-    """``sample_edge_term`` for the rectangle (``shape == 0``) at the m samples whose positions are
-    ``cp[:, :m]``, for one edge with one or two counted triangles, into ``out[:m]``: the twin of
+def rect_edge_terms(cp, m, center, nrm_l, lu, lv, hu, hv, e, ea, eb, tv_start, tv, sc, sel, cand, out):
+    """``sample_edge_term`` for the rectangle (``shape == 0``) at the m samples ``cand[:m]`` whose
+    positions are ``cp[:, :m]``, for one edge with one or two counted triangles: the twin of
     :func:`disk_edge_terms` (``sample_row``'s rectangle part, every early exit a select, branch-free
     on contiguous data: it vectorizes). ``_rect_term``'s Sutherland-Hodgman clipping (data-dependent
     vertex counts) is replaced by the same region's area from its boundary
@@ -1400,7 +1400,9 @@ def rect_edge_terms(cp, m, center, nrm_l, lu, lv, hu, hv, e, ea, eb, tv_start, t
     same values to rounding (tests/test_irregular.py). In two passes, since most candidates exit
     early (85% on ``bunny``): every exit test and the region's half-planes into the scratch ``sc``
     (rows ``_R*``), then the area only at the survivors (their indices compacted into ``sel``, their
-    rows gathered into ``sc``'s second half), scattered into ``out``. A function of its own, like
+    rows gathered into ``sc``'s second half). Returns n: the terms that can be nonzero are
+    ``out[:n]``, at the samples ``cand[:n]`` (compacted in place; every other term is an exact 0),
+    so that the caller's accumulation skips the early exits. A function of its own, like
     ``scalar_edge_terms`` (inlined into ``_penumbra_kernel`` it added 4.5 s to that kernel's compile
     time), without reference counting (it allocates nothing)."""
     ax, ay, az, bx, by, bz = ea[e, 0], ea[e, 1], ea[e, 2], eb[e, 0], eb[e, 1], eb[e, 2]
@@ -1465,7 +1467,6 @@ def rect_edge_terms(cp, m, center, nrm_l, lu, lv, hu, hv, e, ea, eb, tv_start, t
         sc[_RH2, i], sc[_RH2 + 1, i], sc[_RH3, i], sc[_RH3 + 1, i] = -sw * day, sw * dax, sw * dby, -sw * dbx
         f = -so * wsum
         sc[_RF, i] = f if ok else 0.0
-        out[i] = 0.0
     n = 0
     for i in range(m):
         sel[n] = i
@@ -1489,7 +1490,9 @@ def rect_edge_terms(cp, m, center, nrm_l, lu, lv, hu, hv, e, ea, eb, tv_start, t
         )
         sc[g + _RF, t] = sc[g + _RF, t] * (abs(area) * norm)
     for t in range(n):
-        out[sel[t]] = sc[g + _RF, t]
+        cand[t] = cand[sel[t]]  # sel[t] >= t
+        out[t] = sc[g + _RF, t]
+    return n
 
 
 @kernel(nrt=False)
@@ -1719,8 +1722,8 @@ def _penumbra_kernel(
                     if shape == 1:
                         disk_edge_terms(cp, np.int64(m), center, radius, e, ea, eb, tv_start, tv, cval)
                     else:
-                        rect_edge_terms(
-                            cp, np.int64(m), center, nrm_l, u, v, hu, hv, e, ea, eb, tv_start, tv, rsc, sel, cval
+                        m = rect_edge_terms(
+                            cp, np.int64(m), center, nrm_l, u, v, hu, hv, e, ea, eb, tv_start, tv, rsc, sel, cand, cval
                         )
                 else:
                     scalar_edge_terms(
