@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 import softshadows as ss
+from softshadows._jit import py_callable
 from softshadows.analytic import disk_halfplane_visibility, rect_occluder_visibility
 from softshadows.methods import ground_truth as gtm
 from softshadows.scene import builtin
@@ -218,9 +219,9 @@ def _light_grid(shape, center, u, v, radius, p, m=9):
     a, b = (x.ravel() for x in np.meshgrid(t, t))
     if shape == 0:
         return center + (a - 0.5)[:, None] * u + (b - 0.5)[:, None] * v
-    _, _, _, *e = gtm._disk_frame(p[0], p[1], p[2], center)
+    _, _, _, *e = py_callable(gtm._disk_frame)(p[0], p[1], p[2], center)
     e1, e2 = np.array(e[:3]), np.array(e[3:])
-    d = np.array([gtm._concentric(x, y) for x, y in zip(a, b)])
+    d = np.array([py_callable(gtm._concentric)(x, y) for x, y in zip(a, b)])
     return center + radius * (d[:, :1] * e1 + d[:, 1:] * e2)
 
 
@@ -244,7 +245,7 @@ def test_facing_class_never_contradicts_a_sample():
             n = n / np.linalg.norm(n) + rng.normal(scale=0.3) * w / np.linalg.norm(w)
             n /= np.linalg.norm(n)
             g = float(rng.choice([1e-6, 1e-3, 0.05]))
-            cls = gtm._facing_class(p[0], p[1], p[2], n[0], n[1], n[2], g, shape, center, u, v, radius)
+            cls = py_callable(gtm._facing_class)(p[0], p[1], p[2], n[0], n[1], n[2], g, shape, center, u, v, radius)
             q = _light_grid(shape, center, u, v, radius, p) - p
             cp = (n[0] * q[:, 0] + n[1] * q[:, 1] + n[2] * q[:, 2]) / np.sqrt(np.sum(q * q, axis=1))
             seen[cls] += 1
@@ -274,7 +275,10 @@ def test_fast_ray_paths_match_the_per_sample_path(light):
     pts, nrm, ep, ee, graz, own = gtm.hit_points(flat, gb, idx, nrm)
     off, graz = gtm.BOUND_SAFETY * (ep + ee), gtm.BOUND_SAFETY * graz
     shape, center, u, v, radius = gtm.light_arrays(scene.light)
-    classes = [gtm._facing_class(*pts[k], *nrm[k], graz[k], shape, center, u, v, radius) for k in np.flatnonzero(own)]
+    classes = [
+        py_callable(gtm._facing_class)(*pts[k], *nrm[k], graz[k], shape, center, u, v, radius)
+        for k in np.flatnonzero(own)
+    ]
     assert {-1, 0, 1} <= set(classes)  # the bunny has points of each class
     side, S = 4, 16
     out = {}
@@ -304,7 +308,7 @@ def test_concentric_map_matches_libm_within_rounding():
     ab = np.concatenate([rng.random((20000, 2)), grid, [[0.5, 0.5], [0.0, 0.0], [0.25, 0.75], [0.9, 0.1]]])
     worst = 0.0
     for a, b in ab:
-        dx, dy = gtm._concentric(a, b)
+        dx, dy = py_callable(gtm._concentric)(a, b)
         x, y = 2.0 * a - 1.0, 2.0 * b - 1.0
         if x == 0.0 and y == 0.0:
             assert (dx, dy) == (0.0, 0.0)

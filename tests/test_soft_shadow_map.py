@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 import softshadows as ss
+from softshadows._jit import py_callable
 from softshadows.errors import SoftShadowsError
 from softshadows.methods import soft_shadow_map as ssm
 from softshadows.scene.types import Mesh, RectLight, Scene
@@ -75,17 +76,23 @@ def test_round_half_is_ieee_binary16():
             ),
         ]
     )
-    got = np.array([ssm.round_half(float(v)) for v in x])
+    got = np.array([py_callable(ssm.round_half)(float(v)) for v in x])
     with np.errstate(over="ignore"):
         ref = x.astype(np.float16).astype(np.float64)
     np.testing.assert_array_equal(got, ref)
     # the paper's examples (Appendix A): 2048 + 1 = 2048 and 0.5 + 1/2049 = 0.5 in FP16; the second
     # holds only with truncation (round-to-nearest gives 0.5 + 2^-11), the "float16-rtz" mode
-    assert ssm.round_half(2048.0 + 1.0) == 2048.0 and ssm.round_half(0.5 + 1 / 2049) == 0.5 + 2.0**-11
-    assert ssm.round_half(2048.0 + 1.0, True) == 2048.0 and ssm.round_half(0.5 + 1 / 2049, True) == 0.5
+    assert (
+        py_callable(ssm.round_half)(2048.0 + 1.0) == 2048.0
+        and py_callable(ssm.round_half)(0.5 + 1 / 2049) == 0.5 + 2.0**-11
+    )
+    assert (
+        py_callable(ssm.round_half)(2048.0 + 1.0, True) == 2048.0
+        and py_callable(ssm.round_half)(0.5 + 1 / 2049, True) == 0.5
+    )
     # truncation: never grows, and stays within one ulp (2^-10 relative, 2^-24 absolute) of nearest
     fin = np.abs(x) < 65504
-    y = np.array([ssm.round_half(float(v), True) for v in x[fin]])
+    y = np.array([py_callable(ssm.round_half)(float(v), True) for v in x[fin]])
     assert np.all(np.abs(y) <= np.abs(x[fin]))
     assert np.all(np.abs(y - ref[fin]) <= np.abs(ref[fin]) * 2.0**-10 + 2.0**-24)
 
@@ -303,7 +310,7 @@ def test_quad_disk_area_small_matches_polygon_disk_area():
         if k % 2:
             quad = quad[::-1]
         ref = polygon_disk_area(quad[:, 0].copy(), quad[:, 1].copy(), 4, 1.0)
-        got, ok = quad_disk_area_small(*quad[:, 0], *quad[:, 1])
+        got, ok = py_callable(quad_disk_area_small)(*quad[:, 0], *quad[:, 1])
         if ok:
             n_ok += 1
             # both exact up to rounding: areas up to ~1e-2 computed from O(1) coordinates
@@ -332,8 +339,8 @@ def test_quad_disk_area_small32_matches_polygon_disk_area():
         if k % 2:
             quad = quad[::-1]
         ref = polygon_disk_area(quad[:, 0].copy(), quad[:, 1].copy(), 4, 1.0)
-        got, ok = quad_disk_area_small32(*quad[:, 0].astype(np.float32), *quad[:, 1].astype(np.float32))
-        _, ok64 = quad_disk_area_small(*quad[:, 0], *quad[:, 1])
+        got, ok = py_callable(quad_disk_area_small32)(*quad[:, 0].astype(np.float32), *quad[:, 1].astype(np.float32))
+        _, ok64 = py_callable(quad_disk_area_small)(*quad[:, 0], *quad[:, 1])
         assert isinstance(got, np.float32 | float)
         if ok:
             n_ok += 1
@@ -365,7 +372,7 @@ def test_sphere_accumulation_equals_per_pair_sum():
     for i, j in zip(*np.nonzero(rd0 > 0)):
         for p in patches:
             if rd0[i, j] > p[4]:
-                ref[i, j] += ssm.occlusion_percentage_disk(F, i, j, *p, *sc8)
+                ref[i, j] += py_callable(ssm.occlusion_percentage_disk)(F, i, j, *p, *sc8)
     ref = np.clip(ref, 0, 1)
     assert ref.max() > 0.5  # the shadow is there
     assert np.abs(m.occlusion - ref).max() <= 1e-5
@@ -502,7 +509,7 @@ def test_disk_facing_frame_is_orthonormal_and_faces_the_point():
     rng = np.random.default_rng(3)
     pts = np.vstack([rng.normal(size=(50, 3)) * 5, [[3.0, 0.1, -0.2], [-7.0, 0.0, 0.0]]])
     for p in pts:
-        f = np.array(disk_facing_frame(*p))
+        f = np.array(py_callable(disk_facing_frame)(*p))
         w, e1, e2, n = f[0:3], f[3:6], f[6:9], f[9]
         assert abs(n - np.linalg.norm(p)) <= 1e-14 * n
         assert np.allclose(w, p / np.linalg.norm(p), atol=1e-14, rtol=0)
@@ -567,7 +574,7 @@ def test_sphere_extent_divides_once_with_the_same_bounds():
         w, h = rng.uniform(1e-3, 0.1, 2) * z
         lzb = rho * rng.uniform(0.0, 1.0)
         z_max = z * rng.uniform(0.8, 3.0)
-        got = ssm._sphere_extent(x0, x0 + w, y0, y0 + h, z, rho, lzb, z_max, svp)
+        got = py_callable(ssm._sphere_extent)(x0, x0 + w, y0, y0 + h, z, rho, lzb, z_max, svp)
         ref = _sphere_extent_reference(x0, x0 + w, y0, y0 + h, z, rho, lzb, z_max, svp)
         n_diff += tuple(float(v) for v in got) != tuple(float(v) for v in ref)
     assert n_diff == 0

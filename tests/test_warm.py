@@ -5,6 +5,8 @@ import os
 import subprocess
 import sys
 
+import pytest
+
 SRC = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "src")
 
 PROBE = """
@@ -187,3 +189,18 @@ def test_helper_takes_the_costliest_method_first():
     costs = [COMPILE_COST.get(m, 5.0) for m in order]
     assert costs == sorted(costs, reverse=True)
     assert order.index("y-new") < order.index("x-new")  # equal cost: from the end of the list
+
+
+def test_helpers_have_no_python_entry_and_raise_instead_of_crashing():
+    # inline helpers are compiled without the CPython wrapper (compile time): a call from Python
+    # must raise a clear TypeError (Numba alone would jump to a missing entry point and crash), and
+    # py_callable must call the same compiled helper
+    sys.path.insert(0, SRC)
+    import math
+
+    from softshadows import analytic
+    from softshadows._jit import py_callable
+
+    with pytest.raises(TypeError, match="kernel helper"):
+        analytic.atan2_upper(1.0, 2.0)
+    assert abs(py_callable(analytic.atan2_upper)(1.0, 2.0) - math.atan2(1.0, 2.0)) < 1e-15

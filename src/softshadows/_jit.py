@@ -23,16 +23,23 @@ size) otherwise increfs and decrefs every array its IR-inlined helpers receive, 
 iteration: atomic operations that made such a function up to 2x slower than the same loop inside
 the parfor (``irregular.scalar_edge_terms``). Such a function must not allocate.
 
+No kernel gets Numba's C callback ("cfunc") wrapper, and ``inline`` helpers get no CPython wrapper
+either: they are only called from kernels, and the wrappers were about a tenth of a cold
+``compare``'s compile time (docs/results/cold-start.md). Calling a helper from Python raises a
+``TypeError``; tests and scripts call it through ``py_callable(helper)``.
+
 Every kernel is recorded in ``KERNELS`` (the cold-cache check and the warm-up in
 :mod:`softshadows._warm`).
 """
 
 from __future__ import annotations
 
+import functools
 import os
 
 import numpy as np
 from numba import njit
+from numba.core.registry import CPUDispatcher
 
 FLAGS = dict(cache=True, fastmath=False, error_model="numpy")
 INLINE = os.environ.get("SOFTSHADOWS_INLINE", "")  # "" (as declared), "ir", "llvm" or "none"
@@ -46,6 +53,11 @@ def kernel(fn=None, *, parallel: bool = False, inline: bool | str = False, nogil
     if inline not in (False, True, "ir"):
         raise ValueError(f"kernel: inline={inline!r} (expected False, True or 'ir')")
     o = dict(FLAGS)
+    # compile time (docs/results/cold-start.md): no kernel is used as a C callback or a first-class
+    # function, and a helper is called from kernels only (from Python: ``py_callable``)
+    o["no_cfunc_wrapper"] = True
+    if inline:
+        o["no_cpython_wrapper"] = True
     if parallel:
         o["parallel"] = True
     if nogil:
@@ -60,12 +72,37 @@ def kernel(fn=None, *, parallel: bool = False, inline: bool | str = False, nogil
 
     def wrap(f):
         d = njit(**o)(f)
+        if inline:
+            d.__class__ = _Helper
         KERNELS.append(d)
         return d
 
     if fn is None:
         return wrap
     return wrap(fn)
+
+
+class _Helper(CPUDispatcher):
+    """The dispatcher of an ``inline`` helper: compiled without the CPython wrapper that a call from
+    Python needs (Numba would jump to a missing entry point), so a call from Python raises."""
+
+    def __call__(self, *args, **kwargs):
+        raise TypeError(
+            f"{self.py_func.__qualname__} is a kernel helper: call it from a kernel, or from Python "
+            "through softshadows._jit.py_callable"
+        )
+
+
+@functools.cache
+def py_callable(helper):
+    """A Python-callable kernel that calls ``helper`` (an ``inline`` kernel) with its arguments: for
+    tests and scripts. One per helper and process (compiled per process, not cached on disk)."""
+
+    @njit(cache=False, error_model="numpy")
+    def call(*args):
+        return helper(*args)
+
+    return call
 
 
 def frozen(a: np.ndarray) -> np.ndarray:

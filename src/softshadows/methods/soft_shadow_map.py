@@ -24,7 +24,7 @@ import numpy as np
 from numba import prange
 from numba.cpython.unsafe.numbers import trailing_zeros
 
-from .._jit import kernel
+from .._jit import kernel, py_callable
 from ..analytic import disk_facing_frame, polygon_disk_area, quad_disk_area_small, quad_disk_area_small32
 from ..errors import SoftShadowsError
 from ..raster import View, rasterize_depth, rasterize_fragments
@@ -471,7 +471,7 @@ def occlusion_percentage_at(patch, ux, uy, z_r, hx, hy) -> float:
         return 0.0
     k = z_r / (z_r - zo)
     return float(
-        occlusion_percentage(
+        py_callable(occlusion_percentage)(
             k,
             (x0 - ux * zo) / (2 * hx),
             (x1 - ux * zo) / (2 * hx),
@@ -703,10 +703,10 @@ def occlusion_percentage_disk_at(patch, ux, uy, z_r, rho) -> float:
         return 0.0
     F = np.empty((12, 1, 1))
     f = np.empty(12)
-    _disk_frame(ux * z_r, uy * z_r, z_r, rho, f)
+    py_callable(_disk_frame)(ux * z_r, uy * z_r, z_r, rho, f)
     F[:, 0, 0] = f
     sc = [np.empty(8) for _ in range(8)]
-    return float(occlusion_percentage_disk(F, 0, 0, x0, x1, y0, y1, zo, *sc))
+    return float(py_callable(occlusion_percentage_disk)(F, 0, 0, x0, x1, y0, y1, zo, *sc))
 
 
 # ---- 7. accumulation into the soft shadow map --------------------------------------------------
