@@ -66,7 +66,7 @@ def test_helper_warms_the_signatures_the_real_calls_use():
     out = np.full((24, 32), np.inf, np.float32)
     p = PROGRAM_PENUMBRA  # the one program the methods use (penumbra-map)
     rasterize_min_blend(view, V, F, p, np.ones((len(F), 3)), np.zeros((24, 32), np.float32), np.zeros(3), out)
-    kernels = [r._tiles_depth, r._tiles_count, r._tiles_fragments, r._MIN_BLEND_KERNELS[p]]
+    kernels = [r._tiles_depth_slot, r._tiles_count_slot, r._tiles_fragments_slot, r._MIN_BLEND_SLOT_PENUMBRA]
     assert [len(k.signatures) for k in kernels] == [1] * len(kernels)
 
 

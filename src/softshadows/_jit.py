@@ -34,8 +34,10 @@ Every kernel is recorded in ``KERNELS`` (the cold-cache check and the warm-up in
 
 from __future__ import annotations
 
+import concurrent.futures
 import functools
 import os
+import threading
 
 import numpy as np
 from numba import njit
@@ -103,6 +105,43 @@ def py_callable(helper):
         return helper(*args)
 
     return call
+
+
+_POOL = None
+_POOL_LOCK = threading.Lock()
+
+
+def _pool(n: int):
+    global _POOL
+    with _POOL_LOCK:
+        if _POOL is None or _POOL._max_workers < n:
+            _POOL = concurrent.futures.ThreadPoolExecutor(max_workers=n, thread_name_prefix="softshadows-slot")
+        return _POOL
+
+
+def run_slots(fn, nslot: int, *args) -> None:
+    """``fn(slot, *args)`` for every slot in ``range(nslot)``, one slot per thread (the calling
+    thread takes slot 0): what ``for slot in prange(nslot): ...`` does with one slot per Numba
+    thread, without Numba's parfor. ``fn`` is a serial ``@kernel(nogil=True)`` (it runs on Python
+    threads with the GIL released) and uses ``slot`` as its thread index (e.g. for its scratch).
+
+    Why: Numba compiles a parallel kernel's body twice (the kernel and the gufunc of its prange)
+    and LLVM optimises and generates the code of everything the body calls again in each of the
+    two, so a large parallel kernel cost about twice its body's compile time
+    (docs/results/cold-start.md). A launch costs a few tens of microseconds more than a prange,
+    so this is for kernels whose call takes milliseconds."""
+    nslot = int(nslot)
+    if nslot <= 1:
+        fn(0, *args)
+        return
+    futs = [_pool(nslot - 1).submit(fn, s, *args) for s in range(1, nslot)]
+    try:
+        fn(0, *args)
+    finally:
+        for f in futs:
+            f.exception()  # wait for every slot before anything is raised
+    for f in futs:
+        f.result()
 
 
 def frozen(a: np.ndarray) -> np.ndarray:

@@ -21,7 +21,7 @@ from llvmlite import ir
 from numba import prange, types
 from numba.extending import intrinsic
 
-from .._jit import kernel
+from .._jit import kernel, run_slots
 from ..analytic import atan2_upper, rect_halfplanes_area
 from ..geometry.silhouette import build_adjacency, facing, find_silhouette
 from ..raster.view import VP_B, VP_FORWARD, VP_L, VP_ORIGIN, VP_R, VP_RIGHT, VP_T, VP_UP, View, light_frame, light_view
@@ -512,7 +512,108 @@ def _tie(dx, dy):
     return dy > 0.0 or (dy == 0.0 and dx > 0.0)
 
 
-@kernel(parallel=True)
+@kernel(nogil=True)
+def _umbra_kernel_slot(
+    _worker,
+    g_start,
+    sx,
+    sy,
+    sp,
+    sd,
+    gx,
+    gy,
+    B,
+    nbx,
+    S,
+    dlo,
+    dhi,
+    vp,
+    center,
+    verts,
+    faces,
+    tri2d,
+    trid,
+    bin_start,
+    bin_items,
+    umbra,
+    tests,
+    bin_order,
+    counter,
+    n_workers,
+):
+    """One worker of :func:`_umbra_kernel` (``run_slots``)."""
+    kf = slice_scale(dlo, dhi, S)
+    while True:
+        q = next_item(counter)
+        if q >= bin_order.shape[0]:
+            break
+        bi = bin_order[q]
+        by = bi // nbx
+        bx = bi % nbx
+        ntest = 0
+        for kk in range(bin_start[bi], bin_start[bi + 1]):
+            f = bin_items[kk]
+            ax, ay, bx2, by2, cx2, cy2 = (
+                tri2d[f, 0],
+                tri2d[f, 1],
+                tri2d[f, 2],
+                tri2d[f, 3],
+                tri2d[f, 4],
+                tri2d[f, 5],
+            )
+            area = (bx2 - ax) * (cy2 - ay) - (by2 - ay) * (cx2 - ax)
+            if area == 0.0:
+                continue
+            cx0, cx1, cy0, cy1 = _cell_range(
+                min(ax, bx2, cx2), max(ax, bx2, cx2), min(ay, by2, cy2), max(ay, by2, cy2), vp, gx, gy
+            )
+            cx0 = max(cx0, bx * B)
+            cx1 = min(cx1, bx * B + B - 1)
+            cy0 = max(cy0, by * B)
+            cy1 = min(cy1, by * B + B - 1)
+            s0 = slice_of(trid[f], dlo, kf, S)
+            i0, i1, i2 = faces[f, 0], faces[f, 1], faces[f, 2]
+            nx = (verts[i1, 1] - verts[i0, 1]) * (verts[i2, 2] - verts[i0, 2]) - (verts[i1, 2] - verts[i0, 2]) * (
+                verts[i2, 1] - verts[i0, 1]
+            )
+            ny = (verts[i1, 2] - verts[i0, 2]) * (verts[i2, 0] - verts[i0, 0]) - (verts[i1, 0] - verts[i0, 0]) * (
+                verts[i2, 2] - verts[i0, 2]
+            )
+            nz = (verts[i1, 0] - verts[i0, 0]) * (verts[i2, 1] - verts[i0, 1]) - (verts[i1, 1] - verts[i0, 1]) * (
+                verts[i2, 0] - verts[i0, 0]
+            )
+            num = nx * (verts[i0, 0] - center[0]) + ny * (verts[i0, 1] - center[1]) + nz * (verts[i0, 2] - center[2])
+            sg = 1.0 if area > 0.0 else -1.0
+            # tie rule: a point on an edge belongs to the triangle that traverses the edge (in its
+            # counter-clockwise orientation) upward, or rightward when horizontal; two triangles
+            # sharing the edge traverse it in opposite directions, so exactly one counts the point
+            t0 = _tie(sg * (bx2 - ax), sg * (by2 - ay))
+            t1 = _tie(sg * (cx2 - bx2), sg * (cy2 - by2))
+            t2 = _tie(sg * (ax - cx2), sg * (ay - cy2))
+            for cy in range(cy0, cy1 + 1):
+                for cx in range(cx0, cx1 + 1):
+                    col = (bi * B * B + (cy - by * B) * B + cx - bx * B) * S  # cy % B = cy - by B: no division
+                    for j in range(g_start[col + s0], g_start[col + S]):
+                        ntest += 1
+                        px, py = sx[j], sy[j]
+                        e0 = sg * ((bx2 - ax) * (py - ay) - (by2 - ay) * (px - ax))
+                        e1 = sg * ((cx2 - bx2) * (py - by2) - (cy2 - by2) * (px - bx2))
+                        e2 = sg * ((ax - cx2) * (py - cy2) - (ay - cy2) * (px - cx2))
+                        if (
+                            (e0 > 0.0 or (e0 == 0.0 and t0))
+                            and (e1 > 0.0 or (e1 == 0.0 and t1))
+                            and (e2 > 0.0 or (e2 == 0.0 and t2))
+                        ):
+                            den = (
+                                nx * (sp[j, 0] - center[0]) + ny * (sp[j, 1] - center[1]) + nz * (sp[j, 2] - center[2])
+                            )
+                            if den != 0.0:
+                                th = num / den  # the triangle's plane along centre -> p, 1 at p
+                                if th > 0.0 and th < 1.0:
+                                    umbra[j] += 1
+        tests[bi] = ntest
+
+
 def _umbra_kernel(
     g_start,
     sx,
@@ -540,81 +641,35 @@ def _umbra_kernel(
     counter,
     n_workers,
 ):
-    kf = slice_scale(dlo, dhi, S)
-    for _worker in prange(n_workers):  # each takes the next bin of bin_order until none is left
-        while True:
-            q = next_item(counter)
-            if q >= bin_order.shape[0]:
-                break
-            bi = bin_order[q]
-            by = bi // nbx
-            bx = bi % nbx
-            ntest = 0
-            for kk in range(bin_start[bi], bin_start[bi + 1]):
-                f = bin_items[kk]
-                ax, ay, bx2, by2, cx2, cy2 = (
-                    tri2d[f, 0],
-                    tri2d[f, 1],
-                    tri2d[f, 2],
-                    tri2d[f, 3],
-                    tri2d[f, 4],
-                    tri2d[f, 5],
-                )
-                area = (bx2 - ax) * (cy2 - ay) - (by2 - ay) * (cx2 - ax)
-                if area == 0.0:
-                    continue
-                cx0, cx1, cy0, cy1 = _cell_range(
-                    min(ax, bx2, cx2), max(ax, bx2, cx2), min(ay, by2, cy2), max(ay, by2, cy2), vp, gx, gy
-                )
-                cx0 = max(cx0, bx * B)
-                cx1 = min(cx1, bx * B + B - 1)
-                cy0 = max(cy0, by * B)
-                cy1 = min(cy1, by * B + B - 1)
-                s0 = slice_of(trid[f], dlo, kf, S)
-                i0, i1, i2 = faces[f, 0], faces[f, 1], faces[f, 2]
-                nx = (verts[i1, 1] - verts[i0, 1]) * (verts[i2, 2] - verts[i0, 2]) - (verts[i1, 2] - verts[i0, 2]) * (
-                    verts[i2, 1] - verts[i0, 1]
-                )
-                ny = (verts[i1, 2] - verts[i0, 2]) * (verts[i2, 0] - verts[i0, 0]) - (verts[i1, 0] - verts[i0, 0]) * (
-                    verts[i2, 2] - verts[i0, 2]
-                )
-                nz = (verts[i1, 0] - verts[i0, 0]) * (verts[i2, 1] - verts[i0, 1]) - (verts[i1, 1] - verts[i0, 1]) * (
-                    verts[i2, 0] - verts[i0, 0]
-                )
-                num = (
-                    nx * (verts[i0, 0] - center[0]) + ny * (verts[i0, 1] - center[1]) + nz * (verts[i0, 2] - center[2])
-                )
-                sg = 1.0 if area > 0.0 else -1.0
-                # tie rule: a point on an edge belongs to the triangle that traverses the edge (in its
-                # counter-clockwise orientation) upward, or rightward when horizontal; two triangles
-                # sharing the edge traverse it in opposite directions, so exactly one counts the point
-                t0 = _tie(sg * (bx2 - ax), sg * (by2 - ay))
-                t1 = _tie(sg * (cx2 - bx2), sg * (cy2 - by2))
-                t2 = _tie(sg * (ax - cx2), sg * (ay - cy2))
-                for cy in range(cy0, cy1 + 1):
-                    for cx in range(cx0, cx1 + 1):
-                        col = (bi * B * B + (cy - by * B) * B + cx - bx * B) * S  # cy % B = cy - by B: no division
-                        for j in range(g_start[col + s0], g_start[col + S]):
-                            ntest += 1
-                            px, py = sx[j], sy[j]
-                            e0 = sg * ((bx2 - ax) * (py - ay) - (by2 - ay) * (px - ax))
-                            e1 = sg * ((cx2 - bx2) * (py - by2) - (cy2 - by2) * (px - bx2))
-                            e2 = sg * ((ax - cx2) * (py - cy2) - (ay - cy2) * (px - cx2))
-                            if (
-                                (e0 > 0.0 or (e0 == 0.0 and t0))
-                                and (e1 > 0.0 or (e1 == 0.0 and t1))
-                                and (e2 > 0.0 or (e2 == 0.0 and t2))
-                            ):
-                                den = (
-                                    nx * (sp[j, 0] - center[0])
-                                    + ny * (sp[j, 1] - center[1])
-                                    + nz * (sp[j, 2] - center[2])
-                                )
-                                if den != 0.0:
-                                    th = num / den  # the triangle's plane along centre -> p, 1 at p
-                                    if th > 0.0 and th < 1.0:
-                                        umbra[j] += 1
-            tests[bi] = ntest
+    run_slots(
+        _umbra_kernel_slot,
+        n_workers,
+        g_start,
+        sx,
+        sy,
+        sp,
+        sd,
+        gx,
+        gy,
+        B,
+        nbx,
+        S,
+        dlo,
+        dhi,
+        vp,
+        center,
+        verts,
+        faces,
+        tri2d,
+        trid,
+        bin_start,
+        bin_items,
+        umbra,
+        tests,
+        bin_order,
+        counter,
+        n_workers,
+    )
 
 
 def count_umbrae(grid: SampleGrid, verts, faces, counted, center) -> tuple[np.ndarray, dict]:
@@ -1550,7 +1605,216 @@ def _seg_box_dist(ax, ay, bx, by, x0, x1, y0, y1):
     return max(np.sqrt(qx * qx + qy * qy) - hd, 0.0)
 
 
-@kernel(parallel=True)
+@kernel(nogil=True)
+def _penumbra_kernel_slot(
+    _worker,
+    wc2,
+    col_box,
+    g_start,
+    gx,
+    gy,
+    B,
+    nbx,
+    S,
+    dlo,
+    dhi,
+    dmax,
+    bin_maxd,
+    vp,
+    shape,
+    center,
+    nrm_l,
+    spos,
+    sdist,
+    six,
+    siy,
+    u,
+    v,
+    radius,
+    hu,
+    hv,
+    qd,
+    ea,
+    eb,
+    tv_start,
+    tv,
+    bin_start,
+    bin_items,
+    per_bin,
+    wedge,
+    count_only,
+    pen,
+    frags,
+    tests,
+    hits,
+    evals,
+    bin_order,
+    counter,
+    n_workers,
+    max_col,
+    max_bin,
+):
+    """One worker of :func:`_penumbra_kernel` (``run_slots``)."""
+    l, r, b, t = vp[VP_L], vp[VP_R], vp[VP_B], vp[VP_T]
+    cw = (r - l) / gx
+    ch = (t - b) / gy
+    rad_s = radius * (1.0 + _SLACK)
+    kf = slice_scale(dlo, dhi, S)
+    buf = np.zeros((4, 8))  # scratch, once per worker
+    cand = np.empty(max_bin, np.int64)
+    cval = np.empty(max_bin)
+    cp = np.empty((3, max_bin))  # the candidates' positions, contiguous
+    rsc = np.empty((2 * _RSC, max_bin))  # rect_edge_terms' scratch
+    sel = np.empty(max_bin, np.int64)
+    keep = np.empty(max_col, np.int8)
+    rw = np.empty((_ROW, max_bin))  # the current bin's sample rows (one row per field) and 1 / distance
+    sinv = np.empty(max_bin)
+    while True:
+        q = next_item(counter)
+        if q >= bin_order.shape[0]:
+            break
+        bi = bin_order[q]
+        by = bi // nbx
+        bx = bi % nbx
+        jb = g_start[bi * B * B * S]  # the bin's first sample: rw and sinv are indexed from it
+        if not count_only:
+            for j in range(jb, g_start[(bi + 1) * B * B * S]):  # (rows: where needed, scalar_edge_terms)
+                sinv[j - jb] = 1.0 / sdist[j]
+        bx0, bx1, by0, by1 = _bin_box(vp, gx, gy, B, bx, by)
+        bc2 = box_corner2(bx0, bx1, by0, by1)
+        nf = 0
+        nt = 0
+        nh = 0
+        nev = 0
+        for kk in range(bin_start[bi], bin_start[bi + 1]):
+            e = bin_items[kk]
+            R = (
+                quad_half_width(qd, e, radius, bin_maxd[bi], bc2)
+                if per_bin
+                else quad_half_width(qd, e, radius, dmax, wc2)
+            )
+            # per edge: its image-plane segment, stretch and the inverse of (dmin - r) of the
+            # per-sample bound below
+            qax, qay, qbx, qby, dmin, q5 = qd[e, 0], qd[e, 1], qd[e, 2], qd[e, 3], qd[e, 4], qd[e, 5]
+            dr = dmin - radius if dmin > radius else 0.0
+            inv_dr = 1.0 / dr if dr > 0.0 else 0.0
+            if R <= 0.0:
+                continue  # no fragment
+            every = not np.isfinite(R)  # the light's sphere reaches the edge: every cell
+            ux, uy, qcx, qcy, hl, hw = quad_axes(qd, e, 1.0 if every else R)
+            sdx, sdy = qbx - qax, qby - qay
+            s_uu = sdx * sdx + sdy * sdy
+            s_iuu = 1.0 / s_uu if s_uu > 0.0 else 0.0
+            # the bin's cells that can overlap the quad's bounding box (one cell of margin for
+            # rounding: every cell outside is one ``axes_overlap_box`` rejects on the box axes)
+            cx_lo, cx_hi, cy_lo, cy_hi = bx * B, min(bx * B + B, gx), by * B, min(by * B + B, gy)
+            if not every:
+                ex = hl * abs(ux) + hw * abs(uy)
+                ey = hl * abs(uy) + hw * abs(ux)
+                cx_lo = int(max(np.floor((qcx - ex - l) / cw) - 1.0, cx_lo))
+                cx_hi = int(min(np.floor((qcx + ex - l) / cw) + 2.0, cx_hi))
+                cy_lo = int(max(np.floor((t - qcy - ey) / ch) - 1.0, cy_lo))
+                cy_hi = int(min(np.floor((t - qcy + ey) / ch) + 2.0, cy_hi))
+            m = 0  # candidates of this edge in this bin: cand[:m]
+            for cy in range(cy_lo, cy_hi):
+                y1 = t - cy * ch
+                y0 = y1 - ch
+                for cx in range(cx_lo, cx_hi):
+                    x0 = l + cx * cw
+                    x1 = x0 + cw
+                    ci = bi * B * B + (cy - by * B) * B + cx - bx * B  # the column (cy % B = cy - by B)
+                    col = ci * S
+                    if g_start[col] == g_start[col + S]:
+                        continue
+                    if not (every or axes_overlap_box(ux, uy, qcx, qcy, hl, hw, x0, x1, y0, y1)):
+                        continue
+                    if cancels_in_box(e, ea, eb, tv_start, tv, col_box, ci):
+                        continue
+                    nf += 1
+                    s0 = 0
+                    if wedge and dmin > radius:
+                        # the wedge enters this column at the distance where its angular radius
+                        # reaches the column: r (1/(dmin - r) - 1/D) * stretch >= dist(cell, edge)
+                        dc = _seg_box_dist(qax, qay, qbx, qby, x0, x1, y0, y1)
+                        inv = 1.0 / (dmin - radius) - dc / ((1.0 + max(q5, bc2)) * radius) / (1.0 + _SLACK)
+                        if inv <= 0.0:
+                            continue
+                        s0 = slice_of((1.0 / inv) * (1.0 - _SLACK), dlo, kf, S)
+                    j0, j1 = g_start[col + s0], g_start[col + S]
+                    nt += j1 - j0
+                    if count_only:
+                        continue
+                    # the same bound at each sample itself: its image-plane distance to the
+                    # edge's image against the angular radius at its own distance (stretch
+                    # from its own off-axis angle and the edge's endpoints); branch-free, the
+                    # survivors' indices compacted into ``cand``
+                    if dr > 0.0:
+                        # unsigned indices (no negative-index wrap-around code) and selects:
+                        # the loop vectorizes (1.45x on this loop alone), same values and flags
+                        for i in range(j1 - j0):
+                            j = np.uint64(j0 + i)
+                            px, py = six[j], siy[j]
+                            r2 = px * px + py * py
+                            st = q5 if q5 >= r2 else r2
+                            rs = (1.0 + st) * rad_s * (inv_dr - sinv[np.uint64(j0 - jb + i)]) + 1e-12
+                            a = ((px - qax) * sdx + (py - qay) * sdy) * s_iuu
+                            a = a if a > 0.0 else 0.0
+                            tt = a if a < 1.0 else 1.0
+                            ox, oy = qax + tt * sdx - px, qay + tt * sdy - py
+                            keep[np.uint64(i)] = np.int8(rs >= 0.0) & np.int8(ox * ox + oy * oy <= rs * rs)
+                        for i in range(j1 - j0):
+                            cand[m] = j0 + i
+                            m += keep[i]
+                    else:
+                        for j in range(j0, j1):
+                            cand[m] = j
+                            m += 1
+            # the edge's candidates in this bin, every cell's together (longer vector loops)
+            nev += m
+            nt_e = tv_start[e + 1] - tv_start[e]
+            if nt_e == 1 or nt_e == 2:
+                for i in range(m):  # the candidates' positions, contiguous: the terms' loop vectorizes
+                    cp[0, i], cp[1, i], cp[2, i] = spos[cand[i], 0], spos[cand[i], 1], spos[cand[i], 2]
+                if shape == 1:
+                    disk_edge_terms(cp, np.int64(m), center, radius, e, ea, eb, tv_start, tv, cval)
+                else:
+                    m = rect_edge_terms(
+                        cp, np.int64(m), center, nrm_l, u, v, hu, hv, e, ea, eb, tv_start, tv, rsc, sel, cand, cval
+                    )
+            else:
+                scalar_edge_terms(
+                    shape,
+                    center,
+                    nrm_l,
+                    spos,
+                    rw,
+                    jb,
+                    cand,
+                    np.int64(m),  # never Literal[int](0): one specialisation
+                    u,
+                    v,
+                    radius,
+                    hu,
+                    hv,
+                    e,
+                    ea,
+                    eb,
+                    tv_start,
+                    tv,
+                    buf,
+                    cval,
+                )
+            for i in range(m):
+                c = cval[i]
+                if c != 0.0:
+                    nh += 1
+                    pen[cand[i]] += c
+        frags[bi] = nf
+        tests[bi] = nt
+        hits[bi] = nh
+        evals[bi] = nev
+
+
 def _penumbra_kernel(
     wc2,
     col_box,
@@ -1598,165 +1862,55 @@ def _penumbra_kernel(
     max_col,
     max_bin,
 ):
-    l, r, b, t = vp[VP_L], vp[VP_R], vp[VP_B], vp[VP_T]
-    cw = (r - l) / gx
-    ch = (t - b) / gy
-    rad_s = radius * (1.0 + _SLACK)
-    kf = slice_scale(dlo, dhi, S)
-    for _worker in prange(n_workers):  # each takes the next bin of bin_order until none is left
-        buf = np.zeros((4, 8))  # scratch, once per worker
-        cand = np.empty(max_bin, np.int64)
-        cval = np.empty(max_bin)
-        cp = np.empty((3, max_bin))  # the candidates' positions, contiguous
-        rsc = np.empty((2 * _RSC, max_bin))  # rect_edge_terms' scratch
-        sel = np.empty(max_bin, np.int64)
-        keep = np.empty(max_col, np.int8)
-        rw = np.empty((_ROW, max_bin))  # the current bin's sample rows (one row per field) and 1 / distance
-        sinv = np.empty(max_bin)
-        while True:
-            q = next_item(counter)
-            if q >= bin_order.shape[0]:
-                break
-            bi = bin_order[q]
-            by = bi // nbx
-            bx = bi % nbx
-            jb = g_start[bi * B * B * S]  # the bin's first sample: rw and sinv are indexed from it
-            if not count_only:
-                for j in range(jb, g_start[(bi + 1) * B * B * S]):  # (rows: where needed, scalar_edge_terms)
-                    sinv[j - jb] = 1.0 / sdist[j]
-            bx0, bx1, by0, by1 = _bin_box(vp, gx, gy, B, bx, by)
-            bc2 = box_corner2(bx0, bx1, by0, by1)
-            nf = 0
-            nt = 0
-            nh = 0
-            nev = 0
-            for kk in range(bin_start[bi], bin_start[bi + 1]):
-                e = bin_items[kk]
-                R = (
-                    quad_half_width(qd, e, radius, bin_maxd[bi], bc2)
-                    if per_bin
-                    else quad_half_width(qd, e, radius, dmax, wc2)
-                )
-                # per edge: its image-plane segment, stretch and the inverse of (dmin - r) of the
-                # per-sample bound below
-                qax, qay, qbx, qby, dmin, q5 = qd[e, 0], qd[e, 1], qd[e, 2], qd[e, 3], qd[e, 4], qd[e, 5]
-                dr = dmin - radius if dmin > radius else 0.0
-                inv_dr = 1.0 / dr if dr > 0.0 else 0.0
-                if R <= 0.0:
-                    continue  # no fragment
-                every = not np.isfinite(R)  # the light's sphere reaches the edge: every cell
-                ux, uy, qcx, qcy, hl, hw = quad_axes(qd, e, 1.0 if every else R)
-                sdx, sdy = qbx - qax, qby - qay
-                s_uu = sdx * sdx + sdy * sdy
-                s_iuu = 1.0 / s_uu if s_uu > 0.0 else 0.0
-                # the bin's cells that can overlap the quad's bounding box (one cell of margin for
-                # rounding: every cell outside is one ``axes_overlap_box`` rejects on the box axes)
-                cx_lo, cx_hi, cy_lo, cy_hi = bx * B, min(bx * B + B, gx), by * B, min(by * B + B, gy)
-                if not every:
-                    ex = hl * abs(ux) + hw * abs(uy)
-                    ey = hl * abs(uy) + hw * abs(ux)
-                    cx_lo = int(max(np.floor((qcx - ex - l) / cw) - 1.0, cx_lo))
-                    cx_hi = int(min(np.floor((qcx + ex - l) / cw) + 2.0, cx_hi))
-                    cy_lo = int(max(np.floor((t - qcy - ey) / ch) - 1.0, cy_lo))
-                    cy_hi = int(min(np.floor((t - qcy + ey) / ch) + 2.0, cy_hi))
-                m = 0  # candidates of this edge in this bin: cand[:m]
-                for cy in range(cy_lo, cy_hi):
-                    y1 = t - cy * ch
-                    y0 = y1 - ch
-                    for cx in range(cx_lo, cx_hi):
-                        x0 = l + cx * cw
-                        x1 = x0 + cw
-                        ci = bi * B * B + (cy - by * B) * B + cx - bx * B  # the column (cy % B = cy - by B)
-                        col = ci * S
-                        if g_start[col] == g_start[col + S]:
-                            continue
-                        if not (every or axes_overlap_box(ux, uy, qcx, qcy, hl, hw, x0, x1, y0, y1)):
-                            continue
-                        if cancels_in_box(e, ea, eb, tv_start, tv, col_box, ci):
-                            continue
-                        nf += 1
-                        s0 = 0
-                        if wedge and dmin > radius:
-                            # the wedge enters this column at the distance where its angular radius
-                            # reaches the column: r (1/(dmin - r) - 1/D) * stretch >= dist(cell, edge)
-                            dc = _seg_box_dist(qax, qay, qbx, qby, x0, x1, y0, y1)
-                            inv = 1.0 / (dmin - radius) - dc / ((1.0 + max(q5, bc2)) * radius) / (1.0 + _SLACK)
-                            if inv <= 0.0:
-                                continue
-                            s0 = slice_of((1.0 / inv) * (1.0 - _SLACK), dlo, kf, S)
-                        j0, j1 = g_start[col + s0], g_start[col + S]
-                        nt += j1 - j0
-                        if count_only:
-                            continue
-                        # the same bound at each sample itself: its image-plane distance to the
-                        # edge's image against the angular radius at its own distance (stretch
-                        # from its own off-axis angle and the edge's endpoints); branch-free, the
-                        # survivors' indices compacted into ``cand``
-                        if dr > 0.0:
-                            # unsigned indices (no negative-index wrap-around code) and selects:
-                            # the loop vectorizes (1.45x on this loop alone), same values and flags
-                            for i in range(j1 - j0):
-                                j = np.uint64(j0 + i)
-                                px, py = six[j], siy[j]
-                                r2 = px * px + py * py
-                                st = q5 if q5 >= r2 else r2
-                                rs = (1.0 + st) * rad_s * (inv_dr - sinv[np.uint64(j0 - jb + i)]) + 1e-12
-                                a = ((px - qax) * sdx + (py - qay) * sdy) * s_iuu
-                                a = a if a > 0.0 else 0.0
-                                tt = a if a < 1.0 else 1.0
-                                ox, oy = qax + tt * sdx - px, qay + tt * sdy - py
-                                keep[np.uint64(i)] = np.int8(rs >= 0.0) & np.int8(ox * ox + oy * oy <= rs * rs)
-                            for i in range(j1 - j0):
-                                cand[m] = j0 + i
-                                m += keep[i]
-                        else:
-                            for j in range(j0, j1):
-                                cand[m] = j
-                                m += 1
-                # the edge's candidates in this bin, every cell's together (longer vector loops)
-                nev += m
-                nt_e = tv_start[e + 1] - tv_start[e]
-                if nt_e == 1 or nt_e == 2:
-                    for i in range(m):  # the candidates' positions, contiguous: the terms' loop vectorizes
-                        cp[0, i], cp[1, i], cp[2, i] = spos[cand[i], 0], spos[cand[i], 1], spos[cand[i], 2]
-                    if shape == 1:
-                        disk_edge_terms(cp, np.int64(m), center, radius, e, ea, eb, tv_start, tv, cval)
-                    else:
-                        m = rect_edge_terms(
-                            cp, np.int64(m), center, nrm_l, u, v, hu, hv, e, ea, eb, tv_start, tv, rsc, sel, cand, cval
-                        )
-                else:
-                    scalar_edge_terms(
-                        shape,
-                        center,
-                        nrm_l,
-                        spos,
-                        rw,
-                        jb,
-                        cand,
-                        np.int64(m),  # never Literal[int](0): one specialisation
-                        u,
-                        v,
-                        radius,
-                        hu,
-                        hv,
-                        e,
-                        ea,
-                        eb,
-                        tv_start,
-                        tv,
-                        buf,
-                        cval,
-                    )
-                for i in range(m):
-                    c = cval[i]
-                    if c != 0.0:
-                        nh += 1
-                        pen[cand[i]] += c
-            frags[bi] = nf
-            tests[bi] = nt
-            hits[bi] = nh
-            evals[bi] = nev
+    run_slots(
+        _penumbra_kernel_slot,
+        n_workers,
+        wc2,
+        col_box,
+        g_start,
+        gx,
+        gy,
+        B,
+        nbx,
+        S,
+        dlo,
+        dhi,
+        dmax,
+        bin_maxd,
+        vp,
+        shape,
+        center,
+        nrm_l,
+        spos,
+        sdist,
+        six,
+        siy,
+        u,
+        v,
+        radius,
+        hu,
+        hv,
+        qd,
+        ea,
+        eb,
+        tv_start,
+        tv,
+        bin_start,
+        bin_items,
+        per_bin,
+        wedge,
+        count_only,
+        pen,
+        frags,
+        tests,
+        hits,
+        evals,
+        bin_order,
+        counter,
+        n_workers,
+        max_col,
+        max_bin,
+    )
 
 
 def _light_params(light):

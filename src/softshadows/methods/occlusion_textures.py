@@ -22,7 +22,7 @@ import numba
 import numpy as np
 from numba import prange
 
-from .._jit import kernel
+from .._jit import kernel, run_slots
 from ..errors import SoftShadowsError
 from ..raster import View, rasterize_fragments
 from ..raster.view import light_frame
@@ -624,15 +624,11 @@ def slice_weight(pz, z_top, z_low, thick, mode):
 # =====================================================================================
 # 6. Eye pass (Sec. 3.5): per point, all slices between it and the light
 # =====================================================================================
-@kernel(parallel=True)
-def eye_pass(
-    pts, sp, z_planes, slot, bbox, filt, combine, self_mode, max_aniso, pyr, offs, sizes, nb, sat, out, nslot=1
+@kernel(nogil=True)
+def eye_pass_slot(
+    tslot, pts, sp, z_planes, slot, bbox, filt, combine, self_mode, max_aniso, pyr, offs, sizes, nb, sat, out, nslot=1
 ):
-    """V for every point ``pts`` (K,3) world. ``slot[k]`` is the index of slice k in the filtered
-    arrays, -1 for an empty slice (skipped: its occlusion is 0). ``bbox[slot]`` = (x0, x1, y0, y1)
-    texel bounds of the slice's occupied texels: a kernel whose filter support (the rectangle,
-    widened by what the N-Buffer boxes or the mipmap probes read beyond it) misses them has
-    occlusion 0 and is skipped, so the result is unchanged."""
+    """Slot ``tslot`` of :func:`eye_pass` (``run_slots``)."""
     n = z_planes.shape[0] - 1
     thick = (z_planes[n] - z_planes[0]) / n
     # per slice plane, the constants of kernel_rect's map to texels (no division per point)
@@ -645,49 +641,78 @@ def eye_pass(
     ox = sp[15] * sp[19] / (sp[16] - sp[15])
     oy = sp[18] * sp[20] / (sp[18] - sp[17])
     nblock = (pts.shape[0] + 63) // 64  # blocks of 64 dealt round-robin to one slot per thread
-    for tslot in prange(nslot):
-        for blk in range(tslot, nblock, nslot):
-            for i in range(blk * 64, min(pts.shape[0], blk * 64 + 64)):
-                qx = pts[i, 0] - sp[0]
-                qy = pts[i, 1] - sp[1]
-                qz = pts[i, 2] - sp[2]
-                px = qx * sp[3] + qy * sp[4] + qz * sp[5]
-                py = qx * sp[6] + qy * sp[7] + qz * sp[8]
-                pz = qx * sp[9] + qy * sp[10] + qz * sp[11]
-                if not (pz > 0.0):
-                    out[i] = 1.0  # at or behind the light plane: nothing lies between P and the light
+    for blk in range(tslot, nblock, nslot):
+        for i in range(blk * 64, min(pts.shape[0], blk * 64 + 64)):
+            qx = pts[i, 0] - sp[0]
+            qy = pts[i, 1] - sp[1]
+            qz = pts[i, 2] - sp[2]
+            px = qx * sp[3] + qy * sp[4] + qz * sp[5]
+            py = qx * sp[6] + qy * sp[7] + qz * sp[8]
+            pz = qx * sp[9] + qy * sp[10] + qz * sp[11]
+            if not (pz > 0.0):
+                out[i] = 1.0  # at or behind the light plane: nothing lies between P and the light
+                continue
+            acc = 1.0 if combine == 0 else 0.0
+            ipz = 1.0 / pz
+            for k in range(n):
+                if z_planes[k] >= pz:
+                    break  # this slice and all later ones are below P
+                w = slice_weight(pz, z_planes[k], z_planes[k + 1], thick, self_mode)
+                s = slot[k]
+                if w <= 0.0 or s < 0:
                     continue
-                acc = 1.0 if combine == 0 else 0.0
-                ipz = 1.0 / pz
-                for k in range(n):
-                    if z_planes[k] >= pz:
-                        break  # this slice and all later ones are below P
-                    w = slice_weight(pz, z_planes[k], z_planes[k + 1], thick, self_mode)
-                    s = slot[k]
-                    if w <= 0.0 or s < 0:
-                        continue
-                    x0, x1, y0, y1 = _kernel_rect_fast(
-                        px, py, pz, ipz, z_planes[k + 1], sp[12], sp[13], kx[k], ky[k], ox, oy
-                    )
-                    if filt == 0:  # probes inside the rectangle read +-1.5 texels of their upper level
-                        m = _mip_support(x0, x1, y0, y1, max_aniso, offs.shape[0])
-                    elif filt == 1:  # the larger N-Buffer box is at most twice the short side, +1 bilinear
-                        m = 0.5 * min(x1 - x0, y1 - y0) + 1.5
-                    else:  # exact box
-                        m = 1.0
-                    if x1 + m < bbox[s, 0] or x0 - m > bbox[s, 1] or y1 + m < bbox[s, 2] or y0 - m > bbox[s, 3]:
-                        continue
-                    if filt == 0:
-                        o = lookup_mipmap(pyr, s, offs, sizes, max_aniso, x0, x1, y0, y1)
-                    elif filt == 1:
-                        o = lookup_nbuffers(nb, s, max_aniso, x0, x1, y0, y1)
-                    else:
-                        o = lookup_sat(sat, s, x0, x1, y0, y1)
-                    o = min(max(o, 0.0), 1.0)
-                    acc = combine_occlusion(acc, w * o, combine)
-                    if combine == 0 and acc <= 0.0:
-                        break  # product already 0
-                out[i] = finish_visibility(acc, combine)
+                x0, x1, y0, y1 = _kernel_rect_fast(
+                    px, py, pz, ipz, z_planes[k + 1], sp[12], sp[13], kx[k], ky[k], ox, oy
+                )
+                if filt == 0:  # probes inside the rectangle read +-1.5 texels of their upper level
+                    m = _mip_support(x0, x1, y0, y1, max_aniso, offs.shape[0])
+                elif filt == 1:  # the larger N-Buffer box is at most twice the short side, +1 bilinear
+                    m = 0.5 * min(x1 - x0, y1 - y0) + 1.5
+                else:  # exact box
+                    m = 1.0
+                if x1 + m < bbox[s, 0] or x0 - m > bbox[s, 1] or y1 + m < bbox[s, 2] or y0 - m > bbox[s, 3]:
+                    continue
+                if filt == 0:
+                    o = lookup_mipmap(pyr, s, offs, sizes, max_aniso, x0, x1, y0, y1)
+                elif filt == 1:
+                    o = lookup_nbuffers(nb, s, max_aniso, x0, x1, y0, y1)
+                else:
+                    o = lookup_sat(sat, s, x0, x1, y0, y1)
+                o = min(max(o, 0.0), 1.0)
+                acc = combine_occlusion(acc, w * o, combine)
+                if combine == 0 and acc <= 0.0:
+                    break  # product already 0
+            out[i] = finish_visibility(acc, combine)
+
+
+def eye_pass(
+    pts, sp, z_planes, slot, bbox, filt, combine, self_mode, max_aniso, pyr, offs, sizes, nb, sat, out, nslot=1
+):
+    """V for every point ``pts`` (K,3) world. ``slot[k]`` is the index of slice k in the filtered
+    arrays, -1 for an empty slice (skipped: its occlusion is 0). ``bbox[slot]`` = (x0, x1, y0, y1)
+    texel bounds of the slice's occupied texels: a kernel whose filter support (the rectangle,
+    widened by what the N-Buffer boxes or the mipmap probes read beyond it) misses them has
+    occlusion 0 and is skipped, so the result is unchanged."""
+    run_slots(
+        eye_pass_slot,
+        nslot,
+        pts,
+        sp,
+        z_planes,
+        slot,
+        bbox,
+        filt,
+        combine,
+        self_mode,
+        max_aniso,
+        pyr,
+        offs,
+        sizes,
+        nb,
+        sat,
+        out,
+        nslot,
+    )
 
 
 def nbuffer_levels_needed(setup: SlicingSetup, pz_max: float) -> int:

@@ -17,7 +17,7 @@ import numba
 import numpy as np
 from numba import prange
 
-from .._jit import kernel
+from .._jit import kernel, run_slots
 from ..raster.kernels import view_project
 from ..raster.view import VP_B, VP_FORWARD, VP_H, VP_L, VP_ORIGIN, VP_R, VP_RIGHT, VP_T, VP_UP, VP_W
 from .base import Method, MethodOutput, Param, register
@@ -296,7 +296,106 @@ def _region_empty(sat, cell, H, W, sx, sy, rx, ry):
     return sat[gy1, gx1] - sat[gy0, gx1] - sat[gy1, gx0] + sat[gy0, gx0] == 0
 
 
-@kernel(parallel=True)
+@kernel(nogil=True)
+def blocker_search_kernel_slot(
+    slot,
+    vp,
+    depth_map,
+    pts,
+    nrm,
+    bias,
+    slope_bias,
+    half_light,
+    z_near,
+    pattern,
+    disk,
+    rotate,
+    seed,
+    plane,
+    sat,
+    zr_out,
+    avg_out,
+    nblk_out,
+    search_out,
+    nslot=1,
+):
+    """Slot ``slot`` of :func:`blocker_search_kernel` (``run_slots``)."""
+    n = pts.shape[0]
+    H, W = depth_map.shape
+    S = pattern.shape[0]
+    texel1 = (vp[VP_R] - vp[VP_L]) / vp[VP_W]  # texel size at depth 1 (perspective)
+    iw = _exact_inverse(vp[VP_W])
+    ih = _exact_inverse(vp[VP_H])
+    nblock = (n + 63) // 64  # blocks of 64 dealt round-robin to one slot per thread
+    for blk in range(slot, nblock, nslot):
+        for k in range(blk * 64, min(n, blk * 64 + 64)):
+            sx, sy, z = view_project(vp, pts[k, 0], pts[k, 1], pts[k, 2])
+            if not (z > z_near):
+                zr_out[k] = z
+                avg_out[k] = 0.0
+                nblk_out[k] = 0
+                search_out[k] = 0.0
+                continue
+            # similar triangles: the light seen from p, cut at depth z_near, in map texels
+            f = (z - z_near) / (z * z_near) / texel1
+            rx = half_light[0] * f
+            ry = half_light[1] * f
+            search_out[k] = max(rx, ry)
+            if _region_empty(sat, OCC_CELL, H, W, sx, sy, rx, ry):  # no blocker: no bias needed
+                zr_out[k] = z
+                avg_out[k] = 0.0
+                nblk_out[k] = 0
+                continue
+            off = receiver_offset(
+                vp, pts[k, 0], pts[k, 1], pts[k, 2], nrm[k, 0], nrm[k, 1], nrm[k, 2], z, bias, slope_bias
+            )
+            zt = z - off
+            zr_out[k] = zt
+            nr, nu, nf = _view_normal(vp, nrm[k, 0], nrm[k, 1], nrm[k, 2])
+            npo = nr * 0.0
+            if plane:  # n.(p - o) in view coordinates: receiver plane through p
+                npo = (
+                    nrm[k, 0] * (pts[k, 0] - vp[VP_ORIGIN])
+                    + nrm[k, 1] * (pts[k, 1] - vp[VP_ORIGIN + 1])
+                    + nrm[k, 2] * (pts[k, 2] - vp[VP_ORIGIN + 2])
+                )
+            lo, hi = _plane_bounds(z, off)
+            c = 1.0
+            s = 0.0
+            shx = 0.0
+            shy = 0.0
+            if rotate:
+                a = _hash01(k, seed)
+                c = np.cos(2.0 * np.pi * a)
+                s = np.sin(2.0 * np.pi * a)
+                shx = 2.0 * a
+                shy = 2.0 * _hash01(k + 0x5BD1E995, seed)
+            total = 0.0
+            cnt = 0
+            for i in range(S):
+                ox, oy = _tap_offset(pattern, i, disk, rotate, c, s, shx, shy)
+                tx = sx + ox * rx
+                ty = sy - oy * ry
+                col = int(np.floor(tx))
+                row = int(np.floor(ty))
+                if row < 0 or row >= H or col < 0 or col >= W:
+                    continue
+                d = depth_map[row, col]
+                zc = zt
+                if plane:
+                    if d >= hi:
+                        continue  # beyond every plane depth: not a blocker (e.g. an empty texel)
+                    if d >= lo:
+                        zc = _plane_depth(vp, nr, nu, nf, npo, tx, ty, z, iw, ih) - off
+                    else:
+                        zc = np.inf  # in front of every plane depth: a blocker
+                blk = d < zc  # branch-free (adding 0.0 to the non-negative sum changes no bit)
+                total += d if blk else 0.0
+                cnt += blk
+            avg_out[k] = total / cnt if cnt > 0 else 0.0
+            nblk_out[k] = cnt
+
+
 def blocker_search_kernel(
     vp,
     depth_map,
@@ -322,81 +421,29 @@ def blocker_search_kernel(
     over the search region (point-sampled taps). ``half_light`` = (half size x, half size y) of
     the light in world units, along the map's right/up axes. ``sat``: :func:`occupancy_grid`'s
     table (a region over empty cells has no blocker: its taps are not taken)."""
-    n = pts.shape[0]
-    H, W = depth_map.shape
-    S = pattern.shape[0]
-    texel1 = (vp[VP_R] - vp[VP_L]) / vp[VP_W]  # texel size at depth 1 (perspective)
-    iw = _exact_inverse(vp[VP_W])
-    ih = _exact_inverse(vp[VP_H])
-    nblock = (n + 63) // 64  # blocks of 64 dealt round-robin to one slot per thread
-    for slot in prange(nslot):
-        for blk in range(slot, nblock, nslot):
-            for k in range(blk * 64, min(n, blk * 64 + 64)):
-                sx, sy, z = view_project(vp, pts[k, 0], pts[k, 1], pts[k, 2])
-                if not (z > z_near):
-                    zr_out[k] = z
-                    avg_out[k] = 0.0
-                    nblk_out[k] = 0
-                    search_out[k] = 0.0
-                    continue
-                # similar triangles: the light seen from p, cut at depth z_near, in map texels
-                f = (z - z_near) / (z * z_near) / texel1
-                rx = half_light[0] * f
-                ry = half_light[1] * f
-                search_out[k] = max(rx, ry)
-                if _region_empty(sat, OCC_CELL, H, W, sx, sy, rx, ry):  # no blocker: no bias needed
-                    zr_out[k] = z
-                    avg_out[k] = 0.0
-                    nblk_out[k] = 0
-                    continue
-                off = receiver_offset(
-                    vp, pts[k, 0], pts[k, 1], pts[k, 2], nrm[k, 0], nrm[k, 1], nrm[k, 2], z, bias, slope_bias
-                )
-                zt = z - off
-                zr_out[k] = zt
-                nr, nu, nf = _view_normal(vp, nrm[k, 0], nrm[k, 1], nrm[k, 2])
-                npo = nr * 0.0
-                if plane:  # n.(p - o) in view coordinates: receiver plane through p
-                    npo = (
-                        nrm[k, 0] * (pts[k, 0] - vp[VP_ORIGIN])
-                        + nrm[k, 1] * (pts[k, 1] - vp[VP_ORIGIN + 1])
-                        + nrm[k, 2] * (pts[k, 2] - vp[VP_ORIGIN + 2])
-                    )
-                lo, hi = _plane_bounds(z, off)
-                c = 1.0
-                s = 0.0
-                shx = 0.0
-                shy = 0.0
-                if rotate:
-                    a = _hash01(k, seed)
-                    c = np.cos(2.0 * np.pi * a)
-                    s = np.sin(2.0 * np.pi * a)
-                    shx = 2.0 * a
-                    shy = 2.0 * _hash01(k + 0x5BD1E995, seed)
-                total = 0.0
-                cnt = 0
-                for i in range(S):
-                    ox, oy = _tap_offset(pattern, i, disk, rotate, c, s, shx, shy)
-                    tx = sx + ox * rx
-                    ty = sy - oy * ry
-                    col = int(np.floor(tx))
-                    row = int(np.floor(ty))
-                    if row < 0 or row >= H or col < 0 or col >= W:
-                        continue
-                    d = depth_map[row, col]
-                    zc = zt
-                    if plane:
-                        if d >= hi:
-                            continue  # beyond every plane depth: not a blocker (e.g. an empty texel)
-                        if d >= lo:
-                            zc = _plane_depth(vp, nr, nu, nf, npo, tx, ty, z, iw, ih) - off
-                        else:
-                            zc = np.inf  # in front of every plane depth: a blocker
-                    blk = d < zc  # branch-free (adding 0.0 to the non-negative sum changes no bit)
-                    total += d if blk else 0.0
-                    cnt += blk
-                avg_out[k] = total / cnt if cnt > 0 else 0.0
-                nblk_out[k] = cnt
+    run_slots(
+        blocker_search_kernel_slot,
+        nslot,
+        vp,
+        depth_map,
+        pts,
+        nrm,
+        bias,
+        slope_bias,
+        half_light,
+        z_near,
+        pattern,
+        disk,
+        rotate,
+        seed,
+        plane,
+        sat,
+        zr_out,
+        avg_out,
+        nblk_out,
+        search_out,
+        nslot,
+    )
 
 
 @kernel(inline=True)
@@ -409,7 +456,87 @@ def penumbra_estimation(z_receiver, z_blocker, w_light):
     return (z_receiver - z_blocker) * w_light / z_blocker
 
 
-@kernel(parallel=True)
+@kernel(nogil=True)
+def filtering_kernel_slot(
+    slot,
+    vp,
+    depth_map,
+    pts,
+    nrm,
+    zr,
+    avg,
+    nblk,
+    light_w,
+    pattern,
+    disk,
+    rotate,
+    seed,
+    bilinear,
+    plane,
+    out,
+    wp_out,
+    radius_out,
+    nslot=1,
+):
+    """Slot ``slot`` of :func:`filtering_kernel` (``run_slots``)."""
+    n = pts.shape[0]
+    S = pattern.shape[0]
+    texel1 = (vp[VP_R] - vp[VP_L]) / vp[VP_W]  # texel size at depth 1 (perspective map)
+    iw = _exact_inverse(vp[VP_W])
+    ih = _exact_inverse(vp[VP_H])
+    nblock = (n + 63) // 64  # blocks of 64 dealt round-robin to one slot per thread
+    for blk in range(slot, nblock, nslot):
+        for k in range(blk * 64, min(n, blk * 64 + 64)):
+            if nblk[k] == 0:  # early out of the blocker search: fully lit, no filtering
+                out[k] = 1.0
+                wp_out[k] = 0.0
+                radius_out[k] = 0.0
+                continue
+            wx = penumbra_estimation(zr[k], avg[k], light_w[0])
+            wy = penumbra_estimation(zr[k], avg[k], light_w[1])
+            rx = 0.5 * wx / (texel1 * zr[k])
+            ry = 0.5 * wy / (texel1 * zr[k])
+            wp_out[k] = max(wx, wy)
+            radius_out[k] = max(rx, ry)
+            sx, sy, z = view_project(vp, pts[k, 0], pts[k, 1], pts[k, 2])
+            zt = zr[k]
+            off = z - zt
+            nr, nu, nf = _view_normal(vp, nrm[k, 0], nrm[k, 1], nrm[k, 2])
+            npo = (
+                nrm[k, 0] * (pts[k, 0] - vp[VP_ORIGIN])
+                + nrm[k, 1] * (pts[k, 1] - vp[VP_ORIGIN + 1])
+                + nrm[k, 2] * (pts[k, 2] - vp[VP_ORIGIN + 2])
+            )
+            lo, hi = _plane_bounds(z, off)
+            c = 1.0
+            s = 0.0
+            shx = 0.0
+            shy = 0.0
+            if rotate:
+                a = _hash01(k + 0x2545F491, seed)
+                c = np.cos(2.0 * np.pi * a)
+                s = np.sin(2.0 * np.pi * a)
+                shx = 2.0 * a
+                shy = 2.0 * _hash01(k + 0x68E31DA4, seed)
+            acc = 0.0
+            for i in range(S):
+                ox, oy = _tap_offset(pattern, i, disk, rotate, c, s, shx, shy)
+                tx = sx + ox * rx
+                ty = sy - oy * ry
+                if plane and bilinear:  # the plane only where the 2x2 texels need it
+                    acc += _cmp_bilinear_plane(depth_map, tx, ty, vp, nr, nu, nf, npo, z, off, iw, ih, lo, hi)
+                    continue
+                zc = zt
+                if plane:
+                    zc = _plane_depth(vp, nr, nu, nf, npo, tx, ty, z, iw, ih) - off
+                if bilinear:
+                    acc += _cmp_bilinear(depth_map, tx, ty, zc)
+                else:
+                    acc += _cmp_nearest(depth_map, tx, ty, zc)
+            v = acc / S
+            out[k] = min(max(v, 0.0), 1.0)
+
+
 def filtering_kernel(
     vp,
     depth_map,
@@ -432,63 +559,28 @@ def filtering_kernel(
 ):
     """Steps 2 and 3 per point: penumbra estimation, then percentage-closer filtering with a
     kernel of radius w / 2 (per light axis) in texels at the receiver's depth."""
-    n = pts.shape[0]
-    S = pattern.shape[0]
-    texel1 = (vp[VP_R] - vp[VP_L]) / vp[VP_W]  # texel size at depth 1 (perspective map)
-    iw = _exact_inverse(vp[VP_W])
-    ih = _exact_inverse(vp[VP_H])
-    nblock = (n + 63) // 64  # blocks of 64 dealt round-robin to one slot per thread
-    for slot in prange(nslot):
-        for blk in range(slot, nblock, nslot):
-            for k in range(blk * 64, min(n, blk * 64 + 64)):
-                if nblk[k] == 0:  # early out of the blocker search: fully lit, no filtering
-                    out[k] = 1.0
-                    wp_out[k] = 0.0
-                    radius_out[k] = 0.0
-                    continue
-                wx = penumbra_estimation(zr[k], avg[k], light_w[0])
-                wy = penumbra_estimation(zr[k], avg[k], light_w[1])
-                rx = 0.5 * wx / (texel1 * zr[k])
-                ry = 0.5 * wy / (texel1 * zr[k])
-                wp_out[k] = max(wx, wy)
-                radius_out[k] = max(rx, ry)
-                sx, sy, z = view_project(vp, pts[k, 0], pts[k, 1], pts[k, 2])
-                zt = zr[k]
-                off = z - zt
-                nr, nu, nf = _view_normal(vp, nrm[k, 0], nrm[k, 1], nrm[k, 2])
-                npo = (
-                    nrm[k, 0] * (pts[k, 0] - vp[VP_ORIGIN])
-                    + nrm[k, 1] * (pts[k, 1] - vp[VP_ORIGIN + 1])
-                    + nrm[k, 2] * (pts[k, 2] - vp[VP_ORIGIN + 2])
-                )
-                lo, hi = _plane_bounds(z, off)
-                c = 1.0
-                s = 0.0
-                shx = 0.0
-                shy = 0.0
-                if rotate:
-                    a = _hash01(k + 0x2545F491, seed)
-                    c = np.cos(2.0 * np.pi * a)
-                    s = np.sin(2.0 * np.pi * a)
-                    shx = 2.0 * a
-                    shy = 2.0 * _hash01(k + 0x68E31DA4, seed)
-                acc = 0.0
-                for i in range(S):
-                    ox, oy = _tap_offset(pattern, i, disk, rotate, c, s, shx, shy)
-                    tx = sx + ox * rx
-                    ty = sy - oy * ry
-                    if plane and bilinear:  # the plane only where the 2x2 texels need it
-                        acc += _cmp_bilinear_plane(depth_map, tx, ty, vp, nr, nu, nf, npo, z, off, iw, ih, lo, hi)
-                        continue
-                    zc = zt
-                    if plane:
-                        zc = _plane_depth(vp, nr, nu, nf, npo, tx, ty, z, iw, ih) - off
-                    if bilinear:
-                        acc += _cmp_bilinear(depth_map, tx, ty, zc)
-                    else:
-                        acc += _cmp_nearest(depth_map, tx, ty, zc)
-                v = acc / S
-                out[k] = min(max(v, 0.0), 1.0)
+    run_slots(
+        filtering_kernel_slot,
+        nslot,
+        vp,
+        depth_map,
+        pts,
+        nrm,
+        zr,
+        avg,
+        nblk,
+        light_w,
+        pattern,
+        disk,
+        rotate,
+        seed,
+        bilinear,
+        plane,
+        out,
+        wp_out,
+        radius_out,
+        nslot,
+    )
 
 
 # ---- the paper's steps (orchestration) ---------------------------------------------------------

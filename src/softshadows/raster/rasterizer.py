@@ -21,7 +21,7 @@ import numpy as np
 from numba import prange
 from numba.cpython.unsafe.numbers import trailing_zeros
 
-from .._jit import frozen, kernel
+from .._jit import frozen, kernel, run_slots
 from .gbuffer import Fragments, GBuffer
 from .kernels import view_coords, view_coords_to_screen
 from .programs import PROGRAM_ATTRIBUTE, PROGRAM_PENUMBRA, PROGRAMS, discard_depth, run_program, value_lower_bound
@@ -1500,170 +1500,184 @@ def _blend_list(prog, pparams, TL, qa, qb, prect, full, e0, e1, e2, pl, q, ca, z
 
 
 # ----------------------------------------------------------------------------------------------
-# the tile kernels, one per mode. Load balance (see docs/rasterizer.md): Numba splits a prange into
-# equal contiguous parts, one per thread, while the work sits where the geometry is; so each kernel
-# runs a prange over one slot per thread and slot p takes tiles (or tile rows) p, p + n, p + 2n, ...
-# A slot runs on one thread: its scratch is taken once per slot.
+# the tile passes, one per mode. Load balance (see docs/rasterizer.md): the work sits where the
+# geometry is, so each pass runs one slot per thread and slot p takes tiles (or tile rows) p, p + n,
+# p + 2n, ... A slot is a serial kernel run on its own thread by ``run_slots`` (not a prange: the
+# parfor compiled the body twice, docs/results/cold-start.md); its scratch is indexed by the slot.
 # ----------------------------------------------------------------------------------------------
-@kernel(parallel=True)
-def _tiles_depth(fe, sc, depth_out, tri_out, zt, ft):
-    """rasterize_depth: the nearest depth (+inf: none) and triangle (-1: none) of every pixel; with a
-    tiny path (``zt`` (H,W) not empty: :func:`_tiny_depth`), merged with its nearest depths ``zt`` and
-    faces ``ft`` by the same rule (nearer wins, then the smaller face)."""
+@kernel(nogil=True)
+def _tiles_depth_slot(slot, fe, sc, depth_out, tri_out, zt, ft):
+    """Slot ``slot`` of :func:`_tiles_depth` (``run_slots``)."""
     vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, _normals, _rowbits, sh, tri = fe
     zbuf, tbuf, spbuf, _ibuf, _lbuf, nslot = sc
     vw = _view_window(vp)
     W, H = vw[0], vw[1]
     tiny = zt.shape[0] > 0
-    for slot in prange(nslot):
-        tid = numba.get_thread_id()
-        zb = zbuf[tid]
-        tb = tbuf[tid]
-        SP = spbuf[tid]
-        for ty in range(slot, nty, nslot):  # tile rows dealt round-robin: contiguous output rows
-            for tx in range(ntx):
-                rect = _tile_rect(ty, tx, T, W, H)
-                _depth_pass(vw, near, ty * ntx + tx, rect, start, bins, box, edges, zinfo, planes, zb, tb, SP, sh)
-                y0, y1, x0, x1 = rect
-                for i in range(y0, y1 + 1):
-                    # row views: their indices are known non-negative (no wrap-around selects)
-                    drow = depth_out[i, x0 : x1 + 1]
-                    trow = tri_out[i, x0 : x1 + 1]
-                    if tiny:
-                        zrow = zt[i, x0 : x1 + 1]
-                        frow = ft[i, x0 : x1 + 1]
-                        for k in range(drow.shape[0]):
-                            z = zb[i - y0, k]
-                            tv = tb[i - y0, k]
-                            f = tri[max(tv, 0)] if tv >= 0 else -1
-                            zq = zrow[k]
-                            fq = frow[k]
-                            take = (zq < z) | ((zq == z) & (fq < f))
-                            drow[k] = zq if take else z
-                            trow[k] = fq if take else f
-                        continue
+    zb = zbuf[slot]
+    tb = tbuf[slot]
+    SP = spbuf[slot]
+    for ty in range(slot, nty, nslot):  # tile rows dealt round-robin: contiguous output rows
+        for tx in range(ntx):
+            rect = _tile_rect(ty, tx, T, W, H)
+            _depth_pass(vw, near, ty * ntx + tx, rect, start, bins, box, edges, zinfo, planes, zb, tb, SP, sh)
+            y0, y1, x0, x1 = rect
+            for i in range(y0, y1 + 1):
+                # row views: their indices are known non-negative (no wrap-around selects)
+                drow = depth_out[i, x0 : x1 + 1]
+                trow = tri_out[i, x0 : x1 + 1]
+                if tiny:
+                    zrow = zt[i, x0 : x1 + 1]
+                    frow = ft[i, x0 : x1 + 1]
                     for k in range(drow.shape[0]):
-                        drow[k] = zb[i - y0, k]
+                        z = zb[i - y0, k]
                         tv = tb[i - y0, k]
-                        trow[k] = tri[max(tv, 0)] if tv >= 0 else -1  # the face (tb: front-end triangle)
+                        f = tri[max(tv, 0)] if tv >= 0 else -1
+                        zq = zrow[k]
+                        fq = frow[k]
+                        take = (zq < z) | ((zq == z) & (fq < f))
+                        drow[k] = zq if take else z
+                        trow[k] = fq if take else f
+                    continue
+                for k in range(drow.shape[0]):
+                    drow[k] = zb[i - y0, k]
+                    tv = tb[i - y0, k]
+                    trow[k] = tri[max(tv, 0)] if tv >= 0 else -1  # the face (tb: front-end triangle)
 
 
-@kernel(parallel=True)
-def _tiles_gbuffer(fe, sc, out):
-    """rasterize: the nearest surface's G-buffer ``out`` = (depth, tri, pos, nrm, bary, mask)."""
+def _tiles_depth(fe, sc, depth_out, tri_out, zt, ft):
+    """rasterize_depth: the nearest depth (+inf: none) and triangle (-1: none) of every pixel; with a
+    tiny path (``zt`` (H,W) not empty: :func:`_tiny_depth`), merged with its nearest depths ``zt`` and
+    faces ``ft`` by the same rule (nearer wins, then the smaller face)."""
+    run_slots(_tiles_depth_slot, sc[5], fe, sc, depth_out, tri_out, zt, ft)
+
+
+@kernel(nogil=True)
+def _tiles_gbuffer_slot(slot, fe, sc, out):
+    """Slot ``slot`` of :func:`_tiles_gbuffer` (``run_slots``)."""
     vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, normals, _rowbits, sh, tri = fe
     zbuf, tbuf, spbuf, _ibuf, _lbuf, nslot = sc
     vw = _view_window(vp)
     W, H, ortho, _far, wl, wt, wsx, wsy = vw
     frame = _view_frame(vp)
-    for slot in prange(nslot):
-        tid = numba.get_thread_id()
-        zb = zbuf[tid]
-        tb = tbuf[tid]
-        SP = spbuf[tid]
-        for ty in range(slot, nty, nslot):
-            for tx in range(ntx):
-                rect = _tile_rect(ty, tx, T, W, H)
-                _depth_pass(vw, near, ty * ntx + tx, rect, start, bins, box, edges, zinfo, planes, zb, tb, SP, sh)
-                y0, y1, x0, x1 = rect
-                cols = (x0, wl, wsx)
-                for i in range(y0, y1 + 1):
-                    yw = wt - (i + 0.5) * wsy
-                    if ortho:
-                        _gbuffer_row(out, i, i - y0, cols, x1 - x0 + 1, yw, zb, tb, frame, planes, normals, tri, True)
-                    else:
-                        _gbuffer_row(out, i, i - y0, cols, x1 - x0 + 1, yw, zb, tb, frame, planes, normals, tri, False)
+    zb = zbuf[slot]
+    tb = tbuf[slot]
+    SP = spbuf[slot]
+    for ty in range(slot, nty, nslot):
+        for tx in range(ntx):
+            rect = _tile_rect(ty, tx, T, W, H)
+            _depth_pass(vw, near, ty * ntx + tx, rect, start, bins, box, edges, zinfo, planes, zb, tb, SP, sh)
+            y0, y1, x0, x1 = rect
+            cols = (x0, wl, wsx)
+            for i in range(y0, y1 + 1):
+                yw = wt - (i + 0.5) * wsy
+                if ortho:
+                    _gbuffer_row(out, i, i - y0, cols, x1 - x0 + 1, yw, zb, tb, frame, planes, normals, tri, True)
+                else:
+                    _gbuffer_row(out, i, i - y0, cols, x1 - x0 + 1, yw, zb, tb, frame, planes, normals, tri, False)
 
 
-@kernel(parallel=True)
-def _tiles_count(fe, sc, fcount):
-    """rasterize_fragments, first pass: fcount[tile] = the number of fragments of the tile."""
+def _tiles_gbuffer(fe, sc, out):
+    """rasterize: the nearest surface's G-buffer ``out`` = (depth, tri, pos, nrm, bary, mask)."""
+    run_slots(_tiles_gbuffer_slot, sc[5], fe, sc, out)
+
+
+@kernel(nogil=True)
+def _tiles_count_slot(slot, fe, sc, fcount):
+    """Slot ``slot`` of :func:`_tiles_count` (``run_slots``)."""
     vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, _normals, _rowbits, sh, _tri = fe
     _zbuf, _tbuf, spbuf, _ibuf, _lbuf, nslot = sc
     vw = _view_window(vp)
     W, H, ortho, far, wl, wt, wsx, wsy = vw
-    for slot in prange(nslot):
-        SP = spbuf[numba.get_thread_id()]
-        for ty in range(slot, nty, nslot):
-            for tx in range(ntx):
-                tile = ty * ntx + tx
-                rect = _tile_rect(ty, tx, T, W, H)
-                y0, _y1, x0, _x1 = rect
-                cols = (x0, wl, wsx)
-                nfrag = 0
-                for bi in range(start[tile], start[tile + 1]):
-                    ct = bins[bi]
-                    prect = _piece_rect(box, ct, rect)
-                    i0, i1, j0, j1 = prect
-                    if i0 > i1 or j0 > j1:
-                        continue
-                    zlo, zhi = _depth_bounds(zinfo, ct, ortho, near)
-                    zr = (zlo, zhi, far)
-                    pl = _plane(planes, ct >> sh)
-                    e0, e1, e2, scan, nrows = _piece_rows(edges, zinfo, ct, prect, y0, x0, W, H, SP, False)
-                    for rr in range(nrows):
-                        li = SP[_SP_RW, rr]
-                        i = li + y0
-                        py = i + 0.5
-                        zrow = _row_depth(ortho, pl, wt - py * wsy)
-                        lo, hi, r0, r1, r2 = _first_span(scan, li, py, j0, j1, SP, e0, e1, e2)
-                        while lo <= hi:
-                            span = (li, lo - x0, hi - x0)
-                            if ortho:
-                                nfrag += _count_row(span, cols, pl, zrow, zr, True)
-                            else:
-                                nfrag += _count_row(span, cols, pl, zrow, zr, False)
-                            lo, hi = _next_span(scan, hi, j1, e0, e1, e2, r0, r1, r2)
-                fcount[tile] = nfrag
+    SP = spbuf[slot]
+    for ty in range(slot, nty, nslot):
+        for tx in range(ntx):
+            tile = ty * ntx + tx
+            rect = _tile_rect(ty, tx, T, W, H)
+            y0, _y1, x0, _x1 = rect
+            cols = (x0, wl, wsx)
+            nfrag = 0
+            for bi in range(start[tile], start[tile + 1]):
+                ct = bins[bi]
+                prect = _piece_rect(box, ct, rect)
+                i0, i1, j0, j1 = prect
+                if i0 > i1 or j0 > j1:
+                    continue
+                zlo, zhi = _depth_bounds(zinfo, ct, ortho, near)
+                zr = (zlo, zhi, far)
+                pl = _plane(planes, ct >> sh)
+                e0, e1, e2, scan, nrows = _piece_rows(edges, zinfo, ct, prect, y0, x0, W, H, SP, False)
+                for rr in range(nrows):
+                    li = SP[_SP_RW, rr]
+                    i = li + y0
+                    py = i + 0.5
+                    zrow = _row_depth(ortho, pl, wt - py * wsy)
+                    lo, hi, r0, r1, r2 = _first_span(scan, li, py, j0, j1, SP, e0, e1, e2)
+                    while lo <= hi:
+                        span = (li, lo - x0, hi - x0)
+                        if ortho:
+                            nfrag += _count_row(span, cols, pl, zrow, zr, True)
+                        else:
+                            nfrag += _count_row(span, cols, pl, zrow, zr, False)
+                        lo, hi = _next_span(scan, hi, j1, e0, e1, e2, r0, r1, r2)
+            fcount[tile] = nfrag
 
 
-@kernel(parallel=True)
-def _tiles_fragments(fe, sc, foff, fpix, ftri, fbary, fdepth):
-    """rasterize_fragments, second pass: write the fragments of each tile from foff[tile] on, by
-    triangle, piece and pixel (row-major)."""
+def _tiles_count(fe, sc, fcount):
+    """rasterize_fragments, first pass: fcount[tile] = the number of fragments of the tile."""
+    run_slots(_tiles_count_slot, sc[5], fe, sc, fcount)
+
+
+@kernel(nogil=True)
+def _tiles_fragments_slot(slot, fe, sc, foff, fpix, ftri, fbary, fdepth):
+    """Slot ``slot`` of :func:`_tiles_fragments` (``run_slots``)."""
     vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, _normals, _rowbits, sh, tri = fe
     _zbuf, _tbuf, spbuf, _ibuf, _lbuf, nslot = sc
     W, H, ortho, far, wl, wt, wsx, wsy = _view_window(vp)
-    for slot in prange(nslot):
-        SP = spbuf[numba.get_thread_id()]
-        for ty in range(slot, nty, nslot):
-            for tx in range(ntx):
-                tile = ty * ntx + tx
-                rect = _tile_rect(ty, tx, T, W, H)
-                y0, _y1, x0, _x1 = rect
-                w = foff[tile]
-                for bi in range(start[tile], start[tile + 1]):
-                    ct = bins[bi]
-                    t = ct >> sh
-                    prect = _piece_rect(box, ct, rect)
-                    i0, i1, j0, j1 = prect
-                    if i0 > i1 or j0 > j1:
-                        continue
-                    zlo, zhi = _depth_bounds(zinfo, ct, ortho, near)
-                    pl = _plane(planes, t)
-                    q = _dual(planes, t)
-                    e0, e1, e2, scan, nrows = _piece_rows(edges, zinfo, ct, prect, y0, x0, W, H, SP, False)
-                    for rr in range(nrows):
-                        li = SP[_SP_RW, rr]
-                        i = li + y0
-                        py = i + 0.5
-                        yw = wt - py * wsy
-                        zrow = _row_depth(ortho, pl, yw)
-                        lo, hi, r0, r1, r2 = _first_span(scan, li, py, j0, j1, SP, e0, e1, e2)
-                        while lo <= hi:
-                            for j in range(lo, hi + 1):
-                                xw = wl + (j + 0.5) * wsx
-                                z = _clamp_depth(_frag_depth(ortho, pl, zrow, xw), zlo, zhi)
-                                if z > far:
-                                    continue
-                                b1, b2 = _bary(q, xw, yw, z, ortho)
-                                fpix[w] = i * W + j
-                                ftri[w] = tri[t]
-                                fbary[w, 0] = b1
-                                fbary[w, 1] = b2
-                                fdepth[w] = z
-                                w += 1
-                            lo, hi = _next_span(scan, hi, j1, e0, e1, e2, r0, r1, r2)
+    SP = spbuf[slot]
+    for ty in range(slot, nty, nslot):
+        for tx in range(ntx):
+            tile = ty * ntx + tx
+            rect = _tile_rect(ty, tx, T, W, H)
+            y0, _y1, x0, _x1 = rect
+            w = foff[tile]
+            for bi in range(start[tile], start[tile + 1]):
+                ct = bins[bi]
+                t = ct >> sh
+                prect = _piece_rect(box, ct, rect)
+                i0, i1, j0, j1 = prect
+                if i0 > i1 or j0 > j1:
+                    continue
+                zlo, zhi = _depth_bounds(zinfo, ct, ortho, near)
+                pl = _plane(planes, t)
+                q = _dual(planes, t)
+                e0, e1, e2, scan, nrows = _piece_rows(edges, zinfo, ct, prect, y0, x0, W, H, SP, False)
+                for rr in range(nrows):
+                    li = SP[_SP_RW, rr]
+                    i = li + y0
+                    py = i + 0.5
+                    yw = wt - py * wsy
+                    zrow = _row_depth(ortho, pl, yw)
+                    lo, hi, r0, r1, r2 = _first_span(scan, li, py, j0, j1, SP, e0, e1, e2)
+                    while lo <= hi:
+                        for j in range(lo, hi + 1):
+                            xw = wl + (j + 0.5) * wsx
+                            z = _clamp_depth(_frag_depth(ortho, pl, zrow, xw), zlo, zhi)
+                            if z > far:
+                                continue
+                            b1, b2 = _bary(q, xw, yw, z, ortho)
+                            fpix[w] = i * W + j
+                            ftri[w] = tri[t]
+                            fbary[w, 0] = b1
+                            fbary[w, 1] = b2
+                            fdepth[w] = z
+                            w += 1
+                        lo, hi = _next_span(scan, hi, j1, e0, e1, e2, r0, r1, r2)
+
+
+def _tiles_fragments(fe, sc, foff, fpix, ftri, fbary, fdepth):
+    """rasterize_fragments, second pass: write the fragments of each tile from foff[tile] on, by
+    triangle, piece and pixel (row-major)."""
+    run_slots(_tiles_fragments_slot, sc[5], fe, sc, foff, fpix, ftri, fbary, fdepth)
 
 
 @kernel(inline=True)
@@ -1755,11 +1769,10 @@ def _make_min_blend_slot(prog):
     of the closure: each kernel compiles only its own program, which inlines into the vector loops;
     a closure over an int is cached across processes)."""
 
-    @kernel
-    def slot_fn(slot, tid, fe, sc, mb):
-        """Slot ``slot`` (on thread ``tid``) of a min-blend tile kernel (``_MIN_BLEND_KERNELS``): the
-        body of its prange, a serial kernel (Numba's parfor passes then see a one-line loop:
-        docs/results/cold-start.md)."""
+    @kernel(nogil=True)
+    def slot_fn(slot, fe, sc, mb):
+        """Slot ``slot`` of a min-blend tile pass (``_MIN_BLEND_KERNELS``), on its own thread
+        (``run_slots``)."""
         vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, _normals, rowbits, sh, tri = fe
         zbuf, _tbuf, spbuf, ibuf, lbuf, nslot = sc
         pparams, cattr, img, blend, bstats, split, cull_discarded, tlbuf, list_max = mb
@@ -1767,11 +1780,11 @@ def _make_min_blend_slot(prog):
         W, H, ortho, far, wl, wt, wsx, wsy = vw
         use_mask = rowbits.size > 0
         ntiles = ntx * nty
-        zb = zbuf[tid]
-        ib = ibuf[tid]
-        SP = spbuf[tid]
-        CM = lbuf[tid]
-        TL = tlbuf[tid]
+        zb = zbuf[slot]
+        ib = ibuf[slot]
+        SP = spbuf[slot]
+        CM = lbuf[slot]
+        TL = tlbuf[slot]
         for tile in range(slot, ntiles, nslot):  # tiles dealt round-robin: the work sits in few
             if start[tile] == start[tile + 1]:
                 continue  # nothing binned here: ``blend`` unchanged
@@ -1890,25 +1903,19 @@ def _make_min_blend_slot(prog):
     return slot_fn
 
 
-# The min-blend tile kernels, one per program: a one-line prange over the slots, each a serial
-# kernel (above). Module-level functions, not closures over the slot kernel: Numba keys a
-# closure's cache entry on the pickled closure variables, and a pickled dispatcher carries a
-# per-process random id, so a closure kernel missed the cache in every new process (penumbra-map
-# recompiled it on every run, about 5 s).
+# The min-blend tile passes, one per program. Module-level slot kernels, not closures over them:
+# Numba keys a closure's cache entry on the pickled closure variables, and a pickled dispatcher
+# carries a per-process random id, so a closure kernel missed the cache in every new process.
 _MIN_BLEND_SLOT_ATTRIBUTE = _make_min_blend_slot(PROGRAM_ATTRIBUTE)
 _MIN_BLEND_SLOT_PENUMBRA = _make_min_blend_slot(PROGRAM_PENUMBRA)
 
 
-@kernel(parallel=True)
 def _tiles_min_blend_attribute(fe, sc, mb):
-    for slot in prange(sc[5]):  # sc.nslot: one slot per thread
-        _MIN_BLEND_SLOT_ATTRIBUTE(np.uint64(slot), numba.get_thread_id(), fe, sc, mb)
+    run_slots(_MIN_BLEND_SLOT_ATTRIBUTE, sc[5], fe, sc, mb)
 
 
-@kernel(parallel=True)
 def _tiles_min_blend_penumbra(fe, sc, mb):
-    for slot in prange(sc[5]):  # sc.nslot: one slot per thread
-        _MIN_BLEND_SLOT_PENUMBRA(np.uint64(slot), numba.get_thread_id(), fe, sc, mb)
+    run_slots(_MIN_BLEND_SLOT_PENUMBRA, sc[5], fe, sc, mb)
 
 
 # fragment program -> its tile kernel. Each kernel: run the program per fragment and MIN-blend its
@@ -2008,14 +2015,14 @@ class FrontEnd(NamedTuple):
 
 
 class _Scratch(NamedTuple):
-    """Per-thread scratch of the tile kernels (first index: numba.get_thread_id())."""
+    """Per-thread scratch of the tile kernels (first index: the slot, ``run_slots``)."""
 
     depth: np.ndarray  #: (n, T, T) float64: the tile's nearest depths / min-blend values
     tri: np.ndarray  #: (n, T, T) int32: the tile's nearest triangles
     spans: np.ndarray  #: (n, 5, T) int64: per tile row, the rows _SP_* (spans, rows to visit, texels)
     image: np.ndarray  #: (n, T, T) float32: the tile's min-blend input image
     lanes: np.ndarray  #: (n, T) float64: min-blend lane maxima
-    nslot: int  #: slots of the kernels' prange: one per thread
+    nslot: int  #: slots of the tile passes (``run_slots``): one per thread
 
 
 class _Blend(NamedTuple):
