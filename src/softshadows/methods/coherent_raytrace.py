@@ -16,10 +16,11 @@ import math
 from types import SimpleNamespace
 from typing import ClassVar
 
+import numba
 import numpy as np
 from numba import prange
 
-from .._jit import kernel
+from .._jit import kernel, run_slots
 from ..raster.kernels import view_coords, view_coords_to_screen
 from ..raster.view import VP_B, VP_FAR, VP_L, VP_NEAR, VP_R, VP_T, light_view
 from ..shading import exposure
@@ -696,8 +697,10 @@ def predict_visibility(ox, oy, oz, blk, nblk, hires_done, cen, u, v, nl, N, H, s
     return nk
 
 
-@kernel(parallel=True)
-def coherent_tiles(
+@kernel(nogil=True)
+def coherent_tiles_slot(
+    slot,
+    nslot,
     pts,
     nrm,
     pix,
@@ -730,15 +733,13 @@ def coherent_tiles(
     nrays,
     cnt,
 ):
-    """The SoftShad procedure, one coherent walk per tile (``order[tstart[t]:tstart[t+1]]``: the
-    tile's points, serpentine), tiles in parallel; each tile starts with an empty blocker points
-    list, so the output does not depend on the number of threads."""
+    """Slot ``slot`` of :func:`coherent_tiles` (``run_slots``): tiles slot, slot + nslot, ..."""
     ntile = tstart.shape[0] - 1
     nref = vps.shape[0]
     nlev = offs.shape[0] - 1
     S = N * N
     cap = S * H * H + S
-    for t in prange(ntile):
+    for t in range(slot, ntile, nslot):  # tiles dealt round-robin to the slots
         stack = np.empty((4 * nlev + 12, 5))
         seg = np.empty((nref, 10))
         rorder = np.empty(nref, np.int64)
@@ -869,6 +870,81 @@ def coherent_tiles(
             irr[k] = e / S
             nrays[k] = traced
             valid = True
+
+
+def coherent_tiles(
+    pts,
+    nrm,
+    pix,
+    self_occ,
+    self_sin,
+    order,
+    tstart,
+    cen,
+    u,
+    v,
+    nl,
+    N,
+    H,
+    seed,
+    coherence,
+    hires_done,
+    reset2,
+    offset,
+    vps,
+    D,
+    MN,
+    MX,
+    CONN,
+    offs,
+    gapk,
+    kpix0,
+    flags,
+    vis,
+    irr,
+    nrays,
+    cnt,
+):
+    """The SoftShad procedure, one coherent walk per tile (``order[tstart[t]:tstart[t+1]]``: the
+    tile's points, serpentine), tiles in parallel; each tile starts with an empty blocker points
+    list, so the output does not depend on the number of threads."""
+    n = numba.get_num_threads()
+    run_slots(
+        coherent_tiles_slot,
+        n,
+        n,
+        pts,
+        nrm,
+        pix,
+        self_occ,
+        self_sin,
+        order,
+        tstart,
+        cen,
+        u,
+        v,
+        nl,
+        N,
+        H,
+        seed,
+        coherence,
+        hires_done,
+        reset2,
+        offset,
+        vps,
+        D,
+        MN,
+        MX,
+        CONN,
+        offs,
+        gapk,
+        kpix0,
+        flags,
+        vis,
+        irr,
+        nrays,
+        cnt,
+    )
 
 
 def tile_order(idx: np.ndarray, width: int, tile: int) -> tuple[np.ndarray, np.ndarray]:

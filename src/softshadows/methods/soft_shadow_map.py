@@ -24,7 +24,7 @@ import numpy as np
 from numba import prange
 from numba.cpython.unsafe.numbers import trailing_zeros
 
-from .._jit import kernel, py_callable
+from .._jit import kernel, py_callable, run_slots
 from ..analytic import disk_facing_frame, polygon_disk_area, quad_disk_area_small, quad_disk_area_small32
 from ..errors import SoftShadowsError
 from ..raster import View, rasterize_depth, rasterize_fragments
@@ -753,7 +753,104 @@ def bin_patches_by_band(ext, n_bands, band_rows):
     return cnt, idx
 
 
-@kernel(parallel=True)
+@kernel(nogil=True)
+def accumulate_soft_shadow_map_slot(
+    slot,
+    patches,
+    pmesh,
+    ext,
+    band_ptr,
+    band_idx,
+    band_rows,
+    recv_depth,
+    recv_mesh,
+    svp,
+    hx,
+    hy,
+    fp16,
+    rtz,
+    check_mesh,
+    ssm,
+    touched,
+    nslot,
+):
+    """Slot ``slot`` of :func:`accumulate_soft_shadow_map` (``run_slots``): bands slot, slot + nslot, ..."""
+    H, W = recv_depth.shape
+    l, r, b, t = svp[VP_L], svp[VP_R], svp[VP_B], svp[VP_T]
+    dxs = (r - l) / W
+    dys = (t - b) / H
+    n_bands = band_ptr.shape[0] - 1
+    # bands dealt round-robin to the ``nslot`` slots, one per thread (with the shadow in a few
+    # bands, contiguous halves would leave a thread idle)
+    for bnd in range(slot, n_bands, nslot):
+        r0 = bnd * band_rows
+        r1 = min(r0 + band_rows, H) - 1
+        cnt = 0
+        for q in range(band_ptr[bnd], band_ptr[bnd + 1]):
+            p = band_idx[q]
+            x0, x1, y0, y1, zo = patches[p, 0], patches[p, 1], patches[p, 2], patches[p, 3], patches[p, 4]
+            pm = pmesh[p]
+            i0 = max(ext[p, 0], r0)
+            i1 = min(ext[p, 1], r1)
+            j0 = ext[p, 2]
+            j1 = ext[p, 3] + 1
+            # x terms of the fragment program are linear in the column: a0(j) = ax - j * dax
+            ux0 = l + (j0 + 0.5) * dxs
+            ax = (x0 - ux0 * zo) / (2.0 * hx)
+            wx = (x1 - x0) / (2.0 * hx)
+            dax = dxs * zo / (2.0 * hx)
+            for i in range(i0, i1 + 1):
+                uy = t - (i + 0.5) * dys
+                c0 = (y0 - uy * zo) / (2.0 * hy)
+                c1 = (y1 - uy * zo) / (2.0 * hy)
+                cnt += j1 - j0
+                if fp16:
+                    row = recv_depth[i, j0:j1]
+                    out = ssm[i, j0:j1]
+                    for jj in range(row.shape[0]):
+                        zr = np.float64(row[jj])
+                        if zr > zo and not (check_mesh and recv_mesh[i, j0 + jj] == pm):
+                            a0 = ax - jj * dax
+                            c = occlusion_percentage(zr / (zr - zo), a0, a0 + wx, c0, c1)
+                            if c > 0.0:
+                                out[jj] = np.float32(round_half(np.float64(out[jj]) + round_half(c, rtz), rtz))
+                elif check_mesh:
+                    ii = np.uint64(i)
+                    zo32 = np.float32(zo)
+                    ax32 = np.float32(ax)
+                    dax32 = np.float32(dax)
+                    wx32 = np.float32(wx)
+                    c032 = np.float32(c0)
+                    c132 = np.float32(c1)
+                    for jj in range(j1 - j0):
+                        jx = np.uint64(j0 + jj)
+                        zr = recv_depth[ii, jx]
+                        k = zr / (zr - zo32)
+                        k = k if zr > zo32 else _F0
+                        k = k if recv_mesh[ii, jx] != pm else _F0
+                        a0 = ax32 - np.float32(jj) * dax32
+                        ssm[ii, jx] += _occlusion_percentage32(k, a0, a0 + wx32, c032, c132)
+                else:
+                    # float32 arithmetic (a GPU fragment program's; 16 lanes per vector); 2-D subscripts,
+                    # no row views (a view costs a contended atomic refcount update); unsigned
+                    # indices: no negative-index wraparound, so the loop vectorizes
+                    ii = np.uint64(i)
+                    zo32 = np.float32(zo)
+                    ax32 = np.float32(ax)
+                    dax32 = np.float32(dax)
+                    wx32 = np.float32(wx)
+                    c032 = np.float32(c0)
+                    c132 = np.float32(c1)
+                    for jj in range(j1 - j0):
+                        jx = np.uint64(j0 + jj)
+                        zr = recv_depth[ii, jx]
+                        k = zr / (zr - zo32)
+                        k = k if zr > zo32 else _F0
+                        a0 = ax32 - np.float32(jj) * dax32
+                        ssm[ii, jx] += _occlusion_percentage32(k, a0, a0 + wx32, c032, c132)
+        touched[bnd] = cnt
+
+
 def accumulate_soft_shadow_map(
     patches,
     pmesh,
@@ -782,82 +879,28 @@ def accumulate_soft_shadow_map(
     not behind the patch (or, with ``check_mesh``, belongs to the patch's own mesh: no
     self-shadowing) gets k = 0, hence a percentage of exactly 0: the float32 inner loop has no
     branch and vectorizes (adding 0.0 leaves the sum unchanged)."""
-    H, W = recv_depth.shape
-    l, r, b, t = svp[VP_L], svp[VP_R], svp[VP_B], svp[VP_T]
-    dxs = (r - l) / W
-    dys = (t - b) / H
-    n_bands = band_ptr.shape[0] - 1
-    touched = np.zeros(n_bands, np.int64)
-    # bands dealt round-robin to ``nslot`` slots, one per thread (Numba splits a prange into equal
-    # contiguous parts: with the shadow in a few bands, contiguous halves would leave a thread idle)
-    for slot in prange(nslot):
-        for bnd in range(slot, n_bands, nslot):
-            r0 = bnd * band_rows
-            r1 = min(r0 + band_rows, H) - 1
-            cnt = 0
-            for q in range(band_ptr[bnd], band_ptr[bnd + 1]):
-                p = band_idx[q]
-                x0, x1, y0, y1, zo = patches[p, 0], patches[p, 1], patches[p, 2], patches[p, 3], patches[p, 4]
-                pm = pmesh[p]
-                i0 = max(ext[p, 0], r0)
-                i1 = min(ext[p, 1], r1)
-                j0 = ext[p, 2]
-                j1 = ext[p, 3] + 1
-                # x terms of the fragment program are linear in the column: a0(j) = ax - j * dax
-                ux0 = l + (j0 + 0.5) * dxs
-                ax = (x0 - ux0 * zo) / (2.0 * hx)
-                wx = (x1 - x0) / (2.0 * hx)
-                dax = dxs * zo / (2.0 * hx)
-                for i in range(i0, i1 + 1):
-                    uy = t - (i + 0.5) * dys
-                    c0 = (y0 - uy * zo) / (2.0 * hy)
-                    c1 = (y1 - uy * zo) / (2.0 * hy)
-                    cnt += j1 - j0
-                    if fp16:
-                        row = recv_depth[i, j0:j1]
-                        out = ssm[i, j0:j1]
-                        for jj in range(row.shape[0]):
-                            zr = np.float64(row[jj])
-                            if zr > zo and not (check_mesh and recv_mesh[i, j0 + jj] == pm):
-                                a0 = ax - jj * dax
-                                c = occlusion_percentage(zr / (zr - zo), a0, a0 + wx, c0, c1)
-                                if c > 0.0:
-                                    out[jj] = np.float32(round_half(np.float64(out[jj]) + round_half(c, rtz), rtz))
-                    elif check_mesh:
-                        ii = np.uint64(i)
-                        zo32 = np.float32(zo)
-                        ax32 = np.float32(ax)
-                        dax32 = np.float32(dax)
-                        wx32 = np.float32(wx)
-                        c032 = np.float32(c0)
-                        c132 = np.float32(c1)
-                        for jj in range(j1 - j0):
-                            jx = np.uint64(j0 + jj)
-                            zr = recv_depth[ii, jx]
-                            k = zr / (zr - zo32)
-                            k = k if zr > zo32 else _F0
-                            k = k if recv_mesh[ii, jx] != pm else _F0
-                            a0 = ax32 - np.float32(jj) * dax32
-                            ssm[ii, jx] += _occlusion_percentage32(k, a0, a0 + wx32, c032, c132)
-                    else:
-                        # float32 arithmetic (a GPU fragment program's; 16 lanes per vector); 2-D subscripts,
-                        # no row views (a view costs a contended atomic refcount update); unsigned
-                        # indices: no negative-index wraparound, so the loop vectorizes
-                        ii = np.uint64(i)
-                        zo32 = np.float32(zo)
-                        ax32 = np.float32(ax)
-                        dax32 = np.float32(dax)
-                        wx32 = np.float32(wx)
-                        c032 = np.float32(c0)
-                        c132 = np.float32(c1)
-                        for jj in range(j1 - j0):
-                            jx = np.uint64(j0 + jj)
-                            zr = recv_depth[ii, jx]
-                            k = zr / (zr - zo32)
-                            k = k if zr > zo32 else _F0
-                            a0 = ax32 - np.float32(jj) * dax32
-                            ssm[ii, jx] += _occlusion_percentage32(k, a0, a0 + wx32, c032, c132)
-            touched[bnd] = cnt
+    touched = np.zeros(band_ptr.shape[0] - 1, np.int64)
+    run_slots(
+        accumulate_soft_shadow_map_slot,
+        nslot,
+        patches,
+        pmesh,
+        ext,
+        band_ptr,
+        band_idx,
+        band_rows,
+        recv_depth,
+        recv_mesh,
+        svp,
+        hx,
+        hy,
+        fp16,
+        rtz,
+        check_mesh,
+        ssm,
+        touched,
+        nslot,
+    )
     return touched
 
 
@@ -1087,7 +1130,178 @@ def disk_frames32(recv_depth, svp, rho):
     return out
 
 
-@kernel(parallel=True)
+@kernel(nogil=True)
+def accumulate_soft_shadow_map_sphere_slot(
+    slot,
+    patches,
+    pmesh,
+    ext,
+    band_ptr,
+    band_idx,
+    band_rows,
+    recv_depth,
+    recv_mesh,
+    frames,
+    frames32,
+    fp16,
+    rtz,
+    check_mesh,
+    ssm,
+    svp,
+    rho,
+    touched,
+    nslot,
+):
+    """Slot ``slot`` of :func:`accumulate_soft_shadow_map_sphere` (``run_slots``): bands slot, slot + nslot, ..."""
+    H, W = recv_depth.shape
+    l, r, b, t = svp[VP_L], svp[VP_R], svp[VP_B], svp[VP_T]
+    dxs = (r - l) / W
+    dys = (t - b) / H
+    n_bands = band_ptr.shape[0] - 1
+    sx = np.empty(8)
+    sy = np.empty(8)
+    sz = np.empty(8)
+    sh = np.empty(8)
+    tx = np.empty(8)
+    ty = np.empty(8)
+    tz = np.empty(8)
+    th = np.empty(8)
+    flags = np.zeros(8 * ((W + 7) // 8), np.bool_)
+    flags64 = flags.view(np.uint64)
+    cap = max(CROSSING_BATCH, 2 * W)
+    rows = np.zeros(cap, np.int64)
+    cols = np.zeros(cap, np.int64)
+    vals = np.zeros(cap, np.float32)
+    UV = np.empty((8, cap + 24), np.float32)  # the crossing pairs' projected corners
+    bad = np.zeros(cap, np.bool_)
+    Q = np.empty((6, cap + 24))  # row stride not a multiple of 4 KiB: no cache-set conflicts
+    pk = np.empty(12, np.float32)
+    F1 = np.empty((12, 1, 1))
+    f12 = np.empty(12)
+    ramp = np.empty(W, np.int32)  # 0, 1, 2, ...: the row pass's column mask
+    for j in range(W):
+        ramp[j] = j
+    for bnd in range(slot, n_bands, nslot):
+        r0 = bnd * band_rows
+        r1 = min(r0 + band_rows, H) - 1
+        cnt = 0
+        m = 0
+        for q in range(band_ptr[bnd], band_ptr[bnd + 1]):
+            p = band_idx[q]
+            x0, x1, y0, y1, zo = patches[p, 0], patches[p, 1], patches[p, 2], patches[p, 3], patches[p, 4]
+            pm = pmesh[p]
+            i0 = max(ext[p, 0], r0)
+            i1 = min(ext[p, 1], r1)
+            j0 = ext[p, 2]
+            j1 = ext[p, 3] + 1
+            # the row pass runs over whole vectors of 16 texels from ``base``
+            nl = 16 * ((j1 - j0 + 15) // 16)
+            if nl <= W:
+                base = min(j0, W - nl)
+            else:
+                base = j0
+                nl = j1 - j0
+            if not fp16:
+                _patch_constants(x0, x1, y0, y1, zo, pk)
+            for i in range(i0, i1 + 1):
+                cnt += j1 - j0
+                if fp16:
+                    for j in range(j0, j1):
+                        zr = np.float64(recv_depth[i, j])
+                        if not (zr > zo) or (check_mesh and recv_mesh[i, j] == pm):
+                            continue
+                        c = occlusion_percentage_disk(frames, i, j, x0, x1, y0, y1, zo, sx, sy, sz, sh, tx, ty, tz, th)
+                        if c > 0.0:
+                            ssm[i, j] = np.float32(round_half(np.float64(ssm[i, j]) + round_half(c, rtz), rtz))
+                    continue
+                # float32 sums: a branch-free pass over the row (vectorizes) adds the patch's
+                # area where it projects inside the disk, nothing where it misses the cone, and
+                # flags the other texels (a few per row), which are queued and computed in
+                # batches (vectorized), added after the band's other contributions
+                # one instance per value of check_mesh: without it the mesh test folds away
+                if check_mesh:
+                    _disk_row_pass(
+                        frames32,
+                        recv_depth,
+                        recv_mesh,
+                        ssm,
+                        flags,
+                        ramp,
+                        i,
+                        base,
+                        nl,
+                        j0,
+                        j1,
+                        x0,
+                        x1,
+                        y0,
+                        y1,
+                        zo,
+                        pm,
+                        True,
+                        pk,
+                    )
+                else:
+                    _disk_row_pass(
+                        frames32,
+                        recv_depth,
+                        recv_mesh,
+                        ssm,
+                        flags,
+                        ramp,
+                        i,
+                        base,
+                        nl,
+                        j0,
+                        j1,
+                        x0,
+                        x1,
+                        y0,
+                        y1,
+                        zo,
+                        pm,
+                        False,
+                        pk,
+                    )
+                flagged = np.uint64(0)
+                for blk in range((nl + 7) // 8):
+                    flagged |= flags64[blk]
+                if flagged:
+                    if m + (j1 - j0) > cap:
+                        _flush_crossings(
+                            F1,
+                            f12,
+                            Q,
+                            rows,
+                            cols,
+                            vals,
+                            bad,
+                            UV,
+                            m,
+                            ssm,
+                            l,
+                            t,
+                            dxs,
+                            dys,
+                            rho,
+                            sx,
+                            sy,
+                            sz,
+                            sh,
+                            tx,
+                            ty,
+                            tz,
+                            th,
+                        )
+                        m = 0
+                    m = _queue_crossings(recv_depth, flags, flags64, i, base, nl, x0, x1, y0, y1, zo, Q, rows, cols, m)
+        if m:
+            _flush_crossings(
+                F1, f12, Q, rows, cols, vals, bad, UV, m, ssm, l, t, dxs, dys, rho, sx, sy, sz, sh, tx, ty, tz, th
+            )
+        touched[bnd] = cnt
+
+
 def accumulate_soft_shadow_map_sphere(
     patches,
     pmesh,
@@ -1113,159 +1327,29 @@ def accumulate_soft_shadow_map_sphere(
     :func:`disk_frames` of the texels (read with ``fp16`` only), ``frames32``: :func:`disk_frames32`;
     ``svp``: the SSM's view parameters, ``rho``: the light's radius (the crossing pairs' frames are
     recomputed)."""
-    H, W = recv_depth.shape
-    l, r, b, t = svp[VP_L], svp[VP_R], svp[VP_B], svp[VP_T]
-    dxs = (r - l) / W
-    dys = (t - b) / H
-    n_bands = band_ptr.shape[0] - 1
-    touched = np.zeros(n_bands, np.int64)
-    for slot in prange(nslot):
-        sx = np.empty(8)
-        sy = np.empty(8)
-        sz = np.empty(8)
-        sh = np.empty(8)
-        tx = np.empty(8)
-        ty = np.empty(8)
-        tz = np.empty(8)
-        th = np.empty(8)
-        flags = np.zeros(8 * ((W + 7) // 8), np.bool_)
-        flags64 = flags.view(np.uint64)
-        cap = max(CROSSING_BATCH, 2 * W)
-        rows = np.zeros(cap, np.int64)
-        cols = np.zeros(cap, np.int64)
-        vals = np.zeros(cap, np.float32)
-        UV = np.empty((8, cap + 24), np.float32)  # the crossing pairs' projected corners
-        bad = np.zeros(cap, np.bool_)
-        Q = np.empty((6, cap + 24))  # row stride not a multiple of 4 KiB: no cache-set conflicts
-        pk = np.empty(12, np.float32)
-        F1 = np.empty((12, 1, 1))
-        f12 = np.empty(12)
-        ramp = np.empty(W, np.int32)  # 0, 1, 2, ...: the row pass's column mask
-        for j in range(W):
-            ramp[j] = j
-        for bnd in range(slot, n_bands, nslot):
-            r0 = bnd * band_rows
-            r1 = min(r0 + band_rows, H) - 1
-            cnt = 0
-            m = 0
-            for q in range(band_ptr[bnd], band_ptr[bnd + 1]):
-                p = band_idx[q]
-                x0, x1, y0, y1, zo = patches[p, 0], patches[p, 1], patches[p, 2], patches[p, 3], patches[p, 4]
-                pm = pmesh[p]
-                i0 = max(ext[p, 0], r0)
-                i1 = min(ext[p, 1], r1)
-                j0 = ext[p, 2]
-                j1 = ext[p, 3] + 1
-                # the row pass runs over whole vectors of 16 texels from ``base``
-                nl = 16 * ((j1 - j0 + 15) // 16)
-                if nl <= W:
-                    base = min(j0, W - nl)
-                else:
-                    base = j0
-                    nl = j1 - j0
-                if not fp16:
-                    _patch_constants(x0, x1, y0, y1, zo, pk)
-                for i in range(i0, i1 + 1):
-                    cnt += j1 - j0
-                    if fp16:
-                        for j in range(j0, j1):
-                            zr = np.float64(recv_depth[i, j])
-                            if not (zr > zo) or (check_mesh and recv_mesh[i, j] == pm):
-                                continue
-                            c = occlusion_percentage_disk(
-                                frames, i, j, x0, x1, y0, y1, zo, sx, sy, sz, sh, tx, ty, tz, th
-                            )
-                            if c > 0.0:
-                                ssm[i, j] = np.float32(round_half(np.float64(ssm[i, j]) + round_half(c, rtz), rtz))
-                        continue
-                    # float32 sums: a branch-free pass over the row (vectorizes) adds the patch's
-                    # area where it projects inside the disk, nothing where it misses the cone, and
-                    # flags the other texels (a few per row), which are queued and computed in
-                    # batches (vectorized), added after the band's other contributions
-                    # one instance per value of check_mesh: without it the mesh test folds away
-                    if check_mesh:
-                        _disk_row_pass(
-                            frames32,
-                            recv_depth,
-                            recv_mesh,
-                            ssm,
-                            flags,
-                            ramp,
-                            i,
-                            base,
-                            nl,
-                            j0,
-                            j1,
-                            x0,
-                            x1,
-                            y0,
-                            y1,
-                            zo,
-                            pm,
-                            True,
-                            pk,
-                        )
-                    else:
-                        _disk_row_pass(
-                            frames32,
-                            recv_depth,
-                            recv_mesh,
-                            ssm,
-                            flags,
-                            ramp,
-                            i,
-                            base,
-                            nl,
-                            j0,
-                            j1,
-                            x0,
-                            x1,
-                            y0,
-                            y1,
-                            zo,
-                            pm,
-                            False,
-                            pk,
-                        )
-                    flagged = np.uint64(0)
-                    for blk in range((nl + 7) // 8):
-                        flagged |= flags64[blk]
-                    if flagged:
-                        if m + (j1 - j0) > cap:
-                            _flush_crossings(
-                                F1,
-                                f12,
-                                Q,
-                                rows,
-                                cols,
-                                vals,
-                                bad,
-                                UV,
-                                m,
-                                ssm,
-                                l,
-                                t,
-                                dxs,
-                                dys,
-                                rho,
-                                sx,
-                                sy,
-                                sz,
-                                sh,
-                                tx,
-                                ty,
-                                tz,
-                                th,
-                            )
-                            m = 0
-                        m = _queue_crossings(
-                            recv_depth, flags, flags64, i, base, nl, x0, x1, y0, y1, zo, Q, rows, cols, m
-                        )
-            if m:
-                _flush_crossings(
-                    F1, f12, Q, rows, cols, vals, bad, UV, m, ssm, l, t, dxs, dys, rho, sx, sy, sz, sh, tx, ty, tz, th
-                )
-            touched[bnd] = cnt
+    touched = np.zeros(band_ptr.shape[0] - 1, np.int64)
+    run_slots(
+        accumulate_soft_shadow_map_sphere_slot,
+        nslot,
+        patches,
+        pmesh,
+        ext,
+        band_ptr,
+        band_idx,
+        band_rows,
+        recv_depth,
+        recv_mesh,
+        frames,
+        frames32,
+        fp16,
+        rtz,
+        check_mesh,
+        ssm,
+        svp,
+        rho,
+        touched,
+        nslot,
+    )
     return touched
 
 
