@@ -512,7 +512,7 @@ def _tie(dx, dy):
     return dy > 0.0 or (dy == 0.0 and dx > 0.0)
 
 
-@kernel(nogil=True)
+@kernel(nogil=True, nrt=False)
 def _umbra_kernel_slot(
     _worker,
     g_start,

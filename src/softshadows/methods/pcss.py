@@ -296,7 +296,7 @@ def _region_empty(sat, cell, H, W, sx, sy, rx, ry):
     return sat[gy1, gx1] - sat[gy0, gx1] - sat[gy1, gx0] + sat[gy0, gx0] == 0
 
 
-@kernel(nogil=True)
+@kernel(nogil=True, nrt=False)
 def blocker_search_kernel_slot(
     slot,
     vp,
@@ -456,7 +456,7 @@ def penumbra_estimation(z_receiver, z_blocker, w_light):
     return (z_receiver - z_blocker) * w_light / z_blocker
 
 
-@kernel(nogil=True)
+@kernel(nogil=True, nrt=False)
 def filtering_kernel_slot(
     slot,
     vp,

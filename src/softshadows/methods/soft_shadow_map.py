@@ -753,7 +753,7 @@ def bin_patches_by_band(ext, n_bands, band_rows):
     return cnt, idx
 
 
-@kernel(nogil=True)
+@kernel(nogil=True, nrt=False)
 def accumulate_soft_shadow_map_slot(
     slot,
     patches,

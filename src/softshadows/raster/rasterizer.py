@@ -1505,7 +1505,7 @@ def _blend_list(prog, pparams, TL, qa, qb, prect, full, e0, e1, e2, pl, q, ca, z
 # p + 2n, ... A slot is a serial kernel run on its own thread by ``run_slots`` (not a prange: the
 # parfor compiled the body twice, docs/results/cold-start.md); its scratch is indexed by the slot.
 # ----------------------------------------------------------------------------------------------
-@kernel(nogil=True)
+@kernel(nogil=True, nrt=False)
 def _tiles_depth_slot(slot, fe, sc, depth_out, tri_out, zt, ft):
     """Slot ``slot`` of :func:`_tiles_depth` (``run_slots``)."""
     vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, _normals, _rowbits, sh, tri = fe
@@ -1551,7 +1551,7 @@ def _tiles_depth(fe, sc, depth_out, tri_out, zt, ft):
     run_slots(_tiles_depth_slot, sc[5], fe, sc, depth_out, tri_out, zt, ft)
 
 
-@kernel(nogil=True)
+@kernel(nogil=True, nrt=False)
 def _tiles_gbuffer_slot(slot, fe, sc, out):
     """Slot ``slot`` of :func:`_tiles_gbuffer` (``run_slots``)."""
     vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, normals, _rowbits, sh, tri = fe
@@ -1581,7 +1581,7 @@ def _tiles_gbuffer(fe, sc, out):
     run_slots(_tiles_gbuffer_slot, sc[5], fe, sc, out)
 
 
-@kernel(nogil=True)
+@kernel(nogil=True, nrt=False)
 def _tiles_count_slot(slot, fe, sc, fcount):
     """Slot ``slot`` of :func:`_tiles_count` (``run_slots``)."""
     vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, _normals, _rowbits, sh, _tri = fe
@@ -1627,7 +1627,7 @@ def _tiles_count(fe, sc, fcount):
     run_slots(_tiles_count_slot, sc[5], fe, sc, fcount)
 
 
-@kernel(nogil=True)
+@kernel(nogil=True, nrt=False)
 def _tiles_fragments_slot(slot, fe, sc, foff, fpix, ftri, fbary, fdepth):
     """Slot ``slot`` of :func:`_tiles_fragments` (``run_slots``)."""
     vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, _normals, _rowbits, sh, tri = fe
@@ -1769,7 +1769,7 @@ def _make_min_blend_slot(prog):
     of the closure: each kernel compiles only its own program, which inlines into the vector loops;
     a closure over an int is cached across processes)."""
 
-    @kernel(nogil=True)
+    @kernel(nogil=True, nrt=False)
     def slot_fn(slot, fe, sc, mb):
         """Slot ``slot`` of a min-blend tile pass (``_MIN_BLEND_KERNELS``), on its own thread
         (``run_slots``)."""
