@@ -111,11 +111,16 @@ _POOL = None
 _POOL_LOCK = threading.Lock()
 
 
+_POOL_PID = 0
+
+
 def _pool(n: int):
-    global _POOL
+    """The slot threads (made again in a forked child, which does not inherit them)."""
+    global _POOL, _POOL_PID
     with _POOL_LOCK:
-        if _POOL is None or _POOL._max_workers < n:
+        if _POOL is None or _POOL._max_workers < n or os.getpid() != _POOL_PID:
             _POOL = concurrent.futures.ThreadPoolExecutor(max_workers=n, thread_name_prefix="softshadows-slot")
+            _POOL_PID = os.getpid()
         return _POOL
 
 
