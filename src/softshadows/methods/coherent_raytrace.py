@@ -698,7 +698,7 @@ def predict_visibility(ox, oy, oz, blk, nblk, hires_done, cen, u, v, nl, N, H, s
 
 
 @kernel(nogil=True)
-def coherent_tiles_slot(
+def coherent_tiles(
     slot,
     nslot,
     pts,
@@ -733,7 +733,9 @@ def coherent_tiles_slot(
     nrays,
     cnt,
 ):
-    """Slot ``slot`` of :func:`coherent_tiles` (``run_slots``): tiles slot, slot + nslot, ..."""
+    """The SoftShad procedure, one coherent walk per tile (``order[tstart[t]:tstart[t+1]]``: the
+    tile's points, serpentine), tiles in parallel; each tile starts with an empty blocker points
+    list, so the output does not depend on the number of threads. Run by ``run_slots``, one slot per thread."""
     ntile = tstart.shape[0] - 1
     nref = vps.shape[0]
     nlev = offs.shape[0] - 1
@@ -872,81 +874,6 @@ def coherent_tiles_slot(
             valid = True
 
 
-def coherent_tiles(
-    pts,
-    nrm,
-    pix,
-    self_occ,
-    self_sin,
-    order,
-    tstart,
-    cen,
-    u,
-    v,
-    nl,
-    N,
-    H,
-    seed,
-    coherence,
-    hires_done,
-    reset2,
-    offset,
-    vps,
-    D,
-    MN,
-    MX,
-    CONN,
-    offs,
-    gapk,
-    kpix0,
-    flags,
-    vis,
-    irr,
-    nrays,
-    cnt,
-):
-    """The SoftShad procedure, one coherent walk per tile (``order[tstart[t]:tstart[t+1]]``: the
-    tile's points, serpentine), tiles in parallel; each tile starts with an empty blocker points
-    list, so the output does not depend on the number of threads."""
-    n = numba.get_num_threads()
-    run_slots(
-        coherent_tiles_slot,
-        n,
-        n,
-        pts,
-        nrm,
-        pix,
-        self_occ,
-        self_sin,
-        order,
-        tstart,
-        cen,
-        u,
-        v,
-        nl,
-        N,
-        H,
-        seed,
-        coherence,
-        hires_done,
-        reset2,
-        offset,
-        vps,
-        D,
-        MN,
-        MX,
-        CONN,
-        offs,
-        gapk,
-        kpix0,
-        flags,
-        vis,
-        irr,
-        nrays,
-        cnt,
-    )
-
-
 def tile_order(idx: np.ndarray, width: int, tile: int) -> tuple[np.ndarray, np.ndarray]:
     """Points (flat eye-pixel indices ``idx``) grouped by ``tile`` x ``tile`` pixel tiles, serpentine
     inside each tile (rows alternate direction), so consecutive points are image neighbours.
@@ -1080,7 +1007,10 @@ class CoherentRaytrace(Method):
             nrays = np.zeros(K, np.int32)
             cnt = np.zeros((max(ntile, 1), N_COUNTERS), np.int64)
             if K:
-                coherent_tiles(
+                run_slots(
+                    coherent_tiles,
+                    numba.get_num_threads(),
+                    numba.get_num_threads(),
                     pts,
                     nrm,
                     idx,

@@ -513,7 +513,7 @@ def _tie(dx, dy):
 
 
 @kernel(nogil=True, nrt=False)
-def _umbra_kernel_slot(
+def _umbra_kernel(
     _worker,
     g_start,
     sx,
@@ -541,7 +541,8 @@ def _umbra_kernel_slot(
     counter,
     n_workers,
 ):
-    """One worker of :func:`_umbra_kernel` (``run_slots``)."""
+    """One worker of the umbra pass (:func:`count_umbrae`), run by ``run_slots``, one per thread: takes
+    the next bin of ``bin_order`` (``next_item``) until none is left."""
     kf = slice_scale(dlo, dhi, S)
     while True:
         q = next_item(counter)
@@ -614,64 +615,6 @@ def _umbra_kernel_slot(
         tests[bi] = ntest
 
 
-def _umbra_kernel(
-    g_start,
-    sx,
-    sy,
-    sp,
-    sd,
-    gx,
-    gy,
-    B,
-    nbx,
-    S,
-    dlo,
-    dhi,
-    vp,
-    center,
-    verts,
-    faces,
-    tri2d,
-    trid,
-    bin_start,
-    bin_items,
-    umbra,
-    tests,
-    bin_order,
-    counter,
-    n_workers,
-):
-    run_slots(
-        _umbra_kernel_slot,
-        n_workers,
-        g_start,
-        sx,
-        sy,
-        sp,
-        sd,
-        gx,
-        gy,
-        B,
-        nbx,
-        S,
-        dlo,
-        dhi,
-        vp,
-        center,
-        verts,
-        faces,
-        tri2d,
-        trid,
-        bin_start,
-        bin_items,
-        umbra,
-        tests,
-        bin_order,
-        counter,
-        n_workers,
-    )
-
-
 def count_umbrae(grid: SampleGrid, verts, faces, counted, center) -> tuple[np.ndarray, dict]:
     """Step (b): per sample, the number of counted triangles crossed by the segment sample -> light
     centre (hard irregular shadow mapping, counting depth complexity): every triangle is projected
@@ -693,7 +636,9 @@ def count_umbrae(grid: SampleGrid, verts, faces, counted, center) -> tuple[np.nd
     bstart, bitems = _pairs_by_bin(counts, pair_bin, grid.n_bins)
     umbra = np.zeros(len(grid.order), np.int32)
     tests = np.zeros(grid.n_bins, np.int64)
-    _umbra_kernel(
+    run_slots(
+        _umbra_kernel,
+        numba.get_num_threads(),
         grid.start,
         grid.ix,
         grid.iy,
@@ -1606,7 +1551,7 @@ def _seg_box_dist(ax, ay, bx, by, x0, x1, y0, y1):
 
 
 @kernel(nogil=True)
-def _penumbra_kernel_slot(
+def _penumbra_kernel(
     _worker,
     wc2,
     col_box,
@@ -1654,7 +1599,8 @@ def _penumbra_kernel_slot(
     max_col,
     max_bin,
 ):
-    """One worker of :func:`_penumbra_kernel` (``run_slots``)."""
+    """One worker of the penumbra pass (:func:`accumulate_penumbrae`), run by ``run_slots``, one per
+    thread: takes the next bin of ``bin_order`` (``next_item``) until none is left."""
     l, r, b, t = vp[VP_L], vp[VP_R], vp[VP_B], vp[VP_T]
     cw = (r - l) / gx
     ch = (t - b) / gy
@@ -1815,104 +1761,6 @@ def _penumbra_kernel_slot(
         evals[bi] = nev
 
 
-def _penumbra_kernel(
-    wc2,
-    col_box,
-    g_start,
-    gx,
-    gy,
-    B,
-    nbx,
-    S,
-    dlo,
-    dhi,
-    dmax,
-    bin_maxd,
-    vp,
-    shape,
-    center,
-    nrm_l,
-    spos,
-    sdist,
-    six,
-    siy,
-    u,
-    v,
-    radius,
-    hu,
-    hv,
-    qd,
-    ea,
-    eb,
-    tv_start,
-    tv,
-    bin_start,
-    bin_items,
-    per_bin,
-    wedge,
-    count_only,
-    pen,
-    frags,
-    tests,
-    hits,
-    evals,
-    bin_order,
-    counter,
-    n_workers,
-    max_col,
-    max_bin,
-):
-    run_slots(
-        _penumbra_kernel_slot,
-        n_workers,
-        wc2,
-        col_box,
-        g_start,
-        gx,
-        gy,
-        B,
-        nbx,
-        S,
-        dlo,
-        dhi,
-        dmax,
-        bin_maxd,
-        vp,
-        shape,
-        center,
-        nrm_l,
-        spos,
-        sdist,
-        six,
-        siy,
-        u,
-        v,
-        radius,
-        hu,
-        hv,
-        qd,
-        ea,
-        eb,
-        tv_start,
-        tv,
-        bin_start,
-        bin_items,
-        per_bin,
-        wedge,
-        count_only,
-        pen,
-        frags,
-        tests,
-        hits,
-        evals,
-        bin_order,
-        counter,
-        n_workers,
-        max_col,
-        max_bin,
-    )
-
-
 def _light_params(light):
     if light.shape == "sphere":
         z = np.zeros(3)
@@ -1940,7 +1788,9 @@ def accumulate_penumbrae(
     frags, tests, hits = np.zeros(nb, np.int64), np.zeros(nb, np.int64), np.zeros(nb, np.int64)
     evals = np.zeros(nb, np.int64)
     rad = radius if shape == 1 else bound_r
-    _penumbra_kernel(
+    run_slots(
+        _penumbra_kernel,
+        numba.get_num_threads(),
         window_corner2(grid.vp),
         grid.col_box,
         grid.start,

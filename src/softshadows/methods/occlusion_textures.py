@@ -625,10 +625,14 @@ def slice_weight(pz, z_top, z_low, thick, mode):
 # 6. Eye pass (Sec. 3.5): per point, all slices between it and the light
 # =====================================================================================
 @kernel(nogil=True)
-def eye_pass_slot(
+def eye_pass(
     tslot, pts, sp, z_planes, slot, bbox, filt, combine, self_mode, max_aniso, pyr, offs, sizes, nb, sat, out, nslot=1
 ):
-    """Slot ``tslot`` of :func:`eye_pass` (``run_slots``)."""
+    """V for every point ``pts`` (K,3) world. ``slot[k]`` is the index of slice k in the filtered
+    arrays, -1 for an empty slice (skipped: its occlusion is 0). ``bbox[slot]`` = (x0, x1, y0, y1)
+    texel bounds of the slice's occupied texels: a kernel whose filter support (the rectangle,
+    widened by what the N-Buffer boxes or the mipmap probes read beyond it) misses them has
+    occlusion 0 and is skipped, so the result is unchanged. Run by ``run_slots``, one slot per thread."""
     n = z_planes.shape[0] - 1
     thick = (z_planes[n] - z_planes[0]) / n
     # per slice plane, the constants of kernel_rect's map to texels (no division per point)
@@ -683,36 +687,6 @@ def eye_pass_slot(
                 if combine == 0 and acc <= 0.0:
                     break  # product already 0
             out[i] = finish_visibility(acc, combine)
-
-
-def eye_pass(
-    pts, sp, z_planes, slot, bbox, filt, combine, self_mode, max_aniso, pyr, offs, sizes, nb, sat, out, nslot=1
-):
-    """V for every point ``pts`` (K,3) world. ``slot[k]`` is the index of slice k in the filtered
-    arrays, -1 for an empty slice (skipped: its occlusion is 0). ``bbox[slot]`` = (x0, x1, y0, y1)
-    texel bounds of the slice's occupied texels: a kernel whose filter support (the rectangle,
-    widened by what the N-Buffer boxes or the mipmap probes read beyond it) misses them has
-    occlusion 0 and is skipped, so the result is unchanged."""
-    run_slots(
-        eye_pass_slot,
-        nslot,
-        pts,
-        sp,
-        z_planes,
-        slot,
-        bbox,
-        filt,
-        combine,
-        self_mode,
-        max_aniso,
-        pyr,
-        offs,
-        sizes,
-        nb,
-        sat,
-        out,
-        nslot,
-    )
 
 
 def nbuffer_levels_needed(setup: SlicingSetup, pz_max: float) -> int:
@@ -813,7 +787,9 @@ def occlusion_visibility(
         vis = np.ones(len(pos), np.float64)
         if len(pos) and len(tex_used):
             pyr, offs, sizes, nb, sat = arrays
-            eye_pass(
+            run_slots(
+                eye_pass,
+                numba.get_num_threads(),
                 pos,
                 setup.params(),
                 setup.z_planes,

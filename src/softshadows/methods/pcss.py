@@ -297,7 +297,7 @@ def _region_empty(sat, cell, H, W, sx, sy, rx, ry):
 
 
 @kernel(nogil=True, nrt=False)
-def blocker_search_kernel_slot(
+def blocker_search_kernel(
     slot,
     vp,
     depth_map,
@@ -319,7 +319,10 @@ def blocker_search_kernel_slot(
     search_out,
     nslot=1,
 ):
-    """Slot ``slot`` of :func:`blocker_search_kernel` (``run_slots``)."""
+    """Step 1. Per point: receiver depth (minus bias), average blocker depth and blocker count
+    over the search region (point-sampled taps). ``half_light`` = (half size x, half size y) of
+    the light in world units, along the map's right/up axes. ``sat``: :func:`occupancy_grid`'s
+    table (a region over empty cells has no blocker: its taps are not taken). Run by ``run_slots``, one slot per thread."""
     n = pts.shape[0]
     H, W = depth_map.shape
     S = pattern.shape[0]
@@ -396,56 +399,6 @@ def blocker_search_kernel_slot(
             nblk_out[k] = cnt
 
 
-def blocker_search_kernel(
-    vp,
-    depth_map,
-    pts,
-    nrm,
-    bias,
-    slope_bias,
-    half_light,
-    z_near,
-    pattern,
-    disk,
-    rotate,
-    seed,
-    plane,
-    sat,
-    zr_out,
-    avg_out,
-    nblk_out,
-    search_out,
-    nslot=1,
-):
-    """Step 1. Per point: receiver depth (minus bias), average blocker depth and blocker count
-    over the search region (point-sampled taps). ``half_light`` = (half size x, half size y) of
-    the light in world units, along the map's right/up axes. ``sat``: :func:`occupancy_grid`'s
-    table (a region over empty cells has no blocker: its taps are not taken)."""
-    run_slots(
-        blocker_search_kernel_slot,
-        nslot,
-        vp,
-        depth_map,
-        pts,
-        nrm,
-        bias,
-        slope_bias,
-        half_light,
-        z_near,
-        pattern,
-        disk,
-        rotate,
-        seed,
-        plane,
-        sat,
-        zr_out,
-        avg_out,
-        nblk_out,
-        search_out,
-        nslot,
-    )
-
-
 @kernel(inline=True)
 def penumbra_estimation(z_receiver, z_blocker, w_light):
     """Step 2 (per point and light axis): the parallel-plane penumbra width on the receiver,
@@ -457,7 +410,7 @@ def penumbra_estimation(z_receiver, z_blocker, w_light):
 
 
 @kernel(nogil=True, nrt=False)
-def filtering_kernel_slot(
+def filtering_kernel(
     slot,
     vp,
     depth_map,
@@ -478,7 +431,8 @@ def filtering_kernel_slot(
     radius_out,
     nslot=1,
 ):
-    """Slot ``slot`` of :func:`filtering_kernel` (``run_slots``)."""
+    """Steps 2 and 3 per point: penumbra estimation, then percentage-closer filtering with a
+    kernel of radius w / 2 (per light axis) in texels at the receiver's depth. Run by ``run_slots``, one slot per thread."""
     n = pts.shape[0]
     S = pattern.shape[0]
     texel1 = (vp[VP_R] - vp[VP_L]) / vp[VP_W]  # texel size at depth 1 (perspective map)
@@ -537,52 +491,6 @@ def filtering_kernel_slot(
             out[k] = min(max(v, 0.0), 1.0)
 
 
-def filtering_kernel(
-    vp,
-    depth_map,
-    pts,
-    nrm,
-    zr,
-    avg,
-    nblk,
-    light_w,
-    pattern,
-    disk,
-    rotate,
-    seed,
-    bilinear,
-    plane,
-    out,
-    wp_out,
-    radius_out,
-    nslot=1,
-):
-    """Steps 2 and 3 per point: penumbra estimation, then percentage-closer filtering with a
-    kernel of radius w / 2 (per light axis) in texels at the receiver's depth."""
-    run_slots(
-        filtering_kernel_slot,
-        nslot,
-        vp,
-        depth_map,
-        pts,
-        nrm,
-        zr,
-        avg,
-        nblk,
-        light_w,
-        pattern,
-        disk,
-        rotate,
-        seed,
-        bilinear,
-        plane,
-        out,
-        wp_out,
-        radius_out,
-        nslot,
-    )
-
-
 # ---- the paper's steps (orchestration) ---------------------------------------------------------
 def light_extent(light) -> np.ndarray:
     """Light width along the map's (right, up) axes: rect (|u|, |v|), sphere (2r, 2r)."""
@@ -604,7 +512,9 @@ def blocker_search(smap, pts, nrm, light, bias, slope_bias, pattern, disk, rotat
     if not np.isfinite(z_near):
         z_near = float(smap.view.near)
     z_near = max(z_near, 1e-9)
-    blocker_search_kernel(
+    run_slots(
+        blocker_search_kernel,
+        numba.get_num_threads(),
         smap.vp,
         smap.depth,
         pts,
@@ -635,7 +545,9 @@ def filtering(smap, pts, nrm, zr, avg, nblk, light, pattern, disk, rotate, seed,
     out = np.empty(n, np.float32)
     wp = np.empty(n, np.float64)
     radius = np.empty(n, np.float64)
-    filtering_kernel(
+    run_slots(
+        filtering_kernel,
+        numba.get_num_threads(),
         smap.vp,
         smap.depth,
         pts,
