@@ -17,11 +17,11 @@ decrefs of their array arguments stay in the loop), without it as fast as IR-inl
 (docs/results/cold-start.md). ``SOFTSHADOWS_INLINE`` (``ir``, ``llvm``: every helper one way;
 ``none``: no inlining, frames up to 2x slower) is kept for measuring.
 
-``nrt=False`` compiles without Numba's reference counting. A serial function called from a parallel
-kernel's body (to keep a large body out of the parfor, whose compile time grows faster than its
-size) otherwise increfs and decrefs every array its IR-inlined helpers receive, at every
-iteration: atomic operations that made such a function up to 2x slower than the same loop inside
-the parfor (``irregular.scalar_edge_terms``). Such a function must not allocate.
+``nrt=False`` compiles without Numba's reference counting. A serial function (a work function
+called from a parallel kernel, or a slot kernel run by :func:`run_slots`) otherwise increfs and
+decrefs every array its inlined helpers receive, at every iteration: atomic operations that made
+such a function up to 2x slower than the same loop inside a parfor (``irregular.scalar_edge_terms``;
+``pcss``' slot kernels 1.2x). Such a function must not allocate (Numba says so when it compiles).
 
 No kernel gets Numba's C callback ("cfunc") wrapper, and ``inline`` helpers get no CPython wrapper
 either: they are only called from kernels, and the wrappers were about a tenth of a cold
@@ -107,21 +107,21 @@ def py_callable(helper):
     return call
 
 
-_POOL = None
+_POOL = None  # the slot threads: (executor, its size, the process that made it)
 _POOL_LOCK = threading.Lock()
 
 
-_POOL_PID = 0
-
-
 def _pool(n: int):
-    """The slot threads (made again in a forked child, which does not inherit them)."""
-    global _POOL, _POOL_PID
+    """At least n slot threads (made again in a forked child, which does not inherit them)."""
+    global _POOL
     with _POOL_LOCK:
-        if _POOL is None or _POOL._max_workers < n or os.getpid() != _POOL_PID:
-            _POOL = concurrent.futures.ThreadPoolExecutor(max_workers=n, thread_name_prefix="softshadows-slot")
-            _POOL_PID = os.getpid()
-        return _POOL
+        if _POOL is None or _POOL[1] < n or _POOL[2] != os.getpid():
+            _POOL = (
+                concurrent.futures.ThreadPoolExecutor(max_workers=n, thread_name_prefix="softshadows-slot"),
+                n,
+                os.getpid(),
+            )
+        return _POOL[0]
 
 
 def run_slots(fn, nslot: int, *args) -> None:

@@ -202,6 +202,7 @@ def warm_raster_modes() -> None:
     helper begins with these and the two processes do not compile the same kernels at once."""
     import numpy as np
 
+    from ._jit import run_slots
     from .raster import View
     from .raster import rasterizer as r
     from .raster.programs import PROGRAM_PENUMBRA
@@ -234,7 +235,8 @@ def warm_raster_modes() -> None:
     mb = r._Blend(
         np.zeros(3), np.zeros((0, 3)), np.zeros((H, W), np.float32), out, stats, 0, False, r._texel_scratch(), 0
     )
-    r._MIN_BLEND_KERNELS[PROGRAM_PENUMBRA](fe, r._scratch(fe.tile), mb)
+    sc = r._scratch(fe.tile)
+    run_slots(r._MIN_BLEND_KERNELS[PROGRAM_PENUMBRA], sc.nslot, fe, sc, mb)
 
 
 def _main(argv) -> int:

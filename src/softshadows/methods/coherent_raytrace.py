@@ -1007,10 +1007,11 @@ class CoherentRaytrace(Method):
             nrays = np.zeros(K, np.int32)
             cnt = np.zeros((max(ntile, 1), N_COUNTERS), np.int64)
             if K:
+                nslot = numba.get_num_threads()
                 run_slots(
                     coherent_tiles,
-                    numba.get_num_threads(),
-                    numba.get_num_threads(),
+                    nslot,
+                    nslot,
                     pts,
                     nrm,
                     idx,

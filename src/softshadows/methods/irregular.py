@@ -539,7 +539,6 @@ def _umbra_kernel(
     tests,
     bin_order,
     counter,
-    n_workers,
 ):
     """One worker of the umbra pass (:func:`count_umbrae`), run by ``run_slots``, one per thread: takes
     the next bin of ``bin_order`` (``next_item``) until none is left."""
@@ -663,7 +662,6 @@ def count_umbrae(grid: SampleGrid, verts, faces, counted, center) -> tuple[np.nd
         tests,
         bins_by_work(bstart, grid.start, grid.bins * grid.bins * grid.slices),
         np.zeros(1, np.int64),
-        numba.get_num_threads(),
     )
     return umbra, {
         "umbra_triangles": int(valid.sum()),
@@ -1595,7 +1593,6 @@ def _penumbra_kernel(
     evals,
     bin_order,
     counter,
-    n_workers,
     max_col,
     max_bin,
 ):
@@ -1833,7 +1830,6 @@ def accumulate_penumbrae(
         evals,
         bins_by_work(bins[0], grid.start, grid.bins * grid.bins * grid.slices),
         np.zeros(1, np.int64),
-        numba.get_num_threads(),
         int(np.diff(grid.start[:: grid.slices]).max()) if n else 0,
         int(np.diff(grid.start[:: grid.bins * grid.bins * grid.slices]).max()) if n else 0,
     )

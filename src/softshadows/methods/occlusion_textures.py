@@ -787,9 +787,10 @@ def occlusion_visibility(
         vis = np.ones(len(pos), np.float64)
         if len(pos) and len(tex_used):
             pyr, offs, sizes, nb, sat = arrays
+            nslot = numba.get_num_threads()
             run_slots(
                 eye_pass,
-                numba.get_num_threads(),
+                nslot,
                 pos,
                 setup.params(),
                 setup.z_planes,
@@ -805,7 +806,7 @@ def occlusion_visibility(
                 nb,
                 sat,
                 vis,
-                numba.get_num_threads(),
+                nslot,
             )
 
     l, r, b, t = setup.view.window

@@ -512,9 +512,10 @@ def blocker_search(smap, pts, nrm, light, bias, slope_bias, pattern, disk, rotat
     if not np.isfinite(z_near):
         z_near = float(smap.view.near)
     z_near = max(z_near, 1e-9)
+    nslot = numba.get_num_threads()
     run_slots(
         blocker_search_kernel,
-        numba.get_num_threads(),
+        nslot,
         smap.vp,
         smap.depth,
         pts,
@@ -533,7 +534,7 @@ def blocker_search(smap, pts, nrm, light, bias, slope_bias, pattern, disk, rotat
         avg,
         nblk,
         search,
-        numba.get_num_threads(),
+        nslot,
     )
     return zr, avg, nblk, search
 
@@ -545,9 +546,10 @@ def filtering(smap, pts, nrm, zr, avg, nblk, light, pattern, disk, rotate, seed,
     out = np.empty(n, np.float32)
     wp = np.empty(n, np.float64)
     radius = np.empty(n, np.float64)
+    nslot = numba.get_num_threads()
     run_slots(
         filtering_kernel,
-        numba.get_num_threads(),
+        nslot,
         smap.vp,
         smap.depth,
         pts,
@@ -565,7 +567,7 @@ def filtering(smap, pts, nrm, zr, avg, nblk, light, pattern, disk, rotate, seed,
         out,
         wp,
         radius,
-        numba.get_num_threads(),
+        nslot,
     )
     return out, wp, radius
 

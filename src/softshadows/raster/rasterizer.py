@@ -1910,22 +1910,14 @@ _MIN_BLEND_SLOT_ATTRIBUTE = _make_min_blend_slot(PROGRAM_ATTRIBUTE)
 _MIN_BLEND_SLOT_PENUMBRA = _make_min_blend_slot(PROGRAM_PENUMBRA)
 
 
-def _tiles_min_blend_attribute(fe, sc, mb):
-    run_slots(_MIN_BLEND_SLOT_ATTRIBUTE, sc[5], fe, sc, mb)
-
-
-def _tiles_min_blend_penumbra(fe, sc, mb):
-    run_slots(_MIN_BLEND_SLOT_PENUMBRA, sc[5], fe, sc, mb)
-
-
-# fragment program -> its tile kernel. Each kernel: run the program per fragment and MIN-blend its
+# fragment program -> its tile pass's slot kernel (run by ``run_slots``). Each pass: run the program per fragment and MIN-blend its
 # value into ``mb.out``; ``mb.stats[tile]`` += (fragments and kept fragments of the triangles below /
 # from ``mb.split``, pieces culled by depth, by value). With ``mb.cull_discarded``, the pieces of a
 # tile whose every fragment lies at or beyond the depth where the program discards
 # (``discard_depth``, max over the tile) are skipped, and so are the pieces with a constant attribute
 # whose value bound (``value_lower_bound``) is at least the tile's largest value: the output is the
 # same. With a texel mask (``fe.rowbits``), only its texels are shaded, the others keep their value.
-_MIN_BLEND_KERNELS = {PROGRAM_ATTRIBUTE: _tiles_min_blend_attribute, PROGRAM_PENUMBRA: _tiles_min_blend_penumbra}
+_MIN_BLEND_KERNELS = {PROGRAM_ATTRIBUTE: _MIN_BLEND_SLOT_ATTRIBUTE, PROGRAM_PENUMBRA: _MIN_BLEND_SLOT_PENUMBRA}
 assert tuple(_MIN_BLEND_KERNELS) == PROGRAMS
 
 
@@ -2310,7 +2302,8 @@ def rasterize_min_blend(
         _texel_scratch(),
         lmax,
     )
-    kern(fe, _scratch(fe.tile), mb)
+    sc = _scratch(fe.tile)
+    run_slots(kern, sc.nslot, fe, sc, mb)
     tot = bstats.sum(axis=0)
     return {
         "fragments_a": int(tot[0]),
