@@ -204,3 +204,80 @@ def test_helpers_have_no_python_entry_and_raise_instead_of_crashing():
     with pytest.raises(TypeError, match="kernel helper"):
         analytic.atan2_upper(1.0, 2.0)
     assert abs(py_callable(analytic.atan2_upper)(1.0, 2.0) - math.atan2(1.0, 2.0)) < 1e-15
+
+
+JIT_MODULE = """
+import numpy as np
+from numba import prange
+from softshadows._jit import kernel
+
+@kernel(inline=True)
+def helper(x, k):
+    return x * x + k
+
+@kernel
+def first(a):
+    s = 0.0
+    for i in range(a.shape[0]):
+        s += helper(a[i], 1.0)
+    return s
+
+@kernel
+def second(a):
+    s = 0.0
+    for i in range(a.shape[0]):
+        s += helper(a[i], 2.0)
+    return s
+
+@kernel(parallel=True)
+def par(a, out):
+    for i in prange(a.shape[0]):
+        out[i] = helper(a[i], 3.0)
+"""
+
+JIT_PROBE = """
+import sys
+import numpy as np
+import jitmod
+a = np.arange(1000, dtype=np.float64) / 7.0
+which = sys.argv[1]
+out = np.zeros_like(a)
+if which == "first":
+    got = jitmod.first(a)
+    jitmod.par(a, out)
+    assert np.array_equal(out, a * a + 3.0), "parallel kernel"
+    assert jitmod.par.stats.cache_misses and not jitmod.par.stats.cache_hits
+else:
+    got = jitmod.second(a)
+ref = float(np.sum(a * a + (1.0 if which == "first" else 2.0)))
+assert abs(got - ref) <= 1e-12 * ref, (got, ref)
+(res,) = jitmod.helper.overloads.values()
+lib = res.library
+# the helper has no machine code of its own: the JIT engine never saw its module
+assert lib._softshadows_link_only
+assert not lib.codegen._engine.is_symbol_defined(res.fndesc.mangled_name)
+print(which, "helper from cache" if jitmod.helper.stats.cache_hits else "helper compiled")
+"""
+
+
+def test_link_only_helpers_and_gufuncs_compute_the_same_and_survive_the_cache(tmp_path):
+    # softshadows._jit._link_only_helpers: inline helpers and prange gufuncs are finalised without
+    # machine code (their callers link their LLVM modules in) and an inline helper is cached as its
+    # module alone. A kernel compiled in a later process must link the helper loaded from that
+    # cache entry; every result is checked against NumPy.
+    import numba
+
+    sys.path.insert(0, SRC)
+    from softshadows._jit import _LINK_ONLY_NUMBA
+
+    if tuple(int(x) for x in numba.__version__.split(".")[:2]) not in _LINK_ONLY_NUMBA:
+        pytest.skip(
+            f"link-only code generation is applied on Numba {sorted(_LINK_ONLY_NUMBA)}, not {numba.__version__}"
+        )
+    (tmp_path / "jitmod.py").write_text(JIT_MODULE)
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"), PYTHONPATH=os.pathsep.join([SRC, str(tmp_path)]))
+    outs = [
+        subprocess.run([sys.executable, "-c", JIT_PROBE, which], env=env, capture_output=True, text=True).stdout
+        for which in ("first", "second")
+    ]
+    assert outs == ["first helper compiled\n", "second helper from cache\n"], outs

@@ -41,7 +41,11 @@ import threading
 
 import numpy as np
 from numba import njit
+from numba.core import codegen as _codegen
+from numba.core import typed_passes as _typed_passes
 from numba.core.registry import CPUDispatcher
+from numba.np.ufunc import parallel as _parallel
+from numba.np.ufunc import wrappers as _wrappers
 
 FLAGS = dict(cache=True, fastmath=False, error_model="numpy")
 INLINE = os.environ.get("SOFTSHADOWS_INLINE", "")  # "" (as declared), "ir", "llvm" or "none"
@@ -73,6 +77,8 @@ def kernel(fn=None, *, parallel: bool = False, inline: bool | str = False, nogil
         o["forceinline"] = True
 
     def wrap(f):
+        if inline and how == "llvm":
+            f._softshadows_link_only = True  # see _link_only_helpers
         d = njit(**o)(f)
         if inline:
             d.__class__ = _Helper
@@ -93,6 +99,102 @@ class _Helper(CPUDispatcher):
             f"{self.py_func.__qualname__} is a kernel helper: call it from a kernel, or from Python "
             "through softshadows._jit.py_callable"
         )
+
+
+def _link_only_helpers() -> None:
+    """Machine code only where something calls it. Numba finishes every compiled function by
+    generating its machine code, and every caller links the callee's LLVM module in and generates
+    that code again in its own. Two kinds of functions are only ever reached that way:
+
+    * an ``inline`` helper (no wrapper: nothing calls it from outside; its callers inline it);
+    * a ``prange``'s gufunc and its two wrappers: the kernel calls them by name, linked in, so the
+      loop body's code was generated four times (gufunc, both wrappers, kernel) and used once.
+
+    Their libraries are finalised (optimised) without being handed to the JIT engine, and a helper
+    is cached on disk as its LLVM module alone (kind ``"softshadows-link"``); the code of every
+    kernel, and so V, is the same bit for bit. This reaches into Numba's code generation, so it is
+    applied only on the Numba versions it was checked on (``_LINK_ONLY_NUMBA``); ``SOFTSHADOWS_LINK_ONLY=0``
+    turns it off for measuring. ``tests/test_warm.py`` checks it; measured in
+    docs/results/cold-start.md."""
+    import numba
+
+    if os.environ.get("SOFTSHADOWS_LINK_ONLY", "1") == "0":
+        return
+    if tuple(int(x) for x in numba.__version__.split(".")[:2]) not in _LINK_ONLY_NUMBA:
+        return
+    lowering = _typed_passes.BaseNativeLowering
+    lib_cls = _codegen.JITCodeLibrary
+    if getattr(lib_cls, "_softshadows_patched", False):
+        return
+    run_pass = lowering.run_pass
+    finalize_final = lib_cls._finalize_final_module
+    serialize = lib_cls.serialize_using_object_code
+    unserialize = lib_cls._unserialize.__func__
+    set_env = _codegen.JITCPUCodegen.set_env
+
+    def lowering_run_pass(self, state):
+        link_only = getattr(state.func_id.func, "_softshadows_link_only", False)
+        # a prange's gufunc: only ever linked into its kernel (through the two wrappers below)
+        link_only = link_only or state.func_id.func_qualname.startswith("__numba_parfor_gufunc")
+        if state.library is None and link_only:
+            state.library = state.targetctx.codegen().create_library(state.func_id.func_qualname)
+            state.library.enable_object_caching()
+            state.library._softshadows_link_only = True
+        return run_pass(self, state)
+
+    def finalize_final_module(self):
+        if not getattr(self, "_softshadows_link_only", False):
+            return finalize_final(self)
+        self._finalize_dynamic_globals()
+        self._verify_declare_only_symbols()
+        self._finalized = True
+
+    def serialize_using_object_code(self):
+        if not getattr(self, "_softshadows_link_only", False):
+            return serialize(self)
+        self._ensure_finalized()
+        return (self.name, "softshadows-link", self._get_module_for_linking().as_bitcode())
+
+    def _unserialize(cls, codegen, state):
+        name, kind, data = state
+        if kind != "softshadows-link":
+            return unserialize(cls, codegen, state)
+        lib = codegen.create_library(name)
+        lib._softshadows_link_only = True
+        lib._final_module = _codegen.ll.parse_bitcode(data)
+        lib._finalize_final_module()
+        return lib
+
+    def codegen_set_env(self, env_name, env):
+        if self._engine.get_global_value_address(env_name):  # a link-only helper has none
+            set_env(self, env_name, env)
+
+    def compile_wrapper(self, wrapper_name):
+        lib = compile_gufunc_wrapper(self, wrapper_name)
+        if self.is_parfors:  # linked into the kernel, never called through a pointer
+            lib._softshadows_link_only = True
+        return lib
+
+    def build_gufunc_wrapper(py_func, cres, sin, sout, cache, is_parfors):
+        info = build_parallel_wrapper(py_func, cres, sin, sout, cache, is_parfors)
+        if is_parfors:  # the same: the kernel calls it by name, linked in
+            info.library._softshadows_link_only = True
+        return info
+
+    compile_gufunc_wrapper = _wrappers._GufuncWrapper._compile_wrapper
+    build_parallel_wrapper = _parallel.build_gufunc_wrapper
+    _wrappers._GufuncWrapper._compile_wrapper = compile_wrapper
+    _parallel.build_gufunc_wrapper = build_gufunc_wrapper
+    lowering.run_pass = lowering_run_pass
+    lib_cls._finalize_final_module = finalize_final_module
+    lib_cls.serialize_using_object_code = serialize_using_object_code
+    lib_cls._unserialize = classmethod(_unserialize)
+    _codegen.JITCPUCodegen.set_env = codegen_set_env
+    lib_cls._softshadows_patched = True
+
+
+_LINK_ONLY_NUMBA = {(0, 68)}  # Numba versions whose code generation _link_only_helpers was checked on
+_link_only_helpers()
 
 
 @functools.cache
