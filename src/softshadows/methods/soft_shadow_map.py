@@ -1382,23 +1382,29 @@ def merge_two_pass(front: np.ndarray, back: np.ndarray) -> np.ndarray:
 
 # ---- 9. projection onto the eye view -----------------------------------------------------------
 @kernel(parallel=True)
-def project_soft_shadow_map(pts, is_receiver, svp, ssm):
+def project_soft_shadow_map(pts, idx, tri_id, receiver, svp, ssm):
     """V per eye point: receivers read the SSM (bilinear) at their projection from the light;
-    V = 1 - occlusion. Outside the SSM, behind the light, or on occluder-only geometry: V = 1."""
+    V = 1 - occlusion. Outside the SSM, behind the light, or on occluder-only geometry: V = 1.
+    ``pts``, ``idx``: the eye points and their flat pixel indices; ``tri_id``: the eye G-buffer's
+    triangle per pixel (flat, -1 where none); ``receiver``: per triangle, whether it is a receiver.
+    Returns (V per point, the number of receiver points)."""
     n = pts.shape[0]
     H, W = ssm.shape
     out = np.empty(n, np.float32)
+    n_recv = 0
     for k in prange(n):
         out[k] = 1.0
-        if not is_receiver[k]:
+        tri = tri_id[idx[k]]
+        if tri < 0 or not receiver[tri]:
             continue
+        n_recv += 1
         sx, sy, z = view_project(svp, pts[k, 0], pts[k, 1], pts[k, 2])
         if not (z > 0.0) or not (sx >= 0.0 and sx <= W and sy >= 0.0 and sy <= H):
             continue
         o = sample_bilinear(ssm, sx, sy)
         if o > 0.0:
             out[k] = 1.0 - min(o, 1.0)
-    return out
+    return out, n_recv
 
 
 # ---- orchestration -----------------------------------------------------------------------------
@@ -1604,10 +1610,10 @@ class SoftShadowMapMethod(Method):
         smap = compute_soft_shadow_map(ctx.scene, map_size, ssm_size, two_pass, accumulate, margin, ctx.timer)
         with ctx.timer.phase("eye_projection"):
             pts, _, idx = ctx.points()
-            tri = ctx.eye.tri_id.ravel()[idx]
-            is_recv = ctx.flat.receiver[np.maximum(tri, 0)] & (tri >= 0)
-            v = project_soft_shadow_map(pts, is_recv, smap.view.params(), smap.occlusion)
+            v, n_recv = project_soft_shadow_map(
+                pts, idx, ctx.eye.tri_id.ravel(), ctx.flat.receiver, smap.view.params(), smap.occlusion
+            )
             out = ctx.scatter(v, idx)
         stats = dict(smap.stats)
-        stats["eye_receiver_pixels"] = int(is_recv.sum())
+        stats["eye_receiver_pixels"] = int(n_recv)
         return MethodOutput(out, stats)
