@@ -36,7 +36,7 @@ from .base import Method, MethodOutput, Param, register
 BAND_ROWS = 2  # SSM rows per accumulation band (one thread sums one band)
 FP16_MAX = 65504.0
 CROSSING_BATCH = 4096  # sphere light: texel x patch pairs computed per vectorized batch
-REFINE_ROUNDS = 3  # sphere light: narrowing passes of the penumbra extents (refine_extents_sphere)
+REFINE_ROUNDS = 2  # sphere light: narrowing passes of the penumbra extents (refine_extents_sphere)
 # the SSM's resolution when ``ssm_size`` is 0 (the default): 256^2 with a rect light, 128^2 with a
 # sphere light (same error against ground truth on the built-in scenes, 4x fewer texel x patch
 # pairs: docs/results/soft-shadow-map.md, "Sphere light: a 128^2 soft shadow map")
