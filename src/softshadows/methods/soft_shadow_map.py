@@ -1579,7 +1579,7 @@ class SoftShadowMapMethod(Method):
         Param(
             "ssm_size",
             0,
-            f"soft shadow map resolution (N x N texels); 0: {SSM_SIZE_RECT} with a rect light, "
+            f"soft shadow map resolution (N x N texels, N >= 8); 0: {SSM_SIZE_RECT} with a rect light, "
             f"{SSM_SIZE_SPHERE} with a sphere light",
             min=0,
             max=4096,
