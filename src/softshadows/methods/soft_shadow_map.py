@@ -936,11 +936,12 @@ def _disk_row_pass(
     exceeds kappa (|p| - w.c) + s sqrt(1 + kappa^2)). Both tests keep a margin of ``_ROUND32`` |q|^2
     (many times float32's rounding of |q|^2 - h^2), so a texel is only taken as inside or missed
     when it is so in exact arithmetic too. Every other texel (the patch near or across the cone's
-    surface, or not wholly between p and the disk's plane) is flagged in ``flags[j - base]`` for the
-    exact float64 path. The loop runs over the ``nl`` texels from ``base`` (``[base, base + nl)``
+    surface, or not wholly between p and the disk's plane, tested as w.c -+ s(1 + 2^-10) in
+    (0, |p|): the corners' heights are within s of the center's) is flagged in ``flags[j - base]``
+    for the exact float64 path. The loop runs over the ``nl`` texels from ``base`` (``[base, base + nl)``
     contains the patch's range ``[j0, j1)``; the caller makes ``nl`` a multiple of 16, so the row is
     whole vectors, no scalar remainder); texels outside ``[j0, j1)`` add 0 and are not flagged. ``pk``: per patch (float32) |q_c|^2 + margin (4), |c|^2 - margin, s,
-    A / (2 pi), and x0, x1, y0, y1, z_O."""
+    A / (2 pi), x0, x1, y0, y1, z_O, and s (1 + 2^-10)."""
     ii = np.uint64(i)
     lo = np.int32(j0 - base)
     hi = np.int32(j1 - base)
@@ -948,7 +949,7 @@ def _disk_row_pass(
     ub = np.uint64(base)
     not_check = not check_mesh
     qq0, qq1, qq2, qq3, cc, sr, ak = pk[0], pk[1], pk[2], pk[3], pk[4], pk[5], pk[6]
-    x0, x1, y0, y1, zo = pk[7], pk[8], pk[9], pk[10], pk[11]
+    x0, x1, y0, y1, zo, se = pk[7], pk[8], pk[9], pk[10], pk[11], pk[12]
     for jj in range(nl):
         ju = np.uint64(jj)
         jx = ub + ju
@@ -966,7 +967,10 @@ def _disk_row_pass(
         h1 = wx * x1 + wy * y0 + hz
         h2 = wx * x1 + wy * y1 + hz
         h3 = wx * x0 + wy * y1 + hz
-        inr = (h0 > _F0) & (h1 > _F0) & (h2 > _F0) & (h3 > _F0) & (h0 < hmax) & (h1 < hmax) & (h2 < hmax) & (h3 < hmax)
+        # every corner strictly between the disk's plane and p: |h_c - h(center)| <= s |w| = s, so
+        # the center's height +- the half diagonal (times 1 + 2^-10, far above float32's rounding)
+        hc = _FH * (h0 + h2)
+        inr = (hc > se) & (hc + se < hmax)
         d0 = hp - h0
         d1 = hp - h1
         d2 = hp - h2
@@ -978,7 +982,6 @@ def _disk_row_pass(
             & (qq2 - h2 * h2 <= k2 * d2 * d2)
             & (qq3 - h3 * h3 <= k2 * d3 * d3)
         )
-        hc = _FH * (h0 + h2)
         rc = kap * (hp - hc) + sr * F[5, ii, jx]
         miss = cc - hc * hc > rc * rc
         area = ak * (zr - zo) * (d1 + d3) / (k2 * (d0 * d1) * (d2 * d3))
@@ -1089,8 +1092,9 @@ def _flush_crossings(F1, f, Q, rows, cols, vals, bad, UV, m, ssm, l, t, dxs, dys
 @kernel(inline=True)
 def _patch_constants(x0, x1, y0, y1, zo, pk):
     """Per micro-patch constants of :func:`_disk_row_pass` into ``pk`` (float32): |q_c|^2 of the 4
-    corners plus the margin, |c|^2 of the center minus it, the half diagonal s, A / (2 pi), and the
-    patch x0, x1, y0, y1, z_O."""
+    corners plus the margin, |c|^2 of the center minus it, the half diagonal s, A / (2 pi), the
+    patch x0, x1, y0, y1, z_O, and s (1 + 2^-10) (the bound of the corners' heights about the
+    center's)."""
     z2 = zo * zo
     q0 = x0 * x0 + y0 * y0 + z2
     q1 = x1 * x1 + y0 * y0 + z2
@@ -1112,6 +1116,7 @@ def _patch_constants(x0, x1, y0, y1, zo, pk):
     pk[9] = y0
     pk[10] = y1
     pk[11] = zo
+    pk[12] = pk[5] * (1.0 + 2.0**-10)
 
 
 @kernel(parallel=True)
@@ -1186,7 +1191,7 @@ def accumulate_soft_shadow_map_sphere_slot(
     UV = np.empty((8, cap + 24), np.float32)  # the crossing pairs' projected corners
     bad = np.zeros(cap, np.bool_)
     Q = np.empty((6, cap + 24))  # row stride not a multiple of 4 KiB: no cache-set conflicts
-    pk = np.empty(12, np.float32)
+    pk = np.empty(13, np.float32)
     F1 = np.empty((12, 1, 1))
     f12 = np.empty(12)
     ramp = np.empty(W, np.int32)  # 0, 1, 2, ...: the row pass's column mask
