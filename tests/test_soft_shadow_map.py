@@ -232,6 +232,19 @@ def test_rejects_no_roles_and_bad_params():
         ss.render(sc, "soft-shadow-map", 16, 16, accumulate="float64")
     with pytest.raises(SoftShadowsError, match="map_size"):
         ss.render(sc, "soft-shadow-map", 16, 16, map_size=2)
+    with pytest.raises(SoftShadowsError, match="ssm_size"):
+        ss.render(sc, "soft-shadow-map", 16, 16, ssm_size=4)
+
+
+@pytest.mark.parametrize(("light", "size"), [("rect", ssm.SSM_SIZE_RECT), ("sphere", ssm.SSM_SIZE_SPHERE)])
+def test_default_ssm_size_depends_on_the_light(light, size):
+    """``ssm_size=0`` (the default) is 256^2 with a rect light, 128^2 with a sphere light (the same
+    error against ground truth on the built-in scenes: results page); the SSM made has that size."""
+    sc = ss.load_scene("square", light=light)
+    r = ss.render(sc, "soft-shadow-map", 24, 16, map_size=32)
+    assert r.stats["ssm_size"] == size
+    m = ssm.compute_soft_shadow_map(sc, 32)
+    assert m.occlusion.shape == (size, size) and m.stats["ssm_size"] == size
 
 
 def test_mesh_of_role_both_does_not_shadow_itself():

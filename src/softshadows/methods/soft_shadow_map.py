@@ -36,7 +36,18 @@ from .base import Method, MethodOutput, Param, register
 BAND_ROWS = 2  # SSM rows per accumulation band (one thread sums one band)
 FP16_MAX = 65504.0
 CROSSING_BATCH = 4096  # sphere light: texel x patch pairs computed per vectorized batch
-REFINE_ROUNDS = 3  # sphere light: narrowing passes of the penumbra extents (refine_extents_sphere)
+REFINE_ROUNDS = 2  # sphere light: narrowing passes of the penumbra extents (refine_extents_sphere)
+# the SSM's resolution when ``ssm_size`` is 0 (the default): 256^2 with a rect light, 128^2 with a
+# sphere light (same error against ground truth on the built-in scenes, 4x fewer texel x patch
+# pairs: docs/results/soft-shadow-map.md, "Sphere light: a 128^2 soft shadow map")
+SSM_SIZE_RECT = 256
+SSM_SIZE_SPHERE = 128
+
+
+def default_ssm_size(light) -> int:
+    """The SSM resolution that ``ssm_size=0`` stands for with ``light``: :data:`SSM_SIZE_SPHERE`
+    for a sphere light, :data:`SSM_SIZE_RECT` for a rect light."""
+    return SSM_SIZE_SPHERE if light.shape == "sphere" else SSM_SIZE_RECT
 
 
 # ---- 1. the light-aligned views ---------------------------------------------------------------
@@ -925,11 +936,12 @@ def _disk_row_pass(
     exceeds kappa (|p| - w.c) + s sqrt(1 + kappa^2)). Both tests keep a margin of ``_ROUND32`` |q|^2
     (many times float32's rounding of |q|^2 - h^2), so a texel is only taken as inside or missed
     when it is so in exact arithmetic too. Every other texel (the patch near or across the cone's
-    surface, or not wholly between p and the disk's plane) is flagged in ``flags[j - base]`` for the
-    exact float64 path. The loop runs over the ``nl`` texels from ``base`` (``[base, base + nl)``
+    surface, or not wholly between p and the disk's plane, tested as w.c -+ s(1 + 2^-10) in
+    (0, |p|): the corners' heights are within s of the center's) is flagged in ``flags[j - base]``
+    for the exact float64 path. The loop runs over the ``nl`` texels from ``base`` (``[base, base + nl)``
     contains the patch's range ``[j0, j1)``; the caller makes ``nl`` a multiple of 16, so the row is
     whole vectors, no scalar remainder); texels outside ``[j0, j1)`` add 0 and are not flagged. ``pk``: per patch (float32) |q_c|^2 + margin (4), |c|^2 - margin, s,
-    A / (2 pi), and x0, x1, y0, y1, z_O."""
+    A / (2 pi), x0, x1, y0, y1, z_O, and s (1 + 2^-10)."""
     ii = np.uint64(i)
     lo = np.int32(j0 - base)
     hi = np.int32(j1 - base)
@@ -937,7 +949,7 @@ def _disk_row_pass(
     ub = np.uint64(base)
     not_check = not check_mesh
     qq0, qq1, qq2, qq3, cc, sr, ak = pk[0], pk[1], pk[2], pk[3], pk[4], pk[5], pk[6]
-    x0, x1, y0, y1, zo = pk[7], pk[8], pk[9], pk[10], pk[11]
+    x0, x1, y0, y1, zo, se = pk[7], pk[8], pk[9], pk[10], pk[11], pk[12]
     for jj in range(nl):
         ju = np.uint64(jj)
         jx = ub + ju
@@ -955,7 +967,10 @@ def _disk_row_pass(
         h1 = wx * x1 + wy * y0 + hz
         h2 = wx * x1 + wy * y1 + hz
         h3 = wx * x0 + wy * y1 + hz
-        inr = (h0 > _F0) & (h1 > _F0) & (h2 > _F0) & (h3 > _F0) & (h0 < hmax) & (h1 < hmax) & (h2 < hmax) & (h3 < hmax)
+        # every corner strictly between the disk's plane and p: |h_c - h(center)| <= s |w| = s, so
+        # the center's height +- the half diagonal (times 1 + 2^-10, far above float32's rounding)
+        hc = _FH * (h0 + h2)
+        inr = (hc > se) & (hc + se < hmax)
         d0 = hp - h0
         d1 = hp - h1
         d2 = hp - h2
@@ -967,7 +982,6 @@ def _disk_row_pass(
             & (qq2 - h2 * h2 <= k2 * d2 * d2)
             & (qq3 - h3 * h3 <= k2 * d3 * d3)
         )
-        hc = _FH * (h0 + h2)
         rc = kap * (hp - hc) + sr * F[5, ii, jx]
         miss = cc - hc * hc > rc * rc
         area = ak * (zr - zo) * (d1 + d3) / (k2 * (d0 * d1) * (d2 * d3))
@@ -1078,8 +1092,9 @@ def _flush_crossings(F1, f, Q, rows, cols, vals, bad, UV, m, ssm, l, t, dxs, dys
 @kernel(inline=True)
 def _patch_constants(x0, x1, y0, y1, zo, pk):
     """Per micro-patch constants of :func:`_disk_row_pass` into ``pk`` (float32): |q_c|^2 of the 4
-    corners plus the margin, |c|^2 of the center minus it, the half diagonal s, A / (2 pi), and the
-    patch x0, x1, y0, y1, z_O."""
+    corners plus the margin, |c|^2 of the center minus it, the half diagonal s, A / (2 pi), the
+    patch x0, x1, y0, y1, z_O, and s (1 + 2^-10) (the bound of the corners' heights about the
+    center's)."""
     z2 = zo * zo
     q0 = x0 * x0 + y0 * y0 + z2
     q1 = x1 * x1 + y0 * y0 + z2
@@ -1101,6 +1116,7 @@ def _patch_constants(x0, x1, y0, y1, zo, pk):
     pk[9] = y0
     pk[10] = y1
     pk[11] = zo
+    pk[12] = pk[5] * (1.0 + 2.0**-10)
 
 
 @kernel(parallel=True)
@@ -1175,7 +1191,7 @@ def accumulate_soft_shadow_map_sphere_slot(
     UV = np.empty((8, cap + 24), np.float32)  # the crossing pairs' projected corners
     bad = np.zeros(cap, np.bool_)
     Q = np.empty((6, cap + 24))  # row stride not a multiple of 4 KiB: no cache-set conflicts
-    pk = np.empty(12, np.float32)
+    pk = np.empty(13, np.float32)
     F1 = np.empty((12, 1, 1))
     f12 = np.empty(12)
     ramp = np.empty(W, np.int32)  # 0, 1, 2, ...: the row pass's column mask
@@ -1371,23 +1387,29 @@ def merge_two_pass(front: np.ndarray, back: np.ndarray) -> np.ndarray:
 
 # ---- 9. projection onto the eye view -----------------------------------------------------------
 @kernel(parallel=True)
-def project_soft_shadow_map(pts, is_receiver, svp, ssm):
+def project_soft_shadow_map(pts, idx, tri_id, receiver, svp, ssm):
     """V per eye point: receivers read the SSM (bilinear) at their projection from the light;
-    V = 1 - occlusion. Outside the SSM, behind the light, or on occluder-only geometry: V = 1."""
+    V = 1 - occlusion. Outside the SSM, behind the light, or on occluder-only geometry: V = 1.
+    ``pts``, ``idx``: the eye points and their flat pixel indices; ``tri_id``: the eye G-buffer's
+    triangle per pixel (flat, -1 where none); ``receiver``: per triangle, whether it is a receiver.
+    Returns (V per point, the number of receiver points)."""
     n = pts.shape[0]
     H, W = ssm.shape
     out = np.empty(n, np.float32)
+    n_recv = 0
     for k in prange(n):
         out[k] = 1.0
-        if not is_receiver[k]:
+        tri = tri_id[idx[k]]
+        if tri < 0 or not receiver[tri]:
             continue
+        n_recv += 1
         sx, sy, z = view_project(svp, pts[k, 0], pts[k, 1], pts[k, 2])
         if not (z > 0.0) or not (sx >= 0.0 and sx <= W and sy >= 0.0 and sy <= H):
             continue
         o = sample_bilinear(ssm, sx, sy)
         if o > 0.0:
             out[k] = 1.0 - min(o, 1.0)
-    return out
+    return out, n_recv
 
 
 # ---- orchestration -----------------------------------------------------------------------------
@@ -1421,15 +1443,18 @@ def check_roles(scene) -> None:
 def compute_soft_shadow_map(
     scene,
     map_size: int = 256,
-    ssm_size: int = 256,
+    ssm_size: int = 0,
     two_pass: bool = False,
     accumulate: str = "float32",
     margin: float = 0.02,
     timer=None,
 ) -> SoftShadowMap:
-    """Steps 1-8 for ``scene`` (rect or sphere light): the clamped soft shadow map and statistics."""
+    """Steps 1-8 for ``scene`` (rect or sphere light): the clamped soft shadow map and statistics.
+    ``ssm_size`` 0: :func:`default_ssm_size` of the scene's light."""
     timer = timer or _NullTimer()
     check_roles(scene)
+    if ssm_size == 0:
+        ssm_size = default_ssm_size(scene.light)
     sphere = scene.light.shape == "sphere"
     flat = scene.flat
     fp16 = accumulate.startswith("float16")
@@ -1556,7 +1581,15 @@ class SoftShadowMapMethod(Method):
     receivers_only = True  # only receiver faces are shadowed
     params = (
         Param("map_size", 256, "occluder map resolution N (N x N, light's aspect ratio)", min=8, max=4096),
-        Param("ssm_size", 256, "soft shadow map resolution (N x N texels)", min=8, max=4096),
+        Param(
+            "ssm_size",
+            0,
+            f"soft shadow map resolution (N x N texels, N >= 8); 0: {SSM_SIZE_RECT} with a rect light, "
+            f"{SSM_SIZE_SPHERE} with a sphere light",
+            min=0,
+            max=4096,
+            check=lambda n: None if n == 0 or n >= 8 else "0 (the light's default) or >= 8",
+        ),
         Param("two_pass", False, "front-face and back-face occluder maps, SSMs merged by max (Sec. 3.5)"),
         Param(
             "accumulate",
@@ -1582,10 +1615,10 @@ class SoftShadowMapMethod(Method):
         smap = compute_soft_shadow_map(ctx.scene, map_size, ssm_size, two_pass, accumulate, margin, ctx.timer)
         with ctx.timer.phase("eye_projection"):
             pts, _, idx = ctx.points()
-            tri = ctx.eye.tri_id.ravel()[idx]
-            is_recv = ctx.flat.receiver[np.maximum(tri, 0)] & (tri >= 0)
-            v = project_soft_shadow_map(pts, is_recv, smap.view.params(), smap.occlusion)
+            v, n_recv = project_soft_shadow_map(
+                pts, idx, ctx.eye.tri_id.ravel(), ctx.flat.receiver, smap.view.params(), smap.occlusion
+            )
             out = ctx.scatter(v, idx)
         stats = dict(smap.stats)
-        stats["eye_receiver_pixels"] = int(is_recv.sum())
+        stats["eye_receiver_pixels"] = int(n_recv)
         return MethodOutput(out, stats)
