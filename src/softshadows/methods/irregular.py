@@ -874,7 +874,10 @@ def _quad_setup(ea, eb, vp, center, radius, shape, nrm_l, dmax, qd):
         # (dmin - kappa r)
         qd[e, 4] = dmin - kappa * radius + radius
         qd[e, 5] = max(ax * ax + ay * ay, bx * bx + by * by)
-        qd[e, 6] = 1.0 if (az > 0.0 and bz > 0.0 and np.isfinite(ax) and np.isfinite(bx)) else 0.0
+        valid = az > 0.0 and bz > 0.0 and np.isfinite(ax) and np.isfinite(bx)
+        qd[e, 6] = 1.0 if valid else 0.0
+        # the rectangle (in the view's z = 0 plane): 1 / the edge's smallest view depth (see rect_reach)
+        qd[e, 7] = 1.0 / min(az, bz) if (valid and shape == 0) else 0.0
 
 
 @kernel(inline=True)
@@ -890,6 +893,47 @@ def quad_half_width(qd, e, radius, dmax, corner2):
     if dmin <= radius:
         return np.inf
     return (1.0 + max(qd[e, 5], corner2)) * radius * (1.0 / (dmin - radius) - 1.0 / dmax) * (1.0 + _SLACK) + 1e-12
+
+
+#: absolute margin of the rectangle's bounds (image-plane units), as quad_half_width's 1e-12
+_EPS_IMG = 1e-12
+
+
+@kernel(inline=True)
+def rect_k(qd, e, dmax):
+    """The rectangle light: the largest k = 1/z_min - 1/z (z: view depth, z_min: the edge's smallest)
+    of receivers up to distance ``dmax`` (their depth is at most their distance), with a relative
+    slack of ``_SLACK``; < 0 when no receiver lies beyond the edge."""
+    return (qd[e, 7] - 1.0 / dmax) * (1.0 + _SLACK)
+
+
+@kernel(inline=True)
+def rect_reach(qd, e, x0, x1, y0, y1):
+    """The rectangle light's exact penumbra region of edge e, against an image-plane box: the
+    smallest k at which the box meets the region of receivers with k = 1/z_min - 1/z.
+
+    The view looks from the light centre c along the rectangle's normal, so the rectangle lies in
+    its z = 0 plane, and in image coordinates (x/z, y/z) it is the box [-hx, hx] x [-hy, hy] (qd's
+    columns 8, 9: ``build_penumbra_quads``). A receiver p (depth z) gets a nonzero term only if some
+    edge point q in front of it (depth z_q < z) lies on a segment from a light point x to p (the
+    edge's projection from p meets the rectangle); then image(p) = image(q) - (1/z_q - 1/z) x_xy,
+    and since 1/z_q - 1/z <= k and the box is symmetric, image(p) lies in the segment A'B' swept by
+    the box scaled by k: a hexagon, convex, whose sides are parallel to the image axes and to A'B'.
+    So the box misses it for every k below the largest, over those three separating axes, of
+    (centre distance - the box's extent - the segment's) / the light box's extent; both grown by
+    ``_EPS_IMG``. Exact, unlike the circumscribed circle (``quad_half_width``), and without its
+    stretch: 3.6x fewer candidate samples on ``bunny``."""
+    ax, ay, bx, by, hx, hy = qd[e, 0], qd[e, 1], qd[e, 2], qd[e, 3], qd[e, 8], qd[e, 9]
+    sx, sy = bx - ax, by - ay
+    wx, wy = 0.5 * (x1 - x0), 0.5 * (y1 - y0)
+    dx, dy = 0.5 * (x0 + x1 - ax - bx), 0.5 * (y0 + y1 - ay - by)
+    kx = (abs(dx) - wx - 0.5 * abs(sx) - _EPS_IMG) / hx
+    ky = (abs(dy) - wy - 0.5 * abs(sy) - _EPS_IMG) / hy
+    # across A'B' (normal (-sy, sx), not normalised: both sides scale alike)
+    hn = hx * abs(sy) + hy * abs(sx)
+    kn = (abs(sx * dy - sy * dx) - wx * abs(sy) - wy * abs(sx) - _EPS_IMG * (abs(sx) + abs(sy))) / hn
+    kn = kn if hn > 0.0 else -np.inf  # a point segment: the box axes decide
+    return max(kx, ky, kn)
 
 
 @kernel(inline=True)
@@ -955,7 +999,16 @@ def _bin_box(vp, gx, gy, B, bx, by):
 def _quad_bin_range(qd, e, radius, dmax, corner2, vp, gx, gy, B):
     """(by0, by1, bx0, bx1): the screen bins the bounding box of quad e (grown by its half-width for
     every receiver, ``dmax``) touches; an empty range when the quad has no fragment."""
-    if qd[e, 6] > 0.0:
+    if qd[e, 7] > 0.0:  # the rectangle: the hexagon's box (rect_reach)
+        k = rect_k(qd, e, dmax)
+        if k >= 0.0:
+            ex, ey = k * qd[e, 8] + _EPS_IMG, k * qd[e, 9] + _EPS_IMG
+            x0, x1 = min(qd[e, 0], qd[e, 2]) - ex, max(qd[e, 0], qd[e, 2]) + ex
+            y0, y1 = min(qd[e, 1], qd[e, 3]) - ey, max(qd[e, 1], qd[e, 3]) + ey
+            cx0, cx1, cy0, cy1 = _cell_range(x0, x1, y0, y1, vp, gx, gy)
+            if cx0 <= cx1 and cy0 <= cy1:
+                return cy0 // B, cy1 // B + 1, cx0 // B, cx1 // B + 1
+    elif qd[e, 6] > 0.0:
         Rg = quad_half_width(qd, e, radius, dmax, corner2)
         if Rg > 0.0:
             if np.isfinite(Rg):
@@ -998,10 +1051,15 @@ def _quad_bins(qd, radius, dmax, corner2, bin_maxd, per_bin, vp, gx, gy, B, nbx,
                 if bin_maxd[bi] <= 0.0:
                     continue
                 x0, x1, y0, y1 = _bin_box(vp, gx, gy, B, bx, by)
-                R = Rg
-                if per_bin:
-                    R = quad_half_width(qd, e, radius, bin_maxd[bi], box_corner2(x0, x1, y0, y1))
-                if quad_overlaps_box(qd, e, R, x0, x1, y0, y1):
+                if qd[e, 7] > 0.0:
+                    kb = rect_k(qd, e, bin_maxd[bi] if per_bin else dmax)
+                    hit = kb >= 0.0 and rect_reach(qd, e, x0, x1, y0, y1) <= kb
+                else:
+                    R = Rg
+                    if per_bin:
+                        R = quad_half_width(qd, e, radius, bin_maxd[bi], box_corner2(x0, x1, y0, y1))
+                    hit = quad_overlaps_box(qd, e, R, x0, x1, y0, y1)
+                if hit:
                     out[k + n] = bi
                     n += 1
         for i in range(k + n, offs[e + 1]):
@@ -1018,11 +1076,19 @@ def build_penumbra_quads(grid: SampleGrid, edges: Edges, light, light_radius: fl
     """Step (c), setup: one light-view penumbra quad per silhouette edge (its image-plane segment,
     minimum distance to the light centre and stretch; the half-width follows from the receiver
     distance, :func:`quad_half_width`)."""
-    shape, _b, _r, _hu, _hv, nrm_l, _u, _v = _light_params(light)
-    qd = np.zeros((len(edges), 7))
+    shape, _b, _r, hu, hv, nrm_l, u, v = _light_params(light)
+    qd = np.zeros((len(edges), 10))
     _quad_setup(
         edges.a, edges.b, grid.vp, grid.vp[VP_ORIGIN : VP_ORIGIN + 3].copy(), light_radius, shape, nrm_l, grid.dmax, qd
     )
+    if shape == 0:
+        # the rectangle's half-extents along the image axes (rect_reach); the view looks along its
+        # normal (light_frame), so its corners lie at depth 0 (to rounding: u, v and the normal come
+        # from the light's u x v)
+        vr, vu, vf = (grid.vp[i : i + 3] for i in (VP_RIGHT, VP_UP, VP_FORWARD))
+        qd[:, 8] = hu * abs(u @ vr) + hv * abs(v @ vr)
+        qd[:, 9] = hu * abs(u @ vu) + hv * abs(v @ vu)
+        assert hu * abs(u @ vf) + hv * abs(v @ vf) <= 1e-12 * (hu + hv)
     return qd
 
 
@@ -1621,8 +1687,14 @@ def _penumbra_kernel(
         bx = bi % nbx
         jb = g_start[bi * B * B * S]  # the bin's first sample: rw and sinv are indexed from it
         if not count_only:
-            for j in range(jb, g_start[(bi + 1) * B * B * S]):  # (rows: where needed, scalar_edge_terms)
-                sinv[j - jb] = 1.0 / sdist[j]
+            if shape == 0:  # the rectangle's bound: 1 / view depth (rect_reach)
+                f0, f1, f2 = vp[VP_FORWARD], vp[VP_FORWARD + 1], vp[VP_FORWARD + 2]
+                for j in range(jb, g_start[(bi + 1) * B * B * S]):
+                    dz = (spos[j, 0] - vp[VP_ORIGIN]) * f0 + (spos[j, 1] - vp[VP_ORIGIN + 1]) * f1
+                    sinv[j - jb] = 1.0 / (dz + (spos[j, 2] - vp[VP_ORIGIN + 2]) * f2)
+            else:
+                for j in range(jb, g_start[(bi + 1) * B * B * S]):  # (rows: where needed, scalar_edge_terms)
+                    sinv[j - jb] = 1.0 / sdist[j]
         bx0, bx1, by0, by1 = _bin_box(vp, gx, gy, B, bx, by)
         bc2 = box_corner2(bx0, bx1, by0, by1)
         nf = 0
@@ -1641,19 +1713,29 @@ def _penumbra_kernel(
             qax, qay, qbx, qby, dmin, q5 = qd[e, 0], qd[e, 1], qd[e, 2], qd[e, 3], qd[e, 4], qd[e, 5]
             dr = dmin - radius if dmin > radius else 0.0
             inv_dr = 1.0 / dr if dr > 0.0 else 0.0
-            if R <= 0.0:
+            rect = shape == 0  # the exact hexagon of rect_reach instead of the quad
+            izm = qd[e, 7]
+            kq = rect_k(qd, e, bin_maxd[bi] if per_bin else dmax)
+            if (kq < 0.0) if rect else (R <= 0.0):
                 continue  # no fragment
-            every = not np.isfinite(R)  # the light's sphere reaches the edge: every cell
-            ux, uy, qcx, qcy, hl, hw = quad_axes(qd, e, 1.0 if every else R)
+            every = not (rect or np.isfinite(R))  # the light's sphere reaches the edge: every cell
+            ux, uy, qcx, qcy, hl, hw = quad_axes(qd, e, 1.0 if (every or rect) else R)
             sdx, sdy = qbx - qax, qby - qay
             s_uu = sdx * sdx + sdy * sdy
             s_iuu = 1.0 / s_uu if s_uu > 0.0 else 0.0
+            # the rectangle's per-sample test (rect_reach at a point, k of the sample's depth)
+            rhx, rhy = qd[e, 8], qd[e, 9]
+            rmx, rmy = 0.5 * (qax + qbx), 0.5 * (qay + qby)
+            rex, rey = 0.5 * abs(sdx) + _EPS_IMG, 0.5 * abs(sdy) + _EPS_IMG
+            rhn, ren = rhx * abs(sdy) + rhy * abs(sdx), _EPS_IMG * (abs(sdx) + abs(sdy))
             # the bin's cells that can overlap the quad's bounding box (one cell of margin for
             # rounding: every cell outside is one ``axes_overlap_box`` rejects on the box axes)
             cx_lo, cx_hi, cy_lo, cy_hi = bx * B, min(bx * B + B, gx), by * B, min(by * B + B, gy)
             if not every:
                 ex = hl * abs(ux) + hw * abs(uy)
                 ey = hl * abs(uy) + hw * abs(ux)
+                if rect:  # (rect_reach) the hexagon's box
+                    ex, ey = 0.5 * abs(sdx) + kq * rhx + _EPS_IMG, 0.5 * abs(sdy) + kq * rhy + _EPS_IMG
                 cx_lo = int(max(np.floor((qcx - ex - l) / cw) - 1.0, cx_lo))
                 cx_hi = int(min(np.floor((qcx + ex - l) / cw) + 2.0, cx_hi))
                 cy_lo = int(max(np.floor((t - qcy - ey) / ch) - 1.0, cy_lo))
@@ -1669,13 +1751,26 @@ def _penumbra_kernel(
                     col = ci * S
                     if g_start[col] == g_start[col + S]:
                         continue
-                    if not (every or axes_overlap_box(ux, uy, qcx, qcy, hl, hw, x0, x1, y0, y1)):
+                    kc = 0.0
+                    if rect:
+                        kc = rect_reach(qd, e, x0, x1, y0, y1)
+                        if kc > kq:
+                            continue
+                    elif not (every or axes_overlap_box(ux, uy, qcx, qcy, hl, hw, x0, x1, y0, y1)):
                         continue
                     if cancels_in_box(e, ea, eb, tv_start, tv, col_box, ci):
                         continue
                     nf += 1
                     s0 = 0
-                    if wedge and dmin > radius:
+                    if rect:
+                        # the wedge enters the column where k = 1/z_min - 1/z reaches kc: at depth (so
+                        # at distance) 1 / (1/z_min - kc) or beyond
+                        if wedge and kc > 0.0:
+                            inv = izm - kc / (1.0 + _SLACK)
+                            if inv <= 0.0:
+                                continue
+                            s0 = slice_of((1.0 / inv) * (1.0 - _SLACK), dlo, kf, S)
+                    elif wedge and dmin > radius:
                         # the wedge enters this column at the distance where its angular radius
                         # reaches the column: r (1/(dmin - r) - 1/D) * stretch >= dist(cell, edge)
                         dc = _seg_box_dist(qax, qay, qbx, qby, x0, x1, y0, y1)
@@ -1691,7 +1786,20 @@ def _penumbra_kernel(
                     # edge's image against the angular radius at its own distance (stretch
                     # from its own off-axis angle and the edge's endpoints); branch-free, the
                     # survivors' indices compacted into ``cand``
-                    if dr > 0.0:
+                    if rect:
+                        # rect_reach at each sample (a point) with its own k: same form, branch-free
+                        for i in range(j1 - j0):
+                            j = np.uint64(j0 + i)
+                            k = (izm - sinv[np.uint64(j0 - jb + i)]) * (1.0 + _SLACK)
+                            ddx, ddy = six[j] - rmx, siy[j] - rmy
+                            kx = abs(ddx) <= rex + k * rhx
+                            ky = abs(ddy) <= rey + k * rhy
+                            kn = abs(sdx * ddy - sdy * ddx) <= ren + k * rhn
+                            keep[np.uint64(i)] = np.int8(kx) & np.int8(ky) & np.int8(kn)
+                        for i in range(j1 - j0):
+                            cand[m] = j0 + i
+                            m += keep[i]
+                    elif dr > 0.0:
                         # unsigned indices (no negative-index wrap-around code) and selects:
                         # the loop vectorizes (1.45x on this loop alone), same values and flags
                         for i in range(j1 - j0):
