@@ -1387,6 +1387,43 @@ def _sign(s):
 
 
 @kernel(inline=True)
+def drop_cancelling(cp, m, center, e, ea, eb, tv_start, tv, sel, cand):
+    """For an edge with two counted triangles (a fold candidate): drop the samples ``cand[:m]``
+    (positions ``cp[:, :m]``) where the two cancel as seen from p or p lies in the plane through
+    the light centre and the edge (``disk_edge_terms``' first two exits, the same expressions, so
+    the same bits: exact zeros), compacting ``cp`` and ``cand`` in place; returns how many are left.
+    A cheap first pass (two cross products' worth, branch-free): on ``bunny`` 39% of the disk's
+    candidates are such zeros, which the vectorized terms would otherwise evaluate in full."""
+    ax, ay, az, bx, by, bz = ea[e, 0], ea[e, 1], ea[e, 2], eb[e, 0], eb[e, 1], eb[e, 2]
+    k1 = tv_start[e]
+    v1x, v1y, v1z, v2x, v2y, v2z = tv[k1, 0], tv[k1, 1], tv[k1, 2], tv[k1 + 1, 0], tv[k1 + 1, 1], tv[k1 + 1, 2]
+    c0, c1, c2 = center[0], center[1], center[2]
+    for i in range(m):
+        p0, p1, p2 = cp[0, i], cp[1, i], cp[2, i]
+        cx, cy, cz = c0 - p0, c1 - p1, c2 - p2
+        rax, ray, raz = ax - p0, ay - p1, az - p2
+        rbx, rby, rbz = bx - p0, by - p1, bz - p2
+        nx = ray * rbz - raz * rby
+        ny = raz * rbx - rax * rbz
+        nz = rax * rby - ray * rbx
+        w2 = _sign(nx * (v2x - p0) + ny * (v2y - p1) + nz * (v2z - p2))
+        wsum = 0.0 + _sign(nx * (v1x - p0) + ny * (v1y - p1) + nz * (v1z - p2))
+        wsum = wsum + w2
+        nc = nx * cx + ny * cy + nz * cz
+        sel[i] = (wsum != 0.0) & (nc != 0.0)
+    n = 0
+    for i in range(m):
+        keep = sel[i]
+        sel[n] = i
+        n += keep
+    for t in range(n):
+        i = sel[t]  # >= t
+        cand[t] = cand[i]
+        cp[0, t], cp[1, t], cp[2, t] = cp[0, i], cp[1, i], cp[2, i]
+    return n
+
+
+@kernel(inline=True)
 def disk_edge_terms(cp, m, center, radius, e, ea, eb, tv_start, tv, out):
     """``sample_edge_term`` for the disk (``shape == 1``) at the m samples whose positions are
     ``cp[:, :m]`` (copied contiguous when the candidates are compacted), for one edge with one or
@@ -1827,6 +1864,8 @@ def _penumbra_kernel(
                 for i in range(m):  # the candidates' positions, contiguous: the terms' loop vectorizes
                     cp[0, i], cp[1, i], cp[2, i] = spos[cand[i], 0], spos[cand[i], 1], spos[cand[i], 2]
                 if shape == 1:
+                    if nt_e == 2:
+                        m = drop_cancelling(cp, np.int64(m), center, e, ea, eb, tv_start, tv, sel, cand)
                     disk_edge_terms(cp, np.int64(m), center, radius, e, ea, eb, tv_start, tv, cval)
                 else:
                     m = rect_edge_terms(
