@@ -26,7 +26,7 @@ from ..analytic import atan2_upper, rect_halfplanes_area
 from ..geometry.silhouette import build_adjacency, facing, find_silhouette
 from ..raster.view import VP_B, VP_FORWARD, VP_L, VP_ORIGIN, VP_R, VP_RIGHT, VP_T, VP_UP, View, light_frame, light_view
 from .base import Method, MethodOutput, Param, register
-from .ground_truth import BOUND_SAFETY, hit_point
+from .ground_truth import BOUND_SAFETY, hit_point_at
 
 #: a connected occluder component with at most this fraction of boundary edges is a solid (only its
 #: light-facing triangles are counted); otherwise a sheet (both sides counted)
@@ -2008,28 +2008,49 @@ def compose_visibility(grid: SampleGrid, umbra, pen, n_all: int) -> np.ndarray:
     return out
 
 
+#: points per block of ``_error_bound_samples``
+_EB_BLOCK = 256
+
+
 @kernel(parallel=True)
 def _error_bound_samples(verts, faces, tri_img, bary_img, idx, nrm, eps, out, bound):
     """Ground truth's ray origins (:func:`ground_truth.hit_point`, float64): p + (BOUND_SAFETY x its
-    error bound + eps) n, n the geometric normal turned toward the eye; gathers from the G-buffer."""
-    for k in prange(idx.shape[0]):
-        q = idx[k]
-        px, py, pz, nx, ny, nz, ep, ee, _g = hit_point(
-            verts,
-            faces,
-            tri_img[q],
-            np.float64(bary_img[q, 0]),
-            np.float64(bary_img[q, 1]),
-            nrm[k, 0],
-            nrm[k, 1],
-            nrm[k, 2],
-        )
-        b = BOUND_SAFETY * (ep + ee)
-        bound[k] = b
-        off = b + eps
-        out[k, 0] = px + off * nx
-        out[k, 1] = py + off * ny
-        out[k, 2] = pz + off * nz
+    error bound + eps) n, n the geometric normal turned toward the eye; gathers from the G-buffer.
+    By blocks of points: the triangles' vertices and the points' inputs gathered into contiguous
+    scratch first, then ``hit_point_at`` in a loop without gathers or branches (it vectorizes), its
+    outputs stored contiguous and copied to the rows of ``out`` last: the same arithmetic, the same
+    bits as ``hit_point`` point by point."""
+    n = idx.shape[0]
+    nblk = (n + _EB_BLOCK - 1) // _EB_BLOCK
+    for blk in prange(nblk):
+        k0 = blk * _EB_BLOCK
+        m = min(n, k0 + _EB_BLOCK) - k0
+        g = np.empty((17, _EB_BLOCK))  # inputs (14 rows), then the result (3)
+        for i in range(m):
+            k = k0 + i
+            q = idx[k]
+            t = tri_img[q]
+            for c in range(3):
+                vi = faces[t, c]
+                g[3 * c, i] = np.float64(np.float32(verts[vi, 0]))  # Embree's float32 vertex coordinates
+                g[3 * c + 1, i] = np.float64(np.float32(verts[vi, 1]))
+                g[3 * c + 2, i] = np.float64(np.float32(verts[vi, 2]))
+            g[9, i] = np.float64(bary_img[q, 0])
+            g[10, i] = np.float64(bary_img[q, 1])
+            g[11, i], g[12, i], g[13, i] = nrm[k, 0], nrm[k, 1], nrm[k, 2]
+        for i in range(m):
+            px, py, pz, nx, ny, nz, ep, ee, _g = hit_point_at(
+                g[0, i], g[1, i], g[2, i], g[3, i], g[4, i], g[5, i], g[6, i], g[7, i], g[8, i],
+                g[9, i], g[10, i], g[11, i], g[12, i], g[13, i],
+            )  # fmt: skip
+            b = BOUND_SAFETY * (ep + ee)
+            bound[k0 + i] = b
+            off = b + eps
+            g[14, i] = px + off * nx
+            g[15, i] = py + off * ny
+            g[16, i] = pz + off * nz
+        for i in range(m):
+            out[k0 + i, 0], out[k0 + i, 1], out[k0 + i, 2] = g[14, i], g[15, i], g[16, i]
 
 
 def error_bound_samples(flat, eye, idx, nrm, eps):
