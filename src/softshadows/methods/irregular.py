@@ -58,6 +58,7 @@ class SampleGrid:
     slices: int
     dlo: float  # slice 0 starts here (distance to the light centre)
     dhi: float
+    sbound: np.ndarray  # slice_bounds(dlo, dhi, slices): where each slice starts (slice_of)
     start: np.ndarray  # (nbx*nby*B*B*S + 1,) int64
     ix: np.ndarray  # (n,) float64 image-plane x/z of the sorted samples
     iy: np.ndarray
@@ -73,34 +74,40 @@ class SampleGrid:
         return self.nbx * self.nby
 
 
-@kernel(inline=True)
-def slice_scale(dlo, dhi, slices):
-    """The factor of :func:`slice_of`: slices / log(dhi / dlo)."""
-    return slices / np.log(dhi / dlo)
+def slice_bounds(dlo: float, dhi: float, slices: int) -> np.ndarray:
+    """The table of :func:`slice_of`: sb[s] (1 <= s < slices) = dlo (dhi / dlo)^(s / slices), the
+    distance where slice s starts (geometric slicing); sb[0] = -inf, and +inf up to a length of a
+    power of two plus one (the binary search's steps)."""
+    P = 1
+    while slices > P:
+        P *= 2
+    sb = np.full(P + 1, np.inf)
+    sb[0] = -np.inf
+    sb[1:slices] = np.maximum.accumulate(dlo * np.exp(np.arange(1, slices) * (np.log(dhi / dlo) / slices)))
+    return sb
 
 
 @kernel(inline=True)
-def slice_of(d, dlo, kf, slices):
-    """Depth slice of distance ``d`` (geometric slicing between dlo and dhi; ``kf`` =
-    :func:`slice_scale`), clamped; non-decreasing in ``d``."""
-    if slices == 1 or d <= dlo:
-        return 0
-    s = int(np.floor(np.log(d / dlo) * kf))
-    if s < 0:
-        return 0
-    if s >= slices:
-        return slices - 1
+def slice_of(d, sb):
+    """Depth slice of distance ``d``: the largest s with sb[s] <= d (``slice_bounds``), in
+    [0, slices - 1]; non-decreasing in ``d`` by construction (what the umbra's and the wedge's first
+    slices need to be conservative). A branch-free binary search: no logarithm per sample (one
+    cost half of the samples' keys)."""
+    s = 0
+    step = (sb.shape[0] - 1) >> 1
+    while step > 0:
+        s = s + step if sb[s + step] <= d else s
+        step >>= 1
     return s
 
 
 @kernel(parallel=True)
-def _sample_keys(pts, vp, gx, gy, B, nbx, slices, dlo, dhi, near, rec, key):
+def _sample_keys(pts, vp, gx, gy, B, nbx, slices, sb, near, rec, key):
     """Per sample: its grid key (bin, cell in bin, slice; -1 behind the view) and its record
     ``rec[k]`` = (image x, image y, distance to the light centre, position): one row, so that the
     counting sort's gather reads one cache line per sample."""
     n = pts.shape[0]
     l, r, b, t = vp[VP_L], vp[VP_R], vp[VP_B], vp[VP_T]
-    kf = slice_scale(dlo, dhi, slices)
     for k in prange(n):
         dx = pts[k, 0] - vp[VP_ORIGIN]
         dy = pts[k, 1] - vp[VP_ORIGIN + 1]
@@ -128,7 +135,7 @@ def _sample_keys(pts, vp, gx, gy, B, nbx, slices, dlo, dhi, near, rec, key):
         ux, uy, ub = np.uint64(cx), np.uint64(cy), np.uint64(B)
         bi = np.int64((uy // ub) * np.uint64(nbx) + ux // ub)
         loc = np.int64((uy % ub) * ub + ux % ub)
-        key[k] = (bi * B * B + loc) * slices + slice_of(d, dlo, kf, slices)
+        key[k] = (bi * B * B + loc) * slices + slice_of(d, sb)
 
 
 @kernel
@@ -285,7 +292,8 @@ def build_sample_grid(light, pts: np.ndarray, grid: int, bins: int, slices: int)
     rec = np.empty((n, 6))
     key = np.empty(n, np.int64)
     near = view.near
-    _sample_keys(pts, vp, grid, grid, bins, nbx, slices, dlo, dhi, near, rec, key)
+    sb = slice_bounds(dlo, dhi, slices)
+    _sample_keys(pts, vp, grid, grid, bins, nbx, slices, sb, near, rec, key)
     n_keys = nbx * nby * bins * bins * slices
     start, order = counting_sort(key, n_keys)
     m = len(order)
@@ -304,6 +312,7 @@ def build_sample_grid(light, pts: np.ndarray, grid: int, bins: int, slices: int)
         slices,
         dlo,
         dhi,
+        sb,
         start,
         sx,
         sy,
@@ -525,8 +534,7 @@ def _umbra_kernel(
     B,
     nbx,
     S,
-    dlo,
-    dhi,
+    sb,
     vp,
     center,
     verts,
@@ -542,7 +550,6 @@ def _umbra_kernel(
 ):
     """One worker of the umbra pass (:func:`count_umbrae`), run by ``run_slots``, one per thread: takes
     the next bin of ``bin_order`` (``next_item``) until none is left."""
-    kf = slice_scale(dlo, dhi, S)
     while True:
         q = next_item(counter)
         if q >= bin_order.shape[0]:
@@ -571,7 +578,7 @@ def _umbra_kernel(
             cx1 = min(cx1, bx * B + B - 1)
             cy0 = max(cy0, by * B)
             cy1 = min(cy1, by * B + B - 1)
-            s0 = slice_of(trid[f], dlo, kf, S)
+            s0 = slice_of(trid[f], sb)
             i0, i1, i2 = faces[f, 0], faces[f, 1], faces[f, 2]
             nx = (verts[i1, 1] - verts[i0, 1]) * (verts[i2, 2] - verts[i0, 2]) - (verts[i1, 2] - verts[i0, 2]) * (
                 verts[i2, 1] - verts[i0, 1]
@@ -648,8 +655,7 @@ def count_umbrae(grid: SampleGrid, verts, faces, counted, center) -> tuple[np.nd
         grid.bins,
         grid.nbx,
         grid.slices,
-        grid.dlo,
-        grid.dhi,
+        grid.sbound,
         grid.vp,
         c,
         verts,
@@ -967,18 +973,6 @@ def axes_overlap_box(ux, uy, cx, cy, hl, hw, x0, x1, y0, y1):
 
 
 @kernel(inline=True)
-def quad_overlaps_box(qd, e, R, x0, x1, y0, y1):
-    """Separating-axis test of the quad (segment A'B' grown by R along and across it) against an
-    image-plane box."""
-    if R <= 0.0:
-        return False
-    if not np.isfinite(R):
-        return True
-    ux, uy, cx, cy, hl, hw = quad_axes(qd, e, R)
-    return axes_overlap_box(ux, uy, cx, cy, hl, hw, x0, x1, y0, y1)
-
-
-@kernel(inline=True)
 def box_corner2(x0, x1, y0, y1):
     return max(x0 * x0, x1 * x1) + max(y0 * y0, y1 * y1)
 
@@ -1045,6 +1039,7 @@ def _quad_bins(qd, radius, dmax, corner2, bin_maxd, per_bin, vp, gx, gy, B, nbx,
         k = offs[e]
         by0, by1, bx0, bx1 = _quad_bin_range(qd, e, radius, dmax, corner2, vp, gx, gy, B)
         Rg = quad_half_width(qd, e, radius, dmax, corner2)
+        ux, uy, qcx, qcy, hl0, _hw = quad_axes(qd, e, 0.0)  # once per quad (only R varies per bin)
         for by in range(by0, by1):
             for bx in range(bx0, bx1):
                 bi = by * nbx + bx
@@ -1058,7 +1053,10 @@ def _quad_bins(qd, radius, dmax, corner2, bin_maxd, per_bin, vp, gx, gy, B, nbx,
                     R = Rg
                     if per_bin:
                         R = quad_half_width(qd, e, radius, bin_maxd[bi], box_corner2(x0, x1, y0, y1))
-                    hit = quad_overlaps_box(qd, e, R, x0, x1, y0, y1)
+                    # the quad (segment grown by R) against the bin: separating axes
+                    hit = R > 0.0 and (
+                        not np.isfinite(R) or axes_overlap_box(ux, uy, qcx, qcy, hl0 + R, R, x0, x1, y0, y1)
+                    )
                 if hit:
                     out[k + n] = bi
                     n += 1
@@ -1662,8 +1660,7 @@ def _penumbra_kernel(
     B,
     nbx,
     S,
-    dlo,
-    dhi,
+    sb,
     dmax,
     bin_maxd,
     vp,
@@ -1705,7 +1702,6 @@ def _penumbra_kernel(
     cw = (r - l) / gx
     ch = (t - b) / gy
     rad_s = radius * (1.0 + _SLACK)
-    kf = slice_scale(dlo, dhi, S)
     buf = np.zeros((4, 8))  # scratch, once per worker
     cand = np.empty(max_bin, np.int64)
     cval = np.empty(max_bin)
@@ -1806,7 +1802,7 @@ def _penumbra_kernel(
                             inv = izm - kc / (1.0 + _SLACK)
                             if inv <= 0.0:
                                 continue
-                            s0 = slice_of((1.0 / inv) * (1.0 - _SLACK), dlo, kf, S)
+                            s0 = slice_of((1.0 / inv) * (1.0 - _SLACK), sb)
                     elif wedge and dmin > radius:
                         # the wedge enters this column at the distance where its angular radius
                         # reaches the column: r (1/(dmin - r) - 1/D) * stretch >= dist(cell, edge)
@@ -1814,7 +1810,7 @@ def _penumbra_kernel(
                         inv = 1.0 / (dmin - radius) - dc / ((1.0 + max(q5, bc2)) * radius) / (1.0 + _SLACK)
                         if inv <= 0.0:
                             continue
-                        s0 = slice_of((1.0 / inv) * (1.0 - _SLACK), dlo, kf, S)
+                        s0 = slice_of((1.0 / inv) * (1.0 - _SLACK), sb)
                     j0, j1 = g_start[col + s0], g_start[col + S]
                     nt += j1 - j0
                     if count_only:
@@ -1943,8 +1939,7 @@ def accumulate_penumbrae(
         grid.bins,
         grid.nbx,
         grid.slices,
-        grid.dlo,
-        grid.dhi,
+        grid.sbound,
         grid.dmax,
         grid.bin_maxd,
         grid.vp,
