@@ -547,9 +547,13 @@ def _umbra_kernel(
     tests,
     bin_order,
     counter,
+    keep,
+    cand,
 ):
     """One worker of the umbra pass (:func:`count_umbrae`), run by ``run_slots``, one per thread: takes
-    the next bin of ``bin_order`` (``next_item``) until none is left."""
+    the next bin of ``bin_order`` (``next_item``) until none is left. ``keep``, ``cand``: scratch,
+    one row per worker (a cell column's flags; a triangle's candidates in the bin)."""
+    w = _worker
     while True:
         q = next_item(counter)
         if q >= bin_order.shape[0]:
@@ -597,27 +601,34 @@ def _umbra_kernel(
             t0 = _tie(sg * (bx2 - ax), sg * (by2 - ay))
             t1 = _tie(sg * (cx2 - bx2), sg * (cy2 - by2))
             t2 = _tie(sg * (ax - cx2), sg * (ay - cy2))
+            # first the point-in-triangle test on the image-plane coordinates, branch-free (it
+            # vectorizes), the samples inside compacted into ``cand``; then the plane test for them
+            m = 0
             for cy in range(cy0, cy1 + 1):
                 for cx in range(cx0, cx1 + 1):
                     col = (bi * B * B + (cy - by * B) * B + cx - bx * B) * S  # cy % B = cy - by B: no division
-                    for j in range(g_start[col + s0], g_start[col + S]):
-                        ntest += 1
+                    j0, j1 = g_start[col + s0], g_start[col + S]
+                    ntest += j1 - j0
+                    for i in range(j1 - j0):
+                        j = np.uint64(j0 + i)
                         px, py = sx[j], sy[j]
                         e0 = sg * ((bx2 - ax) * (py - ay) - (by2 - ay) * (px - ax))
                         e1 = sg * ((cx2 - bx2) * (py - by2) - (cy2 - by2) * (px - bx2))
                         e2 = sg * ((ax - cx2) * (py - cy2) - (ay - cy2) * (px - cx2))
-                        if (
-                            (e0 > 0.0 or (e0 == 0.0 and t0))
-                            and (e1 > 0.0 or (e1 == 0.0 and t1))
-                            and (e2 > 0.0 or (e2 == 0.0 and t2))
-                        ):
-                            den = (
-                                nx * (sp[j, 0] - center[0]) + ny * (sp[j, 1] - center[1]) + nz * (sp[j, 2] - center[2])
-                            )
-                            if den != 0.0:
-                                th = num / den  # the triangle's plane along centre -> p, 1 at p
-                                if th > 0.0 and th < 1.0:
-                                    umbra[j] += 1
+                        k0 = (e0 > 0.0) | ((e0 == 0.0) & t0)
+                        k1 = (e1 > 0.0) | ((e1 == 0.0) & t1)
+                        k2 = (e2 > 0.0) | ((e2 == 0.0) & t2)
+                        keep[w, np.uint64(i)] = np.int8(k0) & np.int8(k1) & np.int8(k2)
+                    for i in range(j1 - j0):
+                        cand[w, m] = j0 + i
+                        m += keep[w, i]
+            for i in range(m):
+                j = cand[w, i]
+                den = nx * (sp[j, 0] - center[0]) + ny * (sp[j, 1] - center[1]) + nz * (sp[j, 2] - center[2])
+                if den != 0.0:
+                    th = num / den  # the triangle's plane along centre -> p, 1 at p
+                    if th > 0.0 and th < 1.0:
+                        umbra[j] += 1
         tests[bi] = ntest
 
 
@@ -642,9 +653,13 @@ def count_umbrae(grid: SampleGrid, verts, faces, counted, center) -> tuple[np.nd
     bstart, bitems = _pairs_by_bin(counts, pair_bin, grid.n_bins)
     umbra = np.zeros(len(grid.order), np.int32)
     tests = np.zeros(grid.n_bins, np.int64)
+    nw = numba.get_num_threads()
+    n = len(grid.order)
+    max_col = int(np.diff(grid.start[:: grid.slices]).max()) if n else 0
+    max_bin = int(np.diff(grid.start[:: grid.bins * grid.bins * grid.slices]).max()) if n else 0
     run_slots(
         _umbra_kernel,
-        numba.get_num_threads(),
+        nw,
         grid.start,
         grid.ix,
         grid.iy,
@@ -668,6 +683,8 @@ def count_umbrae(grid: SampleGrid, verts, faces, counted, center) -> tuple[np.nd
         tests,
         bins_by_work(bstart, grid.start, grid.bins * grid.bins * grid.slices),
         np.zeros(1, np.int64),
+        np.empty((nw, max(max_col, 1)), np.int8),
+        np.empty((nw, max(max_bin, 1)), np.int64),
     )
     return umbra, {
         "umbra_triangles": int(valid.sum()),
