@@ -1405,10 +1405,12 @@ def _sign(s):
 def drop_cancelling(cp, m, center, e, ea, eb, tv_start, tv, sel, cand):
     """For an edge with two counted triangles (a fold candidate): drop the samples ``cand[:m]``
     (positions ``cp[:, :m]``) where the two cancel as seen from p or p lies in the plane through
-    the light centre and the edge (``disk_edge_terms``' first two exits, the same expressions, so
-    the same bits: exact zeros), compacting ``cp`` and ``cand`` in place; returns how many are left.
-    A cheap first pass (two cross products' worth, branch-free): on ``bunny`` 39% of the disk's
-    candidates are such zeros, which the vectorized terms would otherwise evaluate in full."""
+    the light centre and the edge (the first two exits of ``disk_edge_terms`` and of
+    ``rect_edge_terms``, the same expressions, so the same bits: exact zeros), compacting ``cp``
+    and ``cand`` in place; returns how many are left. A cheap first pass (two cross products' worth,
+    branch-free): on ``bunny`` 39% of the disk's candidates are such zeros, which the vectorized
+    terms would otherwise evaluate in full (1.15x on the sphere's penumbra pass, 1.18x on the
+    rectangle's)."""
     ax, ay, az, bx, by, bz = ea[e, 0], ea[e, 1], ea[e, 2], eb[e, 0], eb[e, 1], eb[e, 2]
     k1 = tv_start[e]
     v1x, v1y, v1z, v2x, v2y, v2z = tv[k1, 0], tv[k1, 1], tv[k1, 2], tv[k1 + 1, 0], tv[k1 + 1, 1], tv[k1 + 1, 2]
@@ -1876,9 +1878,9 @@ def _penumbra_kernel(
             if nt_e == 1 or nt_e == 2:
                 for i in range(m):  # the candidates' positions, contiguous: the terms' loop vectorizes
                     cp[0, i], cp[1, i], cp[2, i] = spos[cand[i], 0], spos[cand[i], 1], spos[cand[i], 2]
+                if nt_e == 2:  # (both lights: the same first two exits as either terms' loop)
+                    m = drop_cancelling(cp, np.int64(m), center, e, ea, eb, tv_start, tv, sel, cand)
                 if shape == 1:
-                    if nt_e == 2:
-                        m = drop_cancelling(cp, np.int64(m), center, e, ea, eb, tv_start, tv, sel, cand)
                     disk_edge_terms(cp, np.int64(m), center, radius, e, ea, eb, tv_start, tv, cval)
                 else:
                     m = rect_edge_terms(
