@@ -1655,19 +1655,6 @@ def cancels_in_box(e, ea, eb, tv_start, tv, box, c):
     return total == 0
 
 
-@kernel(inline=True)
-def _seg_box_dist(ax, ay, bx, by, x0, x1, y0, y1):
-    """Lower bound of the distance between segment AB and a box: distance to the box centre minus
-    its half diagonal (>= 0)."""
-    mx, my = 0.5 * (x0 + x1), 0.5 * (y0 + y1)
-    dx, dy = bx - ax, by - ay
-    uu = dx * dx + dy * dy
-    t = 0.0 if uu == 0.0 else min(max(((mx - ax) * dx + (my - ay) * dy) / uu, 0.0), 1.0)
-    qx, qy = ax + t * dx - mx, ay + t * dy - my
-    hd = 0.5 * np.sqrt((x1 - x0) ** 2 + (y1 - y0) ** 2)
-    return max(np.sqrt(qx * qx + qy * qy) - hd, 0.0)
-
-
 @kernel(nogil=True)
 def _penumbra_kernel(
     _worker,
@@ -1721,6 +1708,7 @@ def _penumbra_kernel(
     cw = (r - l) / gx
     ch = (t - b) / gy
     rad_s = radius * (1.0 + _SLACK)
+    hd = 0.5 * np.sqrt(cw * cw + ch * ch) * (1.0 + 1e-12)  # a cell's half diagonal (rounded up)
     buf = np.zeros((4, 8))  # scratch, once per worker
     cand = np.empty(max_bin, np.int64)
     cval = np.empty(max_bin)
@@ -1775,6 +1763,8 @@ def _penumbra_kernel(
             sdx, sdy = qbx - qax, qby - qay
             s_uu = sdx * sdx + sdy * sdy
             s_iuu = 1.0 / s_uu if s_uu > 0.0 else 0.0
+            # the wedge entry's per-cell division, hoisted: 1 / (stretch r (1 + slack))
+            wk = 1.0 / ((1.0 + max(q5, bc2)) * radius) / (1.0 + _SLACK)
             # the rectangle's per-sample test (rect_reach at a point, k of the sample's depth)
             rhx, rhy = qd[e, 8], qd[e, 9]
             rmx, rmy = 0.5 * (qax + qbx), 0.5 * (qay + qby)
@@ -1825,8 +1815,14 @@ def _penumbra_kernel(
                     elif wedge and dmin > radius:
                         # the wedge enters this column at the distance where its angular radius
                         # reaches the column: r (1/(dmin - r) - 1/D) * stretch >= dist(cell, edge)
-                        dc = _seg_box_dist(qax, qay, qbx, qby, x0, x1, y0, y1)
-                        inv = 1.0 / (dmin - radius) - dc / ((1.0 + max(q5, bc2)) * radius) / (1.0 + _SLACK)
+                        # dc: the distance from the segment to the cell's centre minus its half
+                        # diagonal (>= 0), a lower bound of the distance to the cell; no division
+                        mx, my = x0 + 0.5 * cw, y0 + 0.5 * ch
+                        ta = ((mx - qax) * sdx + (my - qay) * sdy) * s_iuu
+                        ta = min(max(ta, 0.0), 1.0)
+                        ox, oy = qax + ta * sdx - mx, qay + ta * sdy - my
+                        dc = max(np.sqrt(ox * ox + oy * oy) - hd, 0.0)
+                        inv = inv_dr - dc * wk
                         if inv <= 0.0:
                             continue
                         s0 = slice_of((1.0 / inv) * (1.0 - _SLACK), sb)
