@@ -373,6 +373,73 @@ def test_vectorized_rect_terms_agree_with_the_scalar_clipping(case):
     assert np.count_nonzero((scalar == 0) != (batch == 0)) <= 1e-3 * scalar.size
 
 
+@pytest.mark.parametrize("case", ["random", "degenerate"])
+def test_rect_bound_keeps_every_nonzero_term(case):
+    """The rectangle light's candidate bound (``rect_reach``: the edge's image swept by the light's
+    image-plane box scaled by k = 1/z_min - 1/z) is exact and conservative: every (edge, point)
+    whose term is nonzero passes it at the point's own k, as the penumbra pass tests each sample;
+    and it rejects most of the zeros (it is not vacuous). The same random and degenerate edges,
+    points and lights as the test above (the scalar clipping's terms)."""
+    from softshadows.methods.irregular import _SLACK, rect_reach
+    from softshadows.raster.view import light_frame
+
+    rng = np.random.default_rng(5 if case == "random" else 6)
+    q = (lambda a: np.round(a * 8) / 8) if case == "degenerate" else (lambda a: a)
+    ne = 60
+    ea, eb = q(rng.uniform(-1, 1, (ne, 3))), q(rng.uniform(-1, 1, (ne, 3)))
+    if case == "degenerate":
+        axis = rng.integers(0, 3, ne)
+        end = ea.copy()
+        end[np.arange(ne), axis] = eb[np.arange(ne), axis]
+        eb = end
+    ntri = rng.integers(1, 3, ne)
+    tv_start = np.concatenate([[0], np.cumsum(ntri)])
+    tv = q(rng.uniform(-1, 1, (tv_start[-1], 3)))
+    pts = q(rng.uniform(-2, 2, (400, 3)) * [1.0, 0.5, 1.0] - [0.0, 1.0, 0.0])
+    if case == "random":
+        center = np.array([0.1, 2.5, -0.2])
+        nrm = np.array([0.2, -1.0, 0.1]) / np.linalg.norm([0.2, -1.0, 0.1])
+        lu = np.cross(nrm, [0.3, 0.0, 1.0])
+        lu /= np.linalg.norm(lu)
+        lv = np.cross(nrm, lu)
+        hu, hv = 0.6, 0.45
+    else:
+        center, nrm = np.array([0.0, 2.5, 0.0]), np.array([0.0, -1.0, 0.0])
+        lu, lv = np.array([1.0, 0.0, 0.0]), np.array([0.0, 0.0, 1.0])
+        hu, hv = 0.625, 0.375
+    scalar, _batch = _rect_terms_both_paths(pts, center, nrm, lu, lv, hu, hv, ea, eb, tv_start, tv)
+    vr, vu, vf = light_frame(RectLight(center, 2 * hu * lu, 2 * hv * lv))
+    assert np.allclose(vf, nrm)
+
+    def image(x):
+        d = x - center
+        z = d @ vf
+        return (d @ vr) / z, (d @ vu) / z, z
+
+    ax, ay, az = image(ea)
+    bx, by, bz = image(eb)
+    px, py, pz = image(pts)
+    qd = np.zeros((ne, 10))
+    qd[:, 0], qd[:, 1], qd[:, 2], qd[:, 3] = ax, ay, bx, by
+    qd[:, 7] = 1.0 / np.minimum(az, bz)
+    qd[:, 8] = hu * abs(lu @ vr) + hv * abs(lv @ vr)
+    qd[:, 9] = hu * abs(lu @ vu) + hv * abs(lv @ vu)
+    reach = py_callable(rect_reach)
+    front = (az > 0) & (bz > 0)  # the pass bins only edges in front of the light
+    kept = nonzero = rejected_zeros = zeros = 0
+    for e in np.flatnonzero(front):
+        for j in np.flatnonzero(pz > 0):
+            ok = reach(qd, e, px[j], px[j], py[j], py[j]) <= (qd[e, 7] - 1.0 / pz[j]) * (1.0 + _SLACK)
+            if scalar[e, j] != 0.0:
+                nonzero += 1
+                kept += ok
+            else:
+                zeros += 1
+                rejected_zeros += not ok
+    assert nonzero > 500 and kept == nonzero
+    assert rejected_zeros > 0.5 * zeros
+
+
 def test_rect_halfplanes_area_against_exact_cases():
     """``rect_halfplanes_area`` (twice the area) on regions of [-1, 1] x [-0.5, 0.5] whose area is
     known exactly, including first lines that coincide with a side (facing the same way: counted

@@ -259,12 +259,20 @@ def hit_point(verts, faces, t, b1, b2, m0, m1, m2):
     normal m. Returns (px, py, pz, nx, ny, nz, err_point, err_embree, grazing); each value is computed
     with the operations in the order the earlier NumPy version used, so the results are the same
     bits."""
-    tiny = np.finfo(np.float64).tiny
-    g5 = 5 * U64 / (1 - 5 * U64)
     i0, i1, i2 = faces[t, 0], faces[t, 1], faces[t, 2]
     ax, ay, az = _f32(verts[i0, 0]), _f32(verts[i0, 1]), _f32(verts[i0, 2])
     bx, by, bz = _f32(verts[i1, 0]), _f32(verts[i1, 1]), _f32(verts[i1, 2])
     cx, cy, cz = _f32(verts[i2, 0]), _f32(verts[i2, 1]), _f32(verts[i2, 2])
+    return hit_point_at(ax, ay, az, bx, by, bz, cx, cy, cz, b1, b2, m0, m1, m2)
+
+
+@kernel(inline=True)
+def hit_point_at(ax, ay, az, bx, by, bz, cx, cy, cz, b1, b2, m0, m1, m2):
+    """:func:`hit_point` on the triangle's vertices (Embree's float32 values, as float64): no
+    gather and no branch (the flip toward the eye is a select per component), so that a loop of it
+    over contiguous arrays vectorizes (``irregular.error_bound_samples``)."""
+    tiny = np.finfo(np.float64).tiny
+    g5 = 5 * U64 / (1 - 5 * U64)
     b0 = 1.0 - b1 - b2
     e1x, e1y, e1z = bx - ax, by - ay, bz - az
     e2x, e2y, e2z = cx - ax, cy - ay, cz - az
@@ -274,8 +282,10 @@ def hit_point(verts, faces, t, b1, b2, m0, m1, m2):
     twice_area = np.sqrt(crx * crx + cry * cry + crz * crz)
     dn = max(twice_area, tiny)
     nx, ny, nz = crx / dn, cry / dn, crz / dn
-    if nx * m0 + ny * m1 + nz * m2 < 0.0:
-        nx, ny, nz = -nx, -ny, -nz
+    flip = nx * m0 + ny * m1 + nz * m2 < 0.0
+    nx = -nx if flip else nx
+    ny = -ny if flip else ny
+    nz = -nz if flip else nz
     px = b0 * ax + b1 * bx + b2 * cx
     py = b0 * ay + b1 * by + b2 * cy
     pz = b0 * az + b1 * bz + b2 * cz

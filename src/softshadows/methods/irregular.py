@@ -26,7 +26,7 @@ from ..analytic import atan2_upper, rect_halfplanes_area
 from ..geometry.silhouette import build_adjacency, facing, find_silhouette
 from ..raster.view import VP_B, VP_FORWARD, VP_L, VP_ORIGIN, VP_R, VP_RIGHT, VP_T, VP_UP, View, light_frame, light_view
 from .base import Method, MethodOutput, Param, register
-from .ground_truth import BOUND_SAFETY, hit_point
+from .ground_truth import BOUND_SAFETY, hit_point_at
 
 #: a connected occluder component with at most this fraction of boundary edges is a solid (only its
 #: light-facing triangles are counted); otherwise a sheet (both sides counted)
@@ -58,6 +58,7 @@ class SampleGrid:
     slices: int
     dlo: float  # slice 0 starts here (distance to the light centre)
     dhi: float
+    sbound: np.ndarray  # slice_bounds(dlo, dhi, slices): where each slice starts (slice_of)
     start: np.ndarray  # (nbx*nby*B*B*S + 1,) int64
     ix: np.ndarray  # (n,) float64 image-plane x/z of the sorted samples
     iy: np.ndarray
@@ -73,34 +74,40 @@ class SampleGrid:
         return self.nbx * self.nby
 
 
-@kernel(inline=True)
-def slice_scale(dlo, dhi, slices):
-    """The factor of :func:`slice_of`: slices / log(dhi / dlo)."""
-    return slices / np.log(dhi / dlo)
+def slice_bounds(dlo: float, dhi: float, slices: int) -> np.ndarray:
+    """The table of :func:`slice_of`: sb[s] (1 <= s < slices) = dlo (dhi / dlo)^(s / slices), the
+    distance where slice s starts (geometric slicing); sb[0] = -inf, and +inf up to a length of a
+    power of two plus one (the binary search's steps)."""
+    P = 1
+    while slices > P:
+        P *= 2
+    sb = np.full(P + 1, np.inf)
+    sb[0] = -np.inf
+    sb[1:slices] = np.maximum.accumulate(dlo * np.exp(np.arange(1, slices) * (np.log(dhi / dlo) / slices)))
+    return sb
 
 
 @kernel(inline=True)
-def slice_of(d, dlo, kf, slices):
-    """Depth slice of distance ``d`` (geometric slicing between dlo and dhi; ``kf`` =
-    :func:`slice_scale`), clamped; non-decreasing in ``d``."""
-    if slices == 1 or d <= dlo:
-        return 0
-    s = int(np.floor(np.log(d / dlo) * kf))
-    if s < 0:
-        return 0
-    if s >= slices:
-        return slices - 1
+def slice_of(d, sb):
+    """Depth slice of distance ``d``: the largest s with sb[s] <= d (``slice_bounds``), in
+    [0, slices - 1]; non-decreasing in ``d`` by construction (what the umbra's and the wedge's first
+    slices need to be conservative). A branch-free binary search: no logarithm per sample (one
+    cost half of the samples' keys)."""
+    s = 0
+    step = (sb.shape[0] - 1) >> 1
+    while step > 0:
+        s = s + step if sb[s + step] <= d else s
+        step >>= 1
     return s
 
 
 @kernel(parallel=True)
-def _sample_keys(pts, vp, gx, gy, B, nbx, slices, dlo, dhi, near, rec, key):
+def _sample_keys(pts, vp, gx, gy, B, nbx, slices, sb, near, rec, key):
     """Per sample: its grid key (bin, cell in bin, slice; -1 behind the view) and its record
     ``rec[k]`` = (image x, image y, distance to the light centre, position): one row, so that the
     counting sort's gather reads one cache line per sample."""
     n = pts.shape[0]
     l, r, b, t = vp[VP_L], vp[VP_R], vp[VP_B], vp[VP_T]
-    kf = slice_scale(dlo, dhi, slices)
     for k in prange(n):
         dx = pts[k, 0] - vp[VP_ORIGIN]
         dy = pts[k, 1] - vp[VP_ORIGIN + 1]
@@ -128,7 +135,7 @@ def _sample_keys(pts, vp, gx, gy, B, nbx, slices, dlo, dhi, near, rec, key):
         ux, uy, ub = np.uint64(cx), np.uint64(cy), np.uint64(B)
         bi = np.int64((uy // ub) * np.uint64(nbx) + ux // ub)
         loc = np.int64((uy % ub) * ub + ux % ub)
-        key[k] = (bi * B * B + loc) * slices + slice_of(d, dlo, kf, slices)
+        key[k] = (bi * B * B + loc) * slices + slice_of(d, sb)
 
 
 @kernel
@@ -285,7 +292,8 @@ def build_sample_grid(light, pts: np.ndarray, grid: int, bins: int, slices: int)
     rec = np.empty((n, 6))
     key = np.empty(n, np.int64)
     near = view.near
-    _sample_keys(pts, vp, grid, grid, bins, nbx, slices, dlo, dhi, near, rec, key)
+    sb = slice_bounds(dlo, dhi, slices)
+    _sample_keys(pts, vp, grid, grid, bins, nbx, slices, sb, near, rec, key)
     n_keys = nbx * nby * bins * bins * slices
     start, order = counting_sort(key, n_keys)
     m = len(order)
@@ -304,6 +312,7 @@ def build_sample_grid(light, pts: np.ndarray, grid: int, bins: int, slices: int)
         slices,
         dlo,
         dhi,
+        sb,
         start,
         sx,
         sy,
@@ -521,8 +530,7 @@ def _umbra_kernel(
     B,
     nbx,
     S,
-    dlo,
-    dhi,
+    sb,
     vp,
     center,
     verts,
@@ -535,10 +543,13 @@ def _umbra_kernel(
     tests,
     bin_order,
     counter,
+    keep,
+    cand,
 ):
     """One worker of the umbra pass (:func:`count_umbrae`), run by ``run_slots``, one per thread: takes
-    the next bin of ``bin_order`` (``next_item``) until none is left."""
-    kf = slice_scale(dlo, dhi, S)
+    the next bin of ``bin_order`` (``next_item``) until none is left. ``keep``, ``cand``: scratch,
+    one row per worker (a cell column's flags; a triangle's candidates in the bin)."""
+    w = _worker
     while True:
         q = next_item(counter)
         if q >= bin_order.shape[0]:
@@ -567,7 +578,7 @@ def _umbra_kernel(
             cx1 = min(cx1, bx * B + B - 1)
             cy0 = max(cy0, by * B)
             cy1 = min(cy1, by * B + B - 1)
-            s0 = slice_of(trid[f], dlo, kf, S)
+            s0 = slice_of(trid[f], sb)
             i0, i1, i2 = faces[f, 0], faces[f, 1], faces[f, 2]
             nx = (verts[i1, 1] - verts[i0, 1]) * (verts[i2, 2] - verts[i0, 2]) - (verts[i1, 2] - verts[i0, 2]) * (
                 verts[i2, 1] - verts[i0, 1]
@@ -586,27 +597,34 @@ def _umbra_kernel(
             t0 = _tie(sg * (bx2 - ax), sg * (by2 - ay))
             t1 = _tie(sg * (cx2 - bx2), sg * (cy2 - by2))
             t2 = _tie(sg * (ax - cx2), sg * (ay - cy2))
+            # first the point-in-triangle test on the image-plane coordinates, branch-free (it
+            # vectorizes), the samples inside compacted into ``cand``; then the plane test for them
+            m = 0
             for cy in range(cy0, cy1 + 1):
                 for cx in range(cx0, cx1 + 1):
                     col = (bi * B * B + (cy - by * B) * B + cx - bx * B) * S  # cy % B = cy - by B: no division
-                    for j in range(g_start[col + s0], g_start[col + S]):
-                        ntest += 1
+                    j0, j1 = g_start[col + s0], g_start[col + S]
+                    ntest += j1 - j0
+                    for i in range(j1 - j0):
+                        j = np.uint64(j0 + i)
                         px, py = sx[j], sy[j]
                         e0 = sg * ((bx2 - ax) * (py - ay) - (by2 - ay) * (px - ax))
                         e1 = sg * ((cx2 - bx2) * (py - by2) - (cy2 - by2) * (px - bx2))
                         e2 = sg * ((ax - cx2) * (py - cy2) - (ay - cy2) * (px - cx2))
-                        if (
-                            (e0 > 0.0 or (e0 == 0.0 and t0))
-                            and (e1 > 0.0 or (e1 == 0.0 and t1))
-                            and (e2 > 0.0 or (e2 == 0.0 and t2))
-                        ):
-                            den = (
-                                nx * (sp[j, 0] - center[0]) + ny * (sp[j, 1] - center[1]) + nz * (sp[j, 2] - center[2])
-                            )
-                            if den != 0.0:
-                                th = num / den  # the triangle's plane along centre -> p, 1 at p
-                                if th > 0.0 and th < 1.0:
-                                    umbra[j] += 1
+                        k0 = (e0 > 0.0) | ((e0 == 0.0) & t0)
+                        k1 = (e1 > 0.0) | ((e1 == 0.0) & t1)
+                        k2 = (e2 > 0.0) | ((e2 == 0.0) & t2)
+                        keep[w, np.uint64(i)] = np.int8(k0) & np.int8(k1) & np.int8(k2)
+                    for i in range(j1 - j0):
+                        cand[w, m] = j0 + i
+                        m += keep[w, i]
+            for i in range(m):
+                j = cand[w, i]
+                den = nx * (sp[j, 0] - center[0]) + ny * (sp[j, 1] - center[1]) + nz * (sp[j, 2] - center[2])
+                if den != 0.0:
+                    th = num / den  # the triangle's plane along centre -> p, 1 at p
+                    if th > 0.0 and th < 1.0:
+                        umbra[j] += 1
         tests[bi] = ntest
 
 
@@ -631,9 +649,13 @@ def count_umbrae(grid: SampleGrid, verts, faces, counted, center) -> tuple[np.nd
     bstart, bitems = _pairs_by_bin(counts, pair_bin, grid.n_bins)
     umbra = np.zeros(len(grid.order), np.int32)
     tests = np.zeros(grid.n_bins, np.int64)
+    nw = numba.get_num_threads()
+    n = len(grid.order)
+    max_col = int(np.diff(grid.start[:: grid.slices]).max()) if n else 0
+    max_bin = int(np.diff(grid.start[:: grid.bins * grid.bins * grid.slices]).max()) if n else 0
     run_slots(
         _umbra_kernel,
-        numba.get_num_threads(),
+        nw,
         grid.start,
         grid.ix,
         grid.iy,
@@ -644,8 +666,7 @@ def count_umbrae(grid: SampleGrid, verts, faces, counted, center) -> tuple[np.nd
         grid.bins,
         grid.nbx,
         grid.slices,
-        grid.dlo,
-        grid.dhi,
+        grid.sbound,
         grid.vp,
         c,
         verts,
@@ -658,6 +679,8 @@ def count_umbrae(grid: SampleGrid, verts, faces, counted, center) -> tuple[np.nd
         tests,
         bins_by_work(bstart, grid.start, grid.bins * grid.bins * grid.slices),
         np.zeros(1, np.int64),
+        np.empty((nw, max(max_col, 1)), np.int8),
+        np.empty((nw, max(max_bin, 1)), np.int64),
     )
     return umbra, {
         "umbra_triangles": int(valid.sum()),
@@ -870,7 +893,10 @@ def _quad_setup(ea, eb, vp, center, radius, shape, nrm_l, dmax, qd):
         # (dmin - kappa r)
         qd[e, 4] = dmin - kappa * radius + radius
         qd[e, 5] = max(ax * ax + ay * ay, bx * bx + by * by)
-        qd[e, 6] = 1.0 if (az > 0.0 and bz > 0.0 and np.isfinite(ax) and np.isfinite(bx)) else 0.0
+        valid = az > 0.0 and bz > 0.0 and np.isfinite(ax) and np.isfinite(bx)
+        qd[e, 6] = 1.0 if valid else 0.0
+        # the rectangle (in the view's z = 0 plane): 1 / the edge's smallest view depth (see rect_reach)
+        qd[e, 7] = 1.0 / min(az, bz) if (valid and shape == 0) else 0.0
 
 
 @kernel(inline=True)
@@ -886,6 +912,47 @@ def quad_half_width(qd, e, radius, dmax, corner2):
     if dmin <= radius:
         return np.inf
     return (1.0 + max(qd[e, 5], corner2)) * radius * (1.0 / (dmin - radius) - 1.0 / dmax) * (1.0 + _SLACK) + 1e-12
+
+
+#: absolute margin of the rectangle's bounds (image-plane units), as quad_half_width's 1e-12
+_EPS_IMG = 1e-12
+
+
+@kernel(inline=True)
+def rect_k(qd, e, dmax):
+    """The rectangle light: the largest k = 1/z_min - 1/z (z: view depth, z_min: the edge's smallest)
+    of receivers up to distance ``dmax`` (their depth is at most their distance), with a relative
+    slack of ``_SLACK``; < 0 when no receiver lies beyond the edge."""
+    return (qd[e, 7] - 1.0 / dmax) * (1.0 + _SLACK)
+
+
+@kernel(inline=True)
+def rect_reach(qd, e, x0, x1, y0, y1):
+    """The rectangle light's exact penumbra region of edge e, against an image-plane box: the
+    smallest k at which the box meets the region of receivers with k = 1/z_min - 1/z.
+
+    The view looks from the light centre c along the rectangle's normal, so the rectangle lies in
+    its z = 0 plane, and in image coordinates (x/z, y/z) it is the box [-hx, hx] x [-hy, hy] (qd's
+    columns 8, 9: ``build_penumbra_quads``). A receiver p (depth z) gets a nonzero term only if some
+    edge point q in front of it (depth z_q < z) lies on a segment from a light point x to p (the
+    edge's projection from p meets the rectangle); then image(p) = image(q) - (1/z_q - 1/z) x_xy,
+    and since 1/z_q - 1/z <= k and the box is symmetric, image(p) lies in the segment A'B' swept by
+    the box scaled by k: a hexagon, convex, whose sides are parallel to the image axes and to A'B'.
+    So the box misses it for every k below the largest, over those three separating axes, of
+    (centre distance - the box's extent - the segment's) / the light box's extent; both grown by
+    ``_EPS_IMG``. Exact, unlike the circumscribed circle (``quad_half_width``), and without its
+    stretch: 3.6x fewer candidate samples on ``bunny``."""
+    ax, ay, bx, by, hx, hy = qd[e, 0], qd[e, 1], qd[e, 2], qd[e, 3], qd[e, 8], qd[e, 9]
+    sx, sy = bx - ax, by - ay
+    wx, wy = 0.5 * (x1 - x0), 0.5 * (y1 - y0)
+    dx, dy = 0.5 * (x0 + x1 - ax - bx), 0.5 * (y0 + y1 - ay - by)
+    kx = (abs(dx) - wx - 0.5 * abs(sx) - _EPS_IMG) / hx
+    ky = (abs(dy) - wy - 0.5 * abs(sy) - _EPS_IMG) / hy
+    # across A'B' (normal (-sy, sx), not normalised: both sides scale alike)
+    hn = hx * abs(sy) + hy * abs(sx)
+    kn = (abs(sx * dy - sy * dx) - wx * abs(sy) - wy * abs(sx) - _EPS_IMG * (abs(sx) + abs(sy))) / hn
+    kn = kn if hn > 0.0 else -np.inf  # a point segment: the box axes decide
+    return max(kx, ky, kn)
 
 
 @kernel(inline=True)
@@ -919,18 +986,6 @@ def axes_overlap_box(ux, uy, cx, cy, hl, hw, x0, x1, y0, y1):
 
 
 @kernel(inline=True)
-def quad_overlaps_box(qd, e, R, x0, x1, y0, y1):
-    """Separating-axis test of the quad (segment A'B' grown by R along and across it) against an
-    image-plane box."""
-    if R <= 0.0:
-        return False
-    if not np.isfinite(R):
-        return True
-    ux, uy, cx, cy, hl, hw = quad_axes(qd, e, R)
-    return axes_overlap_box(ux, uy, cx, cy, hl, hw, x0, x1, y0, y1)
-
-
-@kernel(inline=True)
 def box_corner2(x0, x1, y0, y1):
     return max(x0 * x0, x1 * x1) + max(y0 * y0, y1 * y1)
 
@@ -951,7 +1006,16 @@ def _bin_box(vp, gx, gy, B, bx, by):
 def _quad_bin_range(qd, e, radius, dmax, corner2, vp, gx, gy, B):
     """(by0, by1, bx0, bx1): the screen bins the bounding box of quad e (grown by its half-width for
     every receiver, ``dmax``) touches; an empty range when the quad has no fragment."""
-    if qd[e, 6] > 0.0:
+    if qd[e, 7] > 0.0:  # the rectangle: the hexagon's box (rect_reach)
+        k = rect_k(qd, e, dmax)
+        if k >= 0.0:
+            ex, ey = k * qd[e, 8] + _EPS_IMG, k * qd[e, 9] + _EPS_IMG
+            x0, x1 = min(qd[e, 0], qd[e, 2]) - ex, max(qd[e, 0], qd[e, 2]) + ex
+            y0, y1 = min(qd[e, 1], qd[e, 3]) - ey, max(qd[e, 1], qd[e, 3]) + ey
+            cx0, cx1, cy0, cy1 = _cell_range(x0, x1, y0, y1, vp, gx, gy)
+            if cx0 <= cx1 and cy0 <= cy1:
+                return cy0 // B, cy1 // B + 1, cx0 // B, cx1 // B + 1
+    elif qd[e, 6] > 0.0:
         Rg = quad_half_width(qd, e, radius, dmax, corner2)
         if Rg > 0.0:
             if np.isfinite(Rg):
@@ -988,16 +1052,25 @@ def _quad_bins(qd, radius, dmax, corner2, bin_maxd, per_bin, vp, gx, gy, B, nbx,
         k = offs[e]
         by0, by1, bx0, bx1 = _quad_bin_range(qd, e, radius, dmax, corner2, vp, gx, gy, B)
         Rg = quad_half_width(qd, e, radius, dmax, corner2)
+        ux, uy, qcx, qcy, hl0, _hw = quad_axes(qd, e, 0.0)  # once per quad (only R varies per bin)
         for by in range(by0, by1):
             for bx in range(bx0, bx1):
                 bi = by * nbx + bx
                 if bin_maxd[bi] <= 0.0:
                     continue
                 x0, x1, y0, y1 = _bin_box(vp, gx, gy, B, bx, by)
-                R = Rg
-                if per_bin:
-                    R = quad_half_width(qd, e, radius, bin_maxd[bi], box_corner2(x0, x1, y0, y1))
-                if quad_overlaps_box(qd, e, R, x0, x1, y0, y1):
+                if qd[e, 7] > 0.0:
+                    kb = rect_k(qd, e, bin_maxd[bi] if per_bin else dmax)
+                    hit = kb >= 0.0 and rect_reach(qd, e, x0, x1, y0, y1) <= kb
+                else:
+                    R = Rg
+                    if per_bin:
+                        R = quad_half_width(qd, e, radius, bin_maxd[bi], box_corner2(x0, x1, y0, y1))
+                    # the quad (segment grown by R) against the bin: separating axes
+                    hit = R > 0.0 and (
+                        not np.isfinite(R) or axes_overlap_box(ux, uy, qcx, qcy, hl0 + R, R, x0, x1, y0, y1)
+                    )
+                if hit:
                     out[k + n] = bi
                     n += 1
         for i in range(k + n, offs[e + 1]):
@@ -1014,11 +1087,19 @@ def build_penumbra_quads(grid: SampleGrid, edges: Edges, light, light_radius: fl
     """Step (c), setup: one light-view penumbra quad per silhouette edge (its image-plane segment,
     minimum distance to the light centre and stretch; the half-width follows from the receiver
     distance, :func:`quad_half_width`)."""
-    shape, _b, _r, _hu, _hv, nrm_l, _u, _v = _light_params(light)
-    qd = np.zeros((len(edges), 7))
+    shape, _b, _r, hu, hv, nrm_l, u, v = _light_params(light)
+    qd = np.zeros((len(edges), 10))
     _quad_setup(
         edges.a, edges.b, grid.vp, grid.vp[VP_ORIGIN : VP_ORIGIN + 3].copy(), light_radius, shape, nrm_l, grid.dmax, qd
     )
+    if shape == 0:
+        # the rectangle's half-extents along the image axes (rect_reach); the view looks along its
+        # normal (light_frame), so its corners lie at depth 0 (to rounding: u, v and the normal come
+        # from the light's u x v)
+        vr, vu, vf = (grid.vp[i : i + 3] for i in (VP_RIGHT, VP_UP, VP_FORWARD))
+        qd[:, 8] = hu * abs(u @ vr) + hv * abs(v @ vr)
+        qd[:, 9] = hu * abs(u @ vu) + hv * abs(v @ vu)
+        assert hu * abs(u @ vf) + hv * abs(v @ vf) <= 1e-12 * (hu + hv)
     return qd
 
 
@@ -1317,6 +1398,45 @@ def _sign(s):
 
 
 @kernel(inline=True)
+def drop_cancelling(cp, m, center, e, ea, eb, tv_start, tv, sel, cand):
+    """For an edge with two counted triangles (a fold candidate): drop the samples ``cand[:m]``
+    (positions ``cp[:, :m]``) where the two cancel as seen from p or p lies in the plane through
+    the light centre and the edge (the first two exits of ``disk_edge_terms`` and of
+    ``rect_edge_terms``, the same expressions, so the same bits: exact zeros), compacting ``cp``
+    and ``cand`` in place; returns how many are left. A cheap first pass (two cross products' worth,
+    branch-free): on ``bunny`` 39% of the disk's candidates are such zeros, which the vectorized
+    terms would otherwise evaluate in full (1.15x on the sphere's penumbra pass, 1.18x on the
+    rectangle's)."""
+    ax, ay, az, bx, by, bz = ea[e, 0], ea[e, 1], ea[e, 2], eb[e, 0], eb[e, 1], eb[e, 2]
+    k1 = tv_start[e]
+    v1x, v1y, v1z, v2x, v2y, v2z = tv[k1, 0], tv[k1, 1], tv[k1, 2], tv[k1 + 1, 0], tv[k1 + 1, 1], tv[k1 + 1, 2]
+    c0, c1, c2 = center[0], center[1], center[2]
+    for i in range(m):
+        p0, p1, p2 = cp[0, i], cp[1, i], cp[2, i]
+        cx, cy, cz = c0 - p0, c1 - p1, c2 - p2
+        rax, ray, raz = ax - p0, ay - p1, az - p2
+        rbx, rby, rbz = bx - p0, by - p1, bz - p2
+        nx = ray * rbz - raz * rby
+        ny = raz * rbx - rax * rbz
+        nz = rax * rby - ray * rbx
+        w2 = _sign(nx * (v2x - p0) + ny * (v2y - p1) + nz * (v2z - p2))
+        wsum = 0.0 + _sign(nx * (v1x - p0) + ny * (v1y - p1) + nz * (v1z - p2))
+        wsum = wsum + w2
+        nc = nx * cx + ny * cy + nz * cz
+        sel[i] = (wsum != 0.0) & (nc != 0.0)
+    n = 0
+    for i in range(m):
+        keep = sel[i]
+        sel[n] = i
+        n += keep
+    for t in range(n):
+        i = sel[t]  # >= t
+        cand[t] = cand[i]
+        cp[0, t], cp[1, t], cp[2, t] = cp[0, i], cp[1, i], cp[2, i]
+    return n
+
+
+@kernel(inline=True)
 def disk_edge_terms(cp, m, center, radius, e, ea, eb, tv_start, tv, out):
     """``sample_edge_term`` for the disk (``shape == 1``) at the m samples whose positions are
     ``cp[:, :m]`` (copied contiguous when the candidates are compacted), for one edge with one or
@@ -1531,19 +1651,6 @@ def cancels_in_box(e, ea, eb, tv_start, tv, box, c):
     return total == 0
 
 
-@kernel(inline=True)
-def _seg_box_dist(ax, ay, bx, by, x0, x1, y0, y1):
-    """Lower bound of the distance between segment AB and a box: distance to the box centre minus
-    its half diagonal (>= 0)."""
-    mx, my = 0.5 * (x0 + x1), 0.5 * (y0 + y1)
-    dx, dy = bx - ax, by - ay
-    uu = dx * dx + dy * dy
-    t = 0.0 if uu == 0.0 else min(max(((mx - ax) * dx + (my - ay) * dy) / uu, 0.0), 1.0)
-    qx, qy = ax + t * dx - mx, ay + t * dy - my
-    hd = 0.5 * np.sqrt((x1 - x0) ** 2 + (y1 - y0) ** 2)
-    return max(np.sqrt(qx * qx + qy * qy) - hd, 0.0)
-
-
 @kernel(nogil=True)
 def _penumbra_kernel(
     _worker,
@@ -1555,8 +1662,7 @@ def _penumbra_kernel(
     B,
     nbx,
     S,
-    dlo,
-    dhi,
+    sb,
     dmax,
     bin_maxd,
     vp,
@@ -1598,7 +1704,7 @@ def _penumbra_kernel(
     cw = (r - l) / gx
     ch = (t - b) / gy
     rad_s = radius * (1.0 + _SLACK)
-    kf = slice_scale(dlo, dhi, S)
+    hd = 0.5 * np.sqrt(cw * cw + ch * ch) * (1.0 + 1e-12)  # a cell's half diagonal (rounded up)
     buf = np.zeros((4, 8))  # scratch, once per worker
     cand = np.empty(max_bin, np.int64)
     cval = np.empty(max_bin)
@@ -1617,8 +1723,14 @@ def _penumbra_kernel(
         bx = bi % nbx
         jb = g_start[bi * B * B * S]  # the bin's first sample: rw and sinv are indexed from it
         if not count_only:
-            for j in range(jb, g_start[(bi + 1) * B * B * S]):  # (rows: where needed, scalar_edge_terms)
-                sinv[j - jb] = 1.0 / sdist[j]
+            if shape == 0:  # the rectangle's bound: 1 / view depth (rect_reach)
+                f0, f1, f2 = vp[VP_FORWARD], vp[VP_FORWARD + 1], vp[VP_FORWARD + 2]
+                for j in range(jb, g_start[(bi + 1) * B * B * S]):
+                    dz = (spos[j, 0] - vp[VP_ORIGIN]) * f0 + (spos[j, 1] - vp[VP_ORIGIN + 1]) * f1
+                    sinv[j - jb] = 1.0 / (dz + (spos[j, 2] - vp[VP_ORIGIN + 2]) * f2)
+            else:
+                for j in range(jb, g_start[(bi + 1) * B * B * S]):  # (rows: where needed, scalar_edge_terms)
+                    sinv[j - jb] = 1.0 / sdist[j]
         bx0, bx1, by0, by1 = _bin_box(vp, gx, gy, B, bx, by)
         bc2 = box_corner2(bx0, bx1, by0, by1)
         nf = 0
@@ -1637,19 +1749,31 @@ def _penumbra_kernel(
             qax, qay, qbx, qby, dmin, q5 = qd[e, 0], qd[e, 1], qd[e, 2], qd[e, 3], qd[e, 4], qd[e, 5]
             dr = dmin - radius if dmin > radius else 0.0
             inv_dr = 1.0 / dr if dr > 0.0 else 0.0
-            if R <= 0.0:
+            rect = shape == 0  # the exact hexagon of rect_reach instead of the quad
+            izm = qd[e, 7]
+            kq = rect_k(qd, e, bin_maxd[bi] if per_bin else dmax)
+            if (kq < 0.0) if rect else (R <= 0.0):
                 continue  # no fragment
-            every = not np.isfinite(R)  # the light's sphere reaches the edge: every cell
-            ux, uy, qcx, qcy, hl, hw = quad_axes(qd, e, 1.0 if every else R)
+            every = not (rect or np.isfinite(R))  # the light's sphere reaches the edge: every cell
+            ux, uy, qcx, qcy, hl, hw = quad_axes(qd, e, 1.0 if (every or rect) else R)
             sdx, sdy = qbx - qax, qby - qay
             s_uu = sdx * sdx + sdy * sdy
             s_iuu = 1.0 / s_uu if s_uu > 0.0 else 0.0
+            # the wedge entry's per-cell division, hoisted: 1 / (stretch r (1 + slack))
+            wk = 1.0 / ((1.0 + max(q5, bc2)) * radius) / (1.0 + _SLACK)
+            # the rectangle's per-sample test (rect_reach at a point, k of the sample's depth)
+            rhx, rhy = qd[e, 8], qd[e, 9]
+            rmx, rmy = 0.5 * (qax + qbx), 0.5 * (qay + qby)
+            rex, rey = 0.5 * abs(sdx) + _EPS_IMG, 0.5 * abs(sdy) + _EPS_IMG
+            rhn, ren = rhx * abs(sdy) + rhy * abs(sdx), _EPS_IMG * (abs(sdx) + abs(sdy))
             # the bin's cells that can overlap the quad's bounding box (one cell of margin for
             # rounding: every cell outside is one ``axes_overlap_box`` rejects on the box axes)
             cx_lo, cx_hi, cy_lo, cy_hi = bx * B, min(bx * B + B, gx), by * B, min(by * B + B, gy)
             if not every:
                 ex = hl * abs(ux) + hw * abs(uy)
                 ey = hl * abs(uy) + hw * abs(ux)
+                if rect:  # (rect_reach) the hexagon's box
+                    ex, ey = 0.5 * abs(sdx) + kq * rhx + _EPS_IMG, 0.5 * abs(sdy) + kq * rhy + _EPS_IMG
                 cx_lo = int(max(np.floor((qcx - ex - l) / cw) - 1.0, cx_lo))
                 cx_hi = int(min(np.floor((qcx + ex - l) / cw) + 2.0, cx_hi))
                 cy_lo = int(max(np.floor((t - qcy - ey) / ch) - 1.0, cy_lo))
@@ -1665,20 +1789,39 @@ def _penumbra_kernel(
                     col = ci * S
                     if g_start[col] == g_start[col + S]:
                         continue
-                    if not (every or axes_overlap_box(ux, uy, qcx, qcy, hl, hw, x0, x1, y0, y1)):
+                    kc = 0.0
+                    if rect:
+                        kc = rect_reach(qd, e, x0, x1, y0, y1)
+                        if kc > kq:
+                            continue
+                    elif not (every or axes_overlap_box(ux, uy, qcx, qcy, hl, hw, x0, x1, y0, y1)):
                         continue
                     if cancels_in_box(e, ea, eb, tv_start, tv, col_box, ci):
                         continue
                     nf += 1
                     s0 = 0
-                    if wedge and dmin > radius:
+                    if rect:
+                        # the wedge enters the column where k = 1/z_min - 1/z reaches kc: at depth (so
+                        # at distance) 1 / (1/z_min - kc) or beyond
+                        if wedge and kc > 0.0:
+                            inv = izm - kc / (1.0 + _SLACK)
+                            if inv <= 0.0:
+                                continue
+                            s0 = slice_of((1.0 / inv) * (1.0 - _SLACK), sb)
+                    elif wedge and dmin > radius:
                         # the wedge enters this column at the distance where its angular radius
                         # reaches the column: r (1/(dmin - r) - 1/D) * stretch >= dist(cell, edge)
-                        dc = _seg_box_dist(qax, qay, qbx, qby, x0, x1, y0, y1)
-                        inv = 1.0 / (dmin - radius) - dc / ((1.0 + max(q5, bc2)) * radius) / (1.0 + _SLACK)
+                        # dc: the distance from the segment to the cell's centre minus its half
+                        # diagonal (>= 0), a lower bound of the distance to the cell; no division
+                        mx, my = x0 + 0.5 * cw, y0 + 0.5 * ch
+                        ta = ((mx - qax) * sdx + (my - qay) * sdy) * s_iuu
+                        ta = min(max(ta, 0.0), 1.0)
+                        ox, oy = qax + ta * sdx - mx, qay + ta * sdy - my
+                        dc = max(np.sqrt(ox * ox + oy * oy) - hd, 0.0)
+                        inv = inv_dr - dc * wk
                         if inv <= 0.0:
                             continue
-                        s0 = slice_of((1.0 / inv) * (1.0 - _SLACK), dlo, kf, S)
+                        s0 = slice_of((1.0 / inv) * (1.0 - _SLACK), sb)
                     j0, j1 = g_start[col + s0], g_start[col + S]
                     nt += j1 - j0
                     if count_only:
@@ -1687,7 +1830,20 @@ def _penumbra_kernel(
                     # edge's image against the angular radius at its own distance (stretch
                     # from its own off-axis angle and the edge's endpoints); branch-free, the
                     # survivors' indices compacted into ``cand``
-                    if dr > 0.0:
+                    if rect:
+                        # rect_reach at each sample (a point) with its own k: same form, branch-free
+                        for i in range(j1 - j0):
+                            j = np.uint64(j0 + i)
+                            k = (izm - sinv[np.uint64(j0 - jb + i)]) * (1.0 + _SLACK)
+                            ddx, ddy = six[j] - rmx, siy[j] - rmy
+                            kx = abs(ddx) <= rex + k * rhx
+                            ky = abs(ddy) <= rey + k * rhy
+                            kn = abs(sdx * ddy - sdy * ddx) <= ren + k * rhn
+                            keep[np.uint64(i)] = np.int8(kx) & np.int8(ky) & np.int8(kn)
+                        for i in range(j1 - j0):
+                            cand[m] = j0 + i
+                            m += keep[i]
+                    elif dr > 0.0:
                         # unsigned indices (no negative-index wrap-around code) and selects:
                         # the loop vectorizes (1.45x on this loop alone), same values and flags
                         for i in range(j1 - j0):
@@ -1714,6 +1870,8 @@ def _penumbra_kernel(
             if nt_e == 1 or nt_e == 2:
                 for i in range(m):  # the candidates' positions, contiguous: the terms' loop vectorizes
                     cp[0, i], cp[1, i], cp[2, i] = spos[cand[i], 0], spos[cand[i], 1], spos[cand[i], 2]
+                if nt_e == 2:  # (both lights: the same first two exits as either terms' loop)
+                    m = drop_cancelling(cp, np.int64(m), center, e, ea, eb, tv_start, tv, sel, cand)
                 if shape == 1:
                     disk_edge_terms(cp, np.int64(m), center, radius, e, ea, eb, tv_start, tv, cval)
                 else:
@@ -1792,8 +1950,7 @@ def accumulate_penumbrae(
         grid.bins,
         grid.nbx,
         grid.slices,
-        grid.dlo,
-        grid.dhi,
+        grid.sbound,
         grid.dmax,
         grid.bin_maxd,
         grid.vp,
@@ -1857,28 +2014,49 @@ def compose_visibility(grid: SampleGrid, umbra, pen, n_all: int) -> np.ndarray:
     return out
 
 
+#: points per block of ``_error_bound_samples``
+_EB_BLOCK = 256
+
+
 @kernel(parallel=True)
 def _error_bound_samples(verts, faces, tri_img, bary_img, idx, nrm, eps, out, bound):
     """Ground truth's ray origins (:func:`ground_truth.hit_point`, float64): p + (BOUND_SAFETY x its
-    error bound + eps) n, n the geometric normal turned toward the eye; gathers from the G-buffer."""
-    for k in prange(idx.shape[0]):
-        q = idx[k]
-        px, py, pz, nx, ny, nz, ep, ee, _g = hit_point(
-            verts,
-            faces,
-            tri_img[q],
-            np.float64(bary_img[q, 0]),
-            np.float64(bary_img[q, 1]),
-            nrm[k, 0],
-            nrm[k, 1],
-            nrm[k, 2],
-        )
-        b = BOUND_SAFETY * (ep + ee)
-        bound[k] = b
-        off = b + eps
-        out[k, 0] = px + off * nx
-        out[k, 1] = py + off * ny
-        out[k, 2] = pz + off * nz
+    error bound + eps) n, n the geometric normal turned toward the eye; gathers from the G-buffer.
+    By blocks of points: the triangles' vertices and the points' inputs gathered into contiguous
+    scratch first, then ``hit_point_at`` in a loop without gathers or branches (it vectorizes), its
+    outputs stored contiguous and copied to the rows of ``out`` last: the same arithmetic, the same
+    bits as ``hit_point`` point by point."""
+    n = idx.shape[0]
+    nblk = (n + _EB_BLOCK - 1) // _EB_BLOCK
+    for blk in prange(nblk):
+        k0 = blk * _EB_BLOCK
+        m = min(n, k0 + _EB_BLOCK) - k0
+        g = np.empty((17, _EB_BLOCK))  # inputs (14 rows), then the result (3)
+        for i in range(m):
+            k = k0 + i
+            q = idx[k]
+            t = tri_img[q]
+            for c in range(3):
+                vi = faces[t, c]
+                g[3 * c, i] = np.float64(np.float32(verts[vi, 0]))  # Embree's float32 vertex coordinates
+                g[3 * c + 1, i] = np.float64(np.float32(verts[vi, 1]))
+                g[3 * c + 2, i] = np.float64(np.float32(verts[vi, 2]))
+            g[9, i] = np.float64(bary_img[q, 0])
+            g[10, i] = np.float64(bary_img[q, 1])
+            g[11, i], g[12, i], g[13, i] = nrm[k, 0], nrm[k, 1], nrm[k, 2]
+        for i in range(m):
+            px, py, pz, nx, ny, nz, ep, ee, _g = hit_point_at(
+                g[0, i], g[1, i], g[2, i], g[3, i], g[4, i], g[5, i], g[6, i], g[7, i], g[8, i],
+                g[9, i], g[10, i], g[11, i], g[12, i], g[13, i],
+            )  # fmt: skip
+            b = BOUND_SAFETY * (ep + ee)
+            bound[k0 + i] = b
+            off = b + eps
+            g[14, i] = px + off * nx
+            g[15, i] = py + off * ny
+            g[16, i] = pz + off * nz
+        for i in range(m):
+            out[k0 + i, 0], out[k0 + i, 1], out[k0 + i, 2] = g[14, i], g[15, i], g[16, i]
 
 
 def error_bound_samples(flat, eye, idx, nrm, eps):
