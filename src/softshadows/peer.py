@@ -22,8 +22,9 @@ patterns (``pcss.sample_pattern``, uploaded as uniforms): a blocker search of th
 light subtends at the map's nearest depth (which a two-pass min reduction of the map finds on the
 GL side before the eye pass), the average blocker depth, the parallel-plane penumbra width, PCF
 over that width with a bilinearly weighted 2x2 comparison per tap; every tap compares against the
-receiver's tangent plane (our ``receiver_plane``). Our work-skipping shortcuts (empty regions,
-plane depths not needed) change no V, so the GL pass has none.
+receiver's tangent plane (our ``receiver_plane``). Our work-skipping shortcuts (empty regions of
+the map, plane depths not needed) change no V; the GL pass has only the coarsest, equally exact
+one: a search region entirely off the map is lit without taking its taps.
 
 Geometry is uploaded once (as our scene keeps its flattened arrays). The GL computes in float32
 (ours in float64 on float32 maps): ``hard``'s V differ only where a depth comparison falls the
@@ -169,6 +170,10 @@ void main() {
     float texel1 = (lwin.y - lwin.x) / lsize.x;      // texel size at depth 1
     // step 1: blocker search over the light's cross-section at depth zn, in texels
     vec2 rs = half_light * ((z - zn) / (z * zn) / texel1);
+    if (s.x + rs.x < 0.0 || s.x - rs.x >= lsize.x || s.y + rs.y < 0.0 || s.y - rs.y >= lsize.y) {
+        vis = 1.0;                                   // every search tap off the map: no blocker
+        return;
+    }
     float off = receiver_offset(n, z);
     float zt = z - off;
     vec3 nv = vec3(dot(n, lR), dot(n, lU), dot(n, lF));   // receiver plane in the light's view
