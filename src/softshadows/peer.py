@@ -81,16 +81,47 @@ void main() {
 }
 """
 )
-#: what every eye pass starts with: the light's map and view, the bias, the fragment's point
-_FRAG_EYE_COMMON = """
+#: the eye pass's point: the fragment's world position and face normal, from the eye triangle
+#: (forward: the shading runs per fragment that passes the depth test) ...
+_EYE_FORWARD = """
 #version 330
+in vec3 wp; flat in vec3 fn;
+out float vis;
+void shadow();
+void main() { shadow(); }
+"""
+#: ... or from the G-buffer (deferred: a full-screen pass shades each pixel once; a pixel without
+#: a surface has w = 0 and gets the marker -1)
+_EYE_DEFERRED = """
+#version 330
+uniform sampler2D gpos; uniform sampler2D gnrm;
+vec3 wp; vec3 fn;
+out float vis;
+void shadow();
+void main() {
+    ivec2 c = ivec2(gl_FragCoord.xy);
+    vec4 g = texelFetch(gpos, c, 0);
+    if (g.w == 0.0) { vis = -1.0; return; }
+    wp = g.xyz;
+    fn = texelFetch(gnrm, c, 0).xyz;
+    shadow();
+}
+"""
+#: the G-buffer of the deferred eye pass (with VERT_EYE): world position, face normal
+FRAG_GBUFFER = """
+#version 330
+in vec3 wp; flat in vec3 fn;
+layout(location = 0) out vec4 gpos;
+layout(location = 1) out vec4 gnrm;
+void main() { gpos = vec4(wp, 1.0); gnrm = vec4(fn, 0.0); }
+"""
+#: what every eye pass's shadow test has: the light's map and view, the bias, helpers (after a head)
+_FRAG_EYE_COMMON = """
 uniform vec3 eye;
 uniform vec3 lo; uniform vec3 lR; uniform vec3 lU; uniform vec3 lF;
 uniform vec4 lwin; uniform vec2 lsize;
 uniform float bias; uniform float slope_bias;
 uniform sampler2D smap;
-in vec3 wp; flat in vec3 fn;
-out float vis;
 
 vec3 eye_normal() {                                  // the face normal turned toward the eye
     vec3 n = fn;
@@ -119,7 +150,7 @@ float texel_depth(int ci, int ri) {                  // column ci, row ri from t
 FRAG_HARD = (
     _FRAG_EYE_COMMON
     + """
-void main() {
+void shadow() {
     vec3 n = eye_normal();
     vec3 s = light_project(wp);
     float z = s.z;
@@ -159,7 +190,7 @@ float penumbra(float zr, float zb, float w) {        // pcss.penumbra_estimation
 float lit(int ci, int ri, float zc) {                // texels outside the map are lit
     return (inside(ci, ri) && texel_depth(ci, ri) < zc) ? 0.0 : 1.0;
 }
-void main() {
+void shadow() {
     vec3 n = eye_normal();
     vec3 s = light_project(wp);
     float z = s.z;
@@ -242,12 +273,19 @@ def _uniforms(prog, view, prefix=""):
 
 class GLFrame:
     """A shadow-map frame of ``scene`` in OpenGL (see the module docstring): the depth map, the eye
-    pass with the fragment shader ``frag_eye`` (a subclass's method), V read back. :meth:`frame`
+    pass with the shadow test ``frag_eye`` (a subclass's GLSL ``void shadow()`` that sets ``vis``
+    from ``wp``, ``fn`` and the helpers of ``_FRAG_EYE_COMMON``), V read back. :meth:`frame`
     renders it and returns V (H,W) float32, NaN where no surface. Raises where no GL context can be
-    made. Subclasses set ``frag_eye`` and may add passes between the map and the eye pass
-    (:meth:`_before_eye`)."""
+    made. Subclasses set ``frag_eye``, may add passes between the map and the eye pass
+    (:meth:`_before_eye`), and set ``deferred`` where their test is costly: the eye triangles then
+    write a G-buffer (world position, face normal; the same nearest fragment, the first drawn on a
+    depth tie) and a full-screen pass runs the test once per pixel, not once per fragment that
+    passes the depth test (overdraw)."""
 
     frag_eye = ""
+    deferred = False
+    #: GLSL ``#define`` lines for ``frag_eye``
+    defines = ""
 
     def __init__(self, scene, width: int, height: int, map_size: int, bias: float, slope_bias: float):
         import moderngl
@@ -262,13 +300,28 @@ class GLFrame:
         fn = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
         fn /= np.maximum(np.linalg.norm(fn, axis=1, keepdims=True), 1e-300)
         occ = tri[flat.occluder]
+        head = (_EYE_DEFERRED if self.deferred else _EYE_FORWARD).replace(
+            "#version 330\n", "#version 330\n" + self.defines, 1
+        )
         self.p_depth = ctx.program(vertex_shader=VERT_DEPTH, fragment_shader=FRAG_DEPTH)
-        self.p_eye = ctx.program(vertex_shader=VERT_EYE, fragment_shader=self.frag_eye)
         vbo_occ = ctx.buffer(occ.astype("f4").tobytes())
         self.vao_depth = ctx.vertex_array(self.p_depth, [(vbo_occ, "3f", "p")])
         inter = np.concatenate([tri, np.repeat(fn[:, None, :], 3, axis=1)], axis=2).astype("f4")
         self.vbo_eye = ctx.buffer(inter.tobytes())
-        self.vao_eye = ctx.vertex_array(self.p_eye, [(self.vbo_eye, "3f 3f", "p", "nrm")])
+        if self.deferred:
+            self.p_eye = ctx.program(vertex_shader=VERT_FULL, fragment_shader=head + self.frag_eye)
+            self.vao_eye = ctx.vertex_array(self.p_eye, [])
+            p_tri = self.p_gbuf = ctx.program(vertex_shader=VERT_EYE, fragment_shader=FRAG_GBUFFER)
+            self.vao_gbuf = ctx.vertex_array(self.p_gbuf, [(self.vbo_eye, "3f 3f", "p", "nrm")])
+            self.tex_g = [ctx.texture((width, height), 4, dtype="f4") for _ in range(2)]
+            for t in self.tex_g:
+                t.filter = (moderngl.NEAREST, moderngl.NEAREST)
+            self.fbo_gbuf = ctx.framebuffer(self.tex_g, ctx.depth_renderbuffer((width, height)))
+            self.p_eye["gpos"].value = 2
+            self.p_eye["gnrm"].value = 3
+        else:
+            p_tri = self.p_eye = ctx.program(vertex_shader=VERT_EYE, fragment_shader=head + self.frag_eye)
+            self.vao_eye = ctx.vertex_array(self.p_eye, [(self.vbo_eye, "3f 3f", "p", "nrm")])
         self.tex_map = ctx.texture((map_size, map_size), 1, dtype="f4")
         self.tex_map.filter = (moderngl.NEAREST, moderngl.NEAREST)
         self.fbo_map = ctx.framebuffer([self.tex_map], ctx.depth_renderbuffer((map_size, map_size)))
@@ -277,8 +330,8 @@ class GLFrame:
         lv, ev = self.lview, self.view
         _uniforms(self.p_depth, lv)
         self.p_depth["nf"].value = (float(lv.near), float(lv.far))
-        _uniforms(self.p_eye, ev)
-        self.p_eye["nf"].value = (float(ev.near), float(ev.far))
+        _uniforms(p_tri, ev)
+        p_tri["nf"].value = (float(ev.near), float(ev.far))
         for k, v in (("lo", lv.origin), ("lR", lv.right), ("lU", lv.up), ("lF", lv.forward)):
             self.p_eye[k].value = tuple(map(float, v))
         self.p_eye["lwin"].value = tuple(map(float, lv.window))
@@ -308,10 +361,21 @@ class GLFrame:
         self.fbo_map.clear(EMPTY_DEPTH, 0.0, 0.0, 0.0, depth=1.0)
         self.vao_depth.render(mgl.TRIANGLES)
         self._before_eye()
-        self.fbo_eye.use()
-        self.fbo_eye.clear(-1.0, 0.0, 0.0, 0.0, depth=1.0)
-        self.tex_map.use(0)
-        self.vao_eye.render(mgl.TRIANGLES)
+        if self.deferred:
+            self.fbo_gbuf.use()
+            self.fbo_gbuf.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+            self.vao_gbuf.render(mgl.TRIANGLES)
+            ctx.disable(mgl.DEPTH_TEST)
+            self.fbo_eye.use()
+            self.tex_map.use(0)
+            self.tex_g[0].use(2)
+            self.tex_g[1].use(3)
+            self.vao_eye.render(mgl.TRIANGLES, vertices=3)  # every pixel
+        else:
+            self.fbo_eye.use()
+            self.fbo_eye.clear(-1.0, 0.0, 0.0, 0.0, depth=1.0)
+            self.tex_map.use(0)
+            self.vao_eye.render(mgl.TRIANGLES)
         raw = self.fbo_eye.read(components=1, dtype="f4")
         v = np.frombuffer(raw, np.float32).reshape(self.height, self.width)[::-1]  # GL rows from the bottom
         return np.where(v < 0.0, np.float32(np.nan), v)
@@ -329,6 +393,8 @@ class GLPCSS(GLFrame):
     (``pcss.sample_pattern`` over the light's shape). Before the eye pass, the map's smallest depth
     (the search region's z_near, as ``pcss.occupancy_grid``) by a two-pass min reduction."""
 
+    frag_eye = FRAG_PCSS
+    deferred = True
     #: texels per side of a first-pass block of the min reduction
     MIN_BLOCK = 32
 
@@ -349,8 +415,7 @@ class GLPCSS(GLFrame):
         disk = scene.light.shape != "rect"
         self.search_pat = sample_pattern(search_samples, pattern, disk)
         self.filter_pat = sample_pattern(filter_samples, pattern, disk)
-        defs = f"#version 330\n#define NS {len(self.search_pat)}\n#define NF {len(self.filter_pat)}\n"
-        self.frag_eye = FRAG_PCSS.replace("#version 330\n", defs, 1)
+        self.defines = f"#define NS {len(self.search_pat)}\n#define NF {len(self.filter_pat)}\n"
         super().__init__(scene, width, height, map_size, bias, slope_bias)
         ctx, mgl, p = self.ctx, self.moderngl, self.p_eye
         ext = light_extent(scene.light)
