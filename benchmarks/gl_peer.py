@@ -16,7 +16,8 @@ otherwise run. Each GL frame is the same computation as ours at the method's def
    correct), the face normal turned toward the eye, our constant + slope-scaled bias in texels
    (``shadowmap.receiver_offset``), then ``hard``: the Williams test; ``pcss``: Fernando's blocker
    search, penumbra estimate and PCF (bilinear 2x2 comparison per tap) with our tap patterns
-   uploaded as uniforms and every tap against the receiver's tangent plane, as our ``pcss``;
+   uploaded as uniforms and every tap against the receiver's tangent plane, as our ``pcss``
+   (deferred: the triangles write a G-buffer, a full-screen pass takes the taps once per pixel);
    V written to an R32F target;
 3. V read back to the CPU (``glReadPixels`` into NumPy).
 
