@@ -70,3 +70,15 @@ def test_make_peer_without_gl_says_why(monkeypatch):
     monkeypatch.setattr(peer_mod, "unavailable", lambda: "moderngl is not installed (pip install -e '.[peer]')")
     gl, why = peer_mod.make_peer(ss.load_scene("square", "rect"), 16, 16, 64, 1.0, 1.0, method="pcss")
     assert gl is None and why == "moderngl is not installed (pip install -e '.[peer]')"
+
+
+def test_make_peer_without_a_context_says_why(monkeypatch):
+    moderngl = pytest.importorskip("moderngl")
+
+    def no_egl(**kw):
+        raise RuntimeError("eglGetDisplay failed\nmore")
+
+    monkeypatch.setattr(moderngl, "create_standalone_context", no_egl)
+    for method in ("hard", "pcss"):
+        gl, why = make_peer(ss.load_scene("square", "rect"), 16, 16, 64, 1.0, 1.0, method=method)
+        assert gl is None and why == "cannot create an OpenGL context: eglGetDisplay failed"

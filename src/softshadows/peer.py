@@ -274,6 +274,22 @@ def _uniforms(prog, view, prefix=""):
     prog[prefix + "win"].value = tuple(map(float, view.window))
 
 
+class GLUnavailable(RuntimeError):
+    """No headless OpenGL 3.3 context on this machine (the peer is then skipped, with the reason)."""
+
+
+def _context(moderngl):
+    """A headless EGL context of GL 3.3 or later, else :class:`GLUnavailable`."""
+    try:
+        ctx = moderngl.create_standalone_context(backend="egl")
+    except Exception as exc:  # no EGL, no driver
+        raise GLUnavailable(str(exc).splitlines()[0] if str(exc) else type(exc).__name__) from exc
+    if ctx.version_code < 330:
+        ctx.release()
+        raise GLUnavailable(f"OpenGL {ctx.version_code} < 3.3")
+    return ctx
+
+
 class GLFrame:
     """A shadow-map frame of ``scene`` in OpenGL (see the module docstring): the depth map, the eye
     pass with the shadow test ``frag_eye`` (a subclass's GLSL ``void shadow()`` that sets ``vis``
@@ -293,7 +309,7 @@ class GLFrame:
     def __init__(self, scene, width: int, height: int, map_size: int, bias: float, slope_bias: float):
         import moderngl
 
-        self.ctx = moderngl.create_standalone_context(backend="egl")
+        self.ctx = _context(moderngl)
         self.renderer = self.ctx.info.get("GL_RENDERER", "?")
         flat = scene.flat
         ctx = self.ctx
@@ -480,8 +496,8 @@ def make_peer(
         return None, why
     try:
         return PEERS[method](scene, width, height, map_size, bias, slope_bias, **params), None
-    except Exception as exc:  # no EGL / no GL 3.3 context on this machine
-        return None, f"cannot create an OpenGL context: {str(exc).splitlines()[0] if str(exc) else type(exc).__name__}"
+    except GLUnavailable as exc:  # no EGL / no GL 3.3 context on this machine (a shader error raises)
+        return None, f"cannot create an OpenGL context: {exc}"
 
 
 def method_defaults(name: str) -> dict:
