@@ -101,7 +101,7 @@ class _Helper(CPUDispatcher):
         )
 
 
-def _link_only_helpers() -> None:
+def _link_only_helpers() -> bool:
     """Machine code only where something calls it. Numba finishes every compiled function by
     generating its machine code, and every caller links the callee's LLVM module in and generates
     that code again in its own. Two kinds of functions are only ever reached that way:
@@ -115,17 +115,17 @@ def _link_only_helpers() -> None:
     kernel, and so V, is the same bit for bit. This reaches into Numba's code generation, so it is
     applied only on the Numba versions it was checked on (``_LINK_ONLY_NUMBA``); ``SOFTSHADOWS_LINK_ONLY=0``
     turns it off for measuring. ``tests/test_warm.py`` checks it; measured in
-    docs/results/cold-start.md."""
+    docs/results/cold-start.md. Returns whether it is applied (:data:`LINK_ONLY`)."""
     import numba
 
     if os.environ.get("SOFTSHADOWS_LINK_ONLY", "1") == "0":
-        return
+        return False
     if tuple(int(x) for x in numba.__version__.split(".")[:2]) not in _LINK_ONLY_NUMBA:
-        return
+        return False
     lowering = _typed_passes.BaseNativeLowering
     lib_cls = _codegen.JITCodeLibrary
     if getattr(lib_cls, "_softshadows_patched", False):
-        return
+        return True
     run_pass = lowering.run_pass
     finalize_final = lib_cls._finalize_final_module
     serialize = lib_cls.serialize_using_object_code
@@ -191,10 +191,11 @@ def _link_only_helpers() -> None:
     lib_cls._unserialize = classmethod(_unserialize)
     _codegen.JITCPUCodegen.set_env = codegen_set_env
     lib_cls._softshadows_patched = True
+    return True
 
 
 _LINK_ONLY_NUMBA = {(0, 68)}  # Numba versions whose code generation _link_only_helpers was checked on
-_link_only_helpers()
+LINK_ONLY = _link_only_helpers()  # whether helpers and gufuncs are compiled without machine code
 
 
 @functools.cache
