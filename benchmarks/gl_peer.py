@@ -51,11 +51,11 @@ import time
 import numpy as np
 
 import softshadows as ss
-from softshadows.peer import agreement, dv_stats, make_peer, method_defaults, peer_params, unavailable
+from softshadows.peer import AGREEMENT_TOL, agreement, dv_stats, make_peer, method_defaults, peer_params, unavailable
 from softshadows.scene.builtin import icosphere
 
 #: |dV| within which a pixel of the GL ``pcss`` counts as agreeing with ours (see the docstring)
-PCSS_TOL = 0.02
+PCSS_TOL = AGREEMENT_TOL["pcss"]
 
 
 def main(argv=None) -> int:

@@ -62,6 +62,12 @@ def test_peers_share_a_process():
 def test_peer_params_are_pcss_defaults():
     assert peer_params("hard") == {}
     assert peer_params("pcss") == {"search_samples": 16, "filter_samples": 16, "pattern": "poisson"}
+    p = method_defaults("pcss") | {"search_samples": 8}
+    assert peer_params("pcss", p)["search_samples"] == 8  # the parameters given, not the defaults
+    with pytest.raises(ValueError, match="rotate off"):
+        peer_params("pcss", p | {"rotate": True})
+    with pytest.raises(ValueError, match="without PCF"):
+        peer_params("hard", method_defaults("hard") | {"pcf": 2})
 
 
 def test_make_peer_without_gl_says_why(monkeypatch):

@@ -49,6 +49,7 @@ from .api import check_seed, check_size
 from .compare import REFERENCE, jsonable, load, parse_method_sets, parse_size, resolve_methods
 from .errors import SoftShadowsError
 from .io import IMAGE_EXTS, JSON_EXTS, check_outputs, write_json
+from .peer import PEERS
 
 SHARED_PHASES = ("eye_gbuffer", "shading")
 SWEEP_KINDS = ("light-size", "occluder-height", "resolution", "map-size", "triangles")
@@ -322,7 +323,7 @@ def sweep(
     names, skipped = resolve_methods(methods, base.light.shape)
     names = [n for n in names if n != REFERENCE]
     if ico and "hard" not in names:
-        names.insert(0, "hard")  # the x-hard columns and the llvmpipe peer need it
+        names.insert(0, "hard")  # the x-hard columns and the llvmpipe peers need it
     if not names:
         raise SoftShadowsError("no method to sweep (all were skipped for this light shape)")
     base_params = _resolve_all(names, params_by_method)
@@ -334,7 +335,12 @@ def sweep(
     out = {m: {"time_ms": [], "time_min_ms": [], "time_max_ms": [], "metrics": []} for m in names}
     xs = []
     ref_ms = []  # ground truth's frame time (icosphere sweep)
-    peer = {"label": "llvmpipe `hard`", "time_ms": [], "disagree": [], "cover": [], "renderer": None, "reason": None}
+    # the GL peers: hard's frame always, pcss's where pcss is swept (softshadows.peer.PEERS)
+    peers = {
+        m: {"label": f"llvmpipe `{m}`", "time_ms": [], "disagree": [], "cover": [], "renderer": None, "reason": None}
+        for m in names
+        if m in PEERS
+    }
     for val in vals:
         sc, w, h = base, w0, h0
         params = {m: dict(p) for m, p in base_params.items()}
@@ -374,7 +380,8 @@ def sweep(
                 last[m] = render(sc, m, w, h, seed=seed, **params[m])
                 times[m].append(last[m].timings["total"] * 1e3)
         if ico:
-            _time_peer(peer, sc, w, h, params["hard"], last["hard"].visibility, repeats)
+            for m, peer in peers.items():
+                _time_peer(peer, m, sc, w, h, params[m], last[m].visibility, repeats)
         for m in names:
             ts, res = times[m], last[m]
             met = compute_metrics(res.visibility, gt.visibility)
@@ -412,7 +419,7 @@ def sweep(
         data["scene"] = ICOSPHERE  # not the first level's name
         data["x_label"] = "triangles (icosphere over a ground quad)"
         data["reference_time_ms"] = ref_ms
-        data["peer"] = peer
+        data["peers"] = peers
     if out_png:
         sweep_plot(data, out_png, error_key=error_key)
         data["png"] = str(out_png)
@@ -429,19 +436,25 @@ def _median_ms(render, sc, method, w, h, seed, params, repeats) -> tuple[float, 
     return float(np.median(ts)), res
 
 
-def _time_peer(peer: dict, sc, w, h, hard_params: dict, v_hard, repeats) -> None:
-    """Append to ``peer`` the median ms of the ``hard`` frame in OpenGL on llvmpipe (after one
-    warm-up frame: shader compile) and the agreement of its V with ours; NaN (and ``peer["reason"]``)
-    where no GL context can be made."""
+def _time_peer(peer: dict, method: str, sc, w, h, params: dict, v_ours, repeats) -> None:
+    """Append to ``peer`` the median ms of ``method``'s frame in OpenGL on llvmpipe (after one
+    warm-up frame: shader compile) and the agreement of its V with ours (``peer.AGREEMENT_TOL``);
+    NaN (and ``peer["reason"]``) where no GL context can be made or the GL frame does not implement
+    the parameters."""
     import time
 
-    from .peer import agreement, make_peer
+    from .peer import AGREEMENT_TOL, agreement, make_peer, peer_params
 
-    gl, why = (
-        (None, peer["reason"])
-        if peer["reason"]
-        else make_peer(sc, w, h, hard_params["map_size"], hard_params["bias"], hard_params["slope_bias"])
-    )
+    gl, why = None, peer["reason"]
+    if why is None:
+        try:
+            extra = peer_params(method, params)
+        except ValueError as exc:
+            why = str(exc)
+        else:
+            gl, why = make_peer(
+                sc, w, h, params["map_size"], params["bias"], params["slope_bias"], method=method, **extra
+            )
     if gl is None:
         peer["reason"] = why
         for k in ("time_ms", "disagree", "cover"):
@@ -454,7 +467,7 @@ def _time_peer(peer: dict, sc, w, h, hard_params: dict, v_hard, repeats) -> None
         t0 = time.perf_counter()
         gl.frame()
         ts.append((time.perf_counter() - t0) * 1e3)
-    disagree, cover, _n = agreement(v_hard, v)
+    disagree, cover, _n = agreement(v_ours, v, AGREEMENT_TOL[method])
     peer["time_ms"].append(float(np.median(ts)))
     peer["disagree"].append(disagree)
     peer["cover"].append(cover)
@@ -463,27 +476,39 @@ def _time_peer(peer: dict, sc, w, h, hard_params: dict, v_hard, repeats) -> None
 
 def triangles_table(data: dict) -> str:
     """The table of issue 15 from an icosphere triangles sweep: per level the triangle count, each
-    method's median ms (x hard's), ground truth's and llvmpipe's ``hard`` frame (or n/a and why)."""
+    method's median ms (x hard's), ground truth's and the llvmpipe peers' frames (x our frame of the
+    same method), or n/a and why."""
+    from .peer import AGREEMENT_TOL
+
     ms = data["methods"]
     hard = ms["hard"]["time_ms"]
-    peer = data.get("peer") or {}
+    peers = data.get("peers") or {}
     ref = data.get("reference_time_ms") or []
-    cols = list(ms) + ([f"{REFERENCE} ({data['gt_samples']} spp)"] if ref else []) + [peer.get("label", "llvmpipe")]
+    cols = (
+        list(ms) + ([f"{REFERENCE} ({data['gt_samples']} spp)"] if ref else []) + [p["label"] for p in peers.values()]
+    )
     lines = ["| triangles | " + " | ".join(cols) + " |", "|---" * (len(cols) + 1) + "|"]
     for i, x in enumerate(data["x"]):
         times = [(m, d["time_ms"][i]) for m, d in ms.items()] + ([(REFERENCE, ref[i])] if ref else [])
         cells = [f"{t:.0f}" if m == "hard" else f"{t:.0f} ({t / hard[i]:.2f}x)" for m, t in times]
-        pt = (peer.get("time_ms") or [float("nan")] * len(data["x"]))[i]
-        cells.append("n/a" if not np.isfinite(pt) else f"{pt:.0f} ({pt / hard[i]:.2f}x)")
+        for m, peer in peers.items():
+            pt = (peer.get("time_ms") or [float("nan")] * len(data["x"]))[i]
+            cells.append("n/a" if not np.isfinite(pt) else f"{pt:.0f} ({pt / ms[m]['time_ms'][i]:.2f}x)")
         lines.append(f"| {int(x):,} | " + " | ".join(cells) + " |")
-    lines.append(f"median ms of {data.get('repeats', '?')} frames at {data['size'][0]}x{data['size'][1]}, (x hard)")
-    if peer.get("reason"):
-        lines.append(f"llvmpipe: n/a: {peer['reason']}")
-    elif peer.get("time_ms"):
-        dis = max(peer["disagree"])
-        lines.append(
-            f"llvmpipe ({peer.get('renderer')}): its V differs from hard's on at most {100 * dis:.3f}% of pixels"
-        )
+    lines.append(
+        f"median ms of {data.get('repeats', '?')} frames at {data['size'][0]}x{data['size'][1]}, (x hard); "
+        "llvmpipe: (x our frame of the same method)"
+    )
+    for m, peer in peers.items():
+        if peer.get("reason"):
+            lines.append(f"llvmpipe `{m}`: n/a: {peer['reason']}")
+        elif peer.get("time_ms"):
+            dis = max(peer["disagree"])
+            tol = AGREEMENT_TOL[m]
+            how = "differs from" if tol == 0 else f"is more than {tol} from"
+            lines.append(
+                f"llvmpipe `{m}` ({peer.get('renderer')}): its V {how} {m}'s on at most {100 * dis:.3f}% of pixels"
+            )
     return "\n".join(lines)
 
 
@@ -529,7 +554,7 @@ def _cmd_bench(args) -> int:
             print(f"{x:12.4g}  {row}")
         for n in data["notes"]:
             print(n)
-        if "peer" in data:
+        if "peers" in data:
             print()
             print(triangles_table(data))
         if args.json:

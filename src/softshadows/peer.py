@@ -512,16 +512,25 @@ def hard_defaults() -> dict:
     return method_defaults("hard")
 
 
-def peer_params(name: str) -> dict:
-    """``make_peer``'s keyword parameters for method ``name`` at its defaults (the ones other than
-    ``map_size``, ``bias`` and ``slope_bias``); raises ValueError where a default is one the GL
-    frame does not implement (pcss: ``rotate``, ``bilinear``, ``receiver_plane``)."""
-    p = method_defaults(name)
-    if name != "pcss":
+def peer_params(name: str, params: dict | None = None) -> dict:
+    """``make_peer``'s keyword parameters for method ``name`` with ``params`` (None: its defaults),
+    the ones other than ``map_size``, ``bias`` and ``slope_bias``; raises ValueError where a
+    parameter has a value the GL frame does not implement (hard: ``pcf``; pcss: ``rotate``,
+    ``bilinear``, ``receiver_plane``)."""
+    p = method_defaults(name) if params is None else params
+    if name == "hard":
+        if p["pcf"]:
+            raise ValueError("GLHard renders hard without PCF (pcf 0)")
         return {}
     if p["rotate"] or not p["bilinear"] or not p["receiver_plane"]:
         raise ValueError("GLPCSS renders pcss with rotate off, bilinear and receiver_plane on")
     return {k: p[k] for k in ("search_samples", "filter_samples", "pattern")}
+
+
+#: |dV| within which a pixel of the GL frame counts as agreeing with ours: ``hard`` exactly; ``pcss``
+#: within 0.02, between the float32 rounding of the GL's weights and radii (a few 1e-5) and a
+#: discrete flip of one of its 16 filter taps (about 1/16); see ``benchmarks/gl_peer.py``
+AGREEMENT_TOL = {"hard": 0.0, "pcss": 0.02}
 
 
 def agreement(v_ours: np.ndarray, v_gl: np.ndarray, tol: float = 0.0) -> tuple[float, float, int]:

@@ -165,9 +165,9 @@ def sweep_plot(data: dict, path=None, error_key: str = "ssm_error") -> bytes:
     ref = data.get("reference_time_ms")
     if ref:
         a1.plot(x, ref, "s:", color="0.4", label=f"ground truth ({data['gt_samples']} spp)")
-    peer = data.get("peer") or {}
-    if np.isfinite(np.array(peer.get("time_ms") or [np.nan], float)).any():
-        a1.plot(x, peer["time_ms"], "k--", label=peer.get("label", "peer"))
+    for peer, style in zip((data.get("peers") or {}).values(), ("k--", "k-.", "k:"), strict=False):
+        if np.isfinite(np.array(peer.get("time_ms") or [np.nan], float)).any():
+            a1.plot(x, peer["time_ms"], style, label=peer.get("label", "peer"))
     a1.set_xlabel(data["x_label"])
     a2.set_xlabel(data["x_label"])
     a1.set_ylabel("frame time (ms, median; band: min-max)")
