@@ -72,40 +72,43 @@ def shade(scene, gbuf, visibility: np.ndarray, shadowed: np.ndarray | None = Non
 def _shade_kernel(
     position, normal, tri_id, vis, albedo, mesh_id, c, ln, rect, scale, eye, ambient, use_shadowed, shadowed
 ):
+    """The image, row by row without branches in the pixel loop (selects instead: every pixel is
+    computed, one without a surface (``tri_id`` < 0) is written black)."""
     H, W = vis.shape
-    img = np.zeros((H, W, 3), np.float32)
+    img = np.empty((H, W, 3), np.float32)
     for i in prange(H):
-        for j in range(W):
-            t = tri_id[i, j]
-            if t < 0:
-                continue
-            px, py, pz = position[i, j, 0], position[i, j, 1], position[i, j, 2]
-            if use_shadowed:
+        if use_shadowed:
+            for j in range(W):
+                t = tri_id[i, j]
                 lit = shadowed[i, j]
-                if not np.isfinite(lit):
-                    lit = 0.0
-            else:
+                lit = lit if np.isfinite(lit) else 0.0
+                m = mesh_id[t if t >= 0 else 0]
+                for ch in range(3):
+                    x = albedo[m, ch] * (lit + ambient)
+                    img[i, j, ch] = x if t >= 0 else 0.0
+        else:
+            for j in range(W):
+                t = tri_id[i, j]
+                px, py, pz = position[i, j, 0], position[i, j, 1], position[i, j, 2]
                 nx, ny, nz = normal[i, j, 0], normal[i, j, 1], normal[i, j, 2]
-                if nx * (eye[0] - px) + ny * (eye[1] - py) + nz * (eye[2] - pz) < 0.0:
-                    nx, ny, nz = -nx, -ny, -nz
+                # the normal turned toward the eye (a sign: the same products as negated components)
+                f = -1.0 if nx * (eye[0] - px) + ny * (eye[1] - py) + nz * (eye[2] - pz) < 0.0 else 1.0
                 dx, dy, dz = c[0] - px, c[1] - py, c[2] - pz
                 r2 = dx * dx + dy * dy + dz * dz
                 r = np.sqrt(r2)
-                cp = (nx * dx + ny * dy + nz * dz) / r
-                if cp < 0.0:
-                    cp = 0.0
+                cp = ((f * nx) * dx + (f * ny) * dy + (f * nz) * dz) / r
+                cp = 0.0 if cp < 0.0 else cp
                 if rect:
                     cl = -(ln[0] * dx + ln[1] * dy + ln[2] * dz) / r
-                    if cl < 0.0:
-                        cl = 0.0
+                    cl = 0.0 if cl < 0.0 else cl
                     cp *= cl
                 v = vis[i, j]
-                if not np.isfinite(v):
-                    v = 0.0
+                v = v if np.isfinite(v) else 0.0
                 lit = scale * cp / r2 * v
-            m = mesh_id[t]
-            for ch in range(3):
-                img[i, j, ch] = albedo[m, ch] * (lit + ambient)
+                m = mesh_id[t if t >= 0 else 0]
+                for ch in range(3):
+                    x = albedo[m, ch] * (lit + ambient)
+                    img[i, j, ch] = x if t >= 0 else 0.0
     return img
 
 
