@@ -117,40 +117,38 @@ def shadow_lookup(vp, depth_map, position, normal, mask, bias, slope_bias, pcf_r
     lit tests over the (2r+1)^2 texels around the point (percentage-closer filtering). Pixels
     without a surface get 1. The normal's sign does not matter (the bias uses |n.l|).
 
-    Per row, two loops: the projections and biased depths of the whole row into scratch (no
-    branch, no gather: LLVM vectorizes it), then the depth tests (a point that is not ``ok`` or has
-    no surface gets ``zt`` = NaN, which no stored depth is below: lit, as before)."""
+    Per row, three loops: the row's positions and normals copied to one float64 array per
+    coordinate (the G-buffer interleaves them: as rows of 3 the next loop ran 1.7x slower), their
+    projections and biased depths (no branch, no gather: LLVM vectorizes it), then the depth tests
+    (a point that is not ``ok`` or has no surface gets ``zt`` = NaN, which no stored depth is
+    below: lit, as before)."""
     Hm, Wm = depth_map.shape
     H, W = mask.shape
     out = np.empty((H, W), np.float32)
     for i in prange(H):
-        sc = np.empty((3, W))
+        sc = np.empty((9, W))  # x, y, z, nx, ny, nz, then sx, sy, zt
+        for j in range(W):
+            for k in range(3):
+                sc[k, j] = position[i, j, k]
+                sc[3 + k, j] = normal[i, j, k]
         for j in range(W):
             ok, sx, sy, zt = biased_light_depth(
-                vp,
-                np.float64(position[i, j, 0]),
-                np.float64(position[i, j, 1]),
-                np.float64(position[i, j, 2]),
-                np.float64(normal[i, j, 0]),
-                np.float64(normal[i, j, 1]),
-                np.float64(normal[i, j, 2]),
-                bias,
-                slope_bias,
+                vp, sc[0, j], sc[1, j], sc[2, j], sc[3, j], sc[4, j], sc[5, j], bias, slope_bias
             )
-            sc[0, j] = sx
-            sc[1, j] = sy
-            sc[2, j] = zt if ok & mask[i, j] else np.nan
+            sc[6, j] = sx
+            sc[7, j] = sy
+            sc[8, j] = zt if ok & mask[i, j] else np.nan
         if pcf_radius == 0:
             for j in range(W):
-                ci = int(np.floor(sc[0, j]))
-                ri = int(np.floor(sc[1, j]))
-                shadowed = ri >= 0 and ri < Hm and ci >= 0 and ci < Wm and depth_map[ri, ci] < sc[2, j]
+                ci = int(np.floor(sc[6, j]))
+                ri = int(np.floor(sc[7, j]))
+                shadowed = ri >= 0 and ri < Hm and ci >= 0 and ci < Wm and depth_map[ri, ci] < sc[8, j]
                 out[i, j] = 0.0 if shadowed else 1.0
         else:
             for j in range(W):
-                zt = sc[2, j]
-                ci = int(np.floor(sc[0, j]))
-                ri = int(np.floor(sc[1, j]))
+                zt = sc[8, j]
+                ci = int(np.floor(sc[6, j]))
+                ri = int(np.floor(sc[7, j]))
                 lit = 0
                 cnt = 0
                 for dr in range(-pcf_radius, pcf_radius + 1):
