@@ -78,6 +78,27 @@ def test_hard_shadow_matches_ground_truth_umbra_and_lit():
     assert np.mean(np.abs(gt[m] - hd[m])) < 0.03
 
 
+def test_hard_eye_pass_over_the_gbuffer_is_the_per_point_test():
+    """hard's lookup straight over the G-buffer's images (lookup_image) gives, bit for bit, the
+    per-point test on the gathered points with eye-facing normals (lookup_points), with and
+    without PCF: the bias uses |n.l|, so the normal's side does not matter."""
+    from softshadows.methods.shadowmap import build_shadow_map, fit_light_view, lookup_points
+
+    for name, light in (("bunny", "rect"), ("contact", "sphere")):
+        scene = ss.load_scene(name, light=light)
+        smap = build_shadow_map(scene, fit_light_view(scene, 256))
+        for pcf in (0, 2):
+            res = ss.render(scene, "hard", 64, 48, map_size=256, pcf=pcf)
+            m = res.mask
+            pts = res.position[m].astype(np.float64)
+            nrm = res.normal[m].astype(np.float64)
+            v = lookup_points(smap, pts, nrm, 1.0, 1.0, pcf)
+            np.testing.assert_array_equal(res.visibility[m], v)
+            np.testing.assert_array_equal(v, lookup_points(smap, pts, -nrm, 1.0, 1.0, pcf))
+            assert np.isnan(res.visibility[~m]).all()
+            assert 0 < (v < 1).sum() < len(v)  # both lit and shadowed pixels
+
+
 def test_hard_pcf_softens_only_edges():
     scene = ss.load_scene("square")
     a = ss.render(scene, "hard", 64, 48).visibility

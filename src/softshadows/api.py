@@ -165,7 +165,7 @@ def _render(scene, m, width, height, resolved, seed, progress) -> Result:
     v = np.asarray(out.visibility, dtype=np.float32)
     if v.shape != (height, width):
         raise RuntimeError(f"method {m.name} returned V of shape {v.shape}, expected {(height, width)}")
-    v = np.where(g.mask, v, np.float32(np.nan)).astype(np.float32)
+    v = np.where(g.mask, v, np.float32(np.nan))  # float32: both operands are
     with timer.phase("shading"):
         img = shading.shade(scene, g, v, shadowed=out.direct_shadowed)
     timings = dict(timer.times)
