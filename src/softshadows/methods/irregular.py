@@ -1397,7 +1397,7 @@ def _sign(s):
     return np.float64(s > 0.0) - np.float64(s < 0.0)
 
 
-@kernel(nrt=False)
+@kernel(inline=True)
 def drop_cancelling(cp, m, center, e, ea, eb, tv_start, tv, sel, cand):
     """For an edge with two counted triangles (a fold candidate): drop the samples ``cand[:m]``
     (positions ``cp[:, :m]``) where the two cancel as seen from p or p lies in the plane through
@@ -1406,8 +1406,7 @@ def drop_cancelling(cp, m, center, e, ea, eb, tv_start, tv, sel, cand):
     and ``cand`` in place; returns how many are left. A cheap first pass (two cross products' worth,
     branch-free): on ``bunny`` 39% of the disk's candidates are such zeros, which the vectorized
     terms would otherwise evaluate in full (1.15x on the sphere's penumbra pass, 1.18x on the
-    rectangle's). A function of its own without reference counting, like ``rect_edge_terms``:
-    inlined into ``_penumbra_kernel`` it lengthened that kernel's compile time."""
+    rectangle's)."""
     ax, ay, az, bx, by, bz = ea[e, 0], ea[e, 1], ea[e, 2], eb[e, 0], eb[e, 1], eb[e, 2]
     k1 = tv_start[e]
     v1x, v1y, v1z, v2x, v2y, v2z = tv[k1, 0], tv[k1, 1], tv[k1, 2], tv[k1 + 1, 0], tv[k1 + 1, 1], tv[k1 + 1, 2]
@@ -1626,57 +1625,6 @@ def scalar_edge_terms(
         out[i] = sample_edge_term(shape, rw, cand[i] - jb, lu, lv, radius, hu, hv, e, ea, eb, tv_start, tv, buf)
 
 
-@kernel(nrt=False)
-def rect_candidates(j0, j1, jb, izm, sinv, six, siy, rmx, rmy, sdx, sdy, rex, rey, ren, rhx, rhy, rhn, keep, cand, m):
-    """The rectangle's per-sample candidate test of one (edge, column): ``rect_reach`` at each
-    sample j0..j1-1 (a point) with its own k = (1/z_min - 1/z) (1 + slack) (``sinv``: the samples'
-    1/z from ``jb`` on): its image-plane offset (``six``, ``siy``) from the edge image's centre
-    (``rmx``, ``rmy``) within the box half sizes (``rex``, ``rey``) and the distance to the edge's
-    line (direction ``sdx``, ``sdy``; ``ren``) grown by k times the light's (``rhx``, ``rhy``,
-    ``rhn``). Branch-free (it vectorizes); the survivors appended to ``cand[m:]`` (``keep``:
-    scratch); returns the new m. A function of its own without reference counting (compile time
-    of ``_penumbra_kernel``, like ``rect_edge_terms``)."""
-    for i in range(j1 - j0):
-        j = np.uint64(j0 + i)
-        k = (izm - sinv[np.uint64(j0 - jb + i)]) * (1.0 + _SLACK)
-        ddx, ddy = six[j] - rmx, siy[j] - rmy
-        kx = abs(ddx) <= rex + k * rhx
-        ky = abs(ddy) <= rey + k * rhy
-        kn = abs(sdx * ddy - sdy * ddx) <= ren + k * rhn
-        keep[np.uint64(i)] = np.int8(kx) & np.int8(ky) & np.int8(kn)
-    for i in range(j1 - j0):
-        cand[m] = j0 + i
-        m += keep[i]
-    return m
-
-
-@kernel(nrt=False)
-def disk_candidates(j0, j1, jb, six, siy, sinv, q5, rad_s, inv_dr, qax, qay, sdx, sdy, s_iuu, keep, cand, m):
-    """The disk's per-sample candidate test of one (edge, column): each sample j0..j1-1's
-    image-plane distance to the edge's image (segment from (``qax``, ``qay``) along (``sdx``,
-    ``sdy``), ``s_iuu`` = 1 / its squared length) against the light's angular radius at the
-    sample's own distance (``sinv``: the samples' 1/distance from ``jb`` on; ``rad_s``, ``inv_dr``)
-    stretched by its off-axis angle (``q5``: the endpoints'). Unsigned indices (no negative-index
-    wrap-around code) and selects: the loop vectorizes (1.45x on this loop alone). The survivors
-    appended to ``cand[m:]`` (``keep``: scratch); returns the new m. A function of its own without
-    reference counting (compile time of ``_penumbra_kernel``, like ``rect_edge_terms``)."""
-    for i in range(j1 - j0):
-        j = np.uint64(j0 + i)
-        px, py = six[j], siy[j]
-        r2 = px * px + py * py
-        st = q5 if q5 >= r2 else r2
-        rs = (1.0 + st) * rad_s * (inv_dr - sinv[np.uint64(j0 - jb + i)]) + 1e-12
-        a = ((px - qax) * sdx + (py - qay) * sdy) * s_iuu
-        a = a if a > 0.0 else 0.0
-        tt = a if a < 1.0 else 1.0
-        ox, oy = qax + tt * sdx - px, qay + tt * sdy - py
-        keep[np.uint64(i)] = np.int8(rs >= 0.0) & np.int8(ox * ox + oy * oy <= rs * rs)
-    for i in range(j1 - j0):
-        cand[m] = j0 + i
-        m += keep[i]
-    return m
-
-
 @kernel(inline=True, nrt=False)
 def cancels_in_box(e, ea, eb, tv_start, tv, box, c):
     """True when edge e's counted triangles cancel at every point of 3D box ``c``: the sign of a
@@ -1883,32 +1831,35 @@ def _penumbra_kernel(
                     # from its own off-axis angle and the edge's endpoints); branch-free, the
                     # survivors' indices compacted into ``cand``
                     if rect:
-                        m = rect_candidates(
-                            j0,
-                            j1,
-                            jb,
-                            izm,
-                            sinv,
-                            six,
-                            siy,
-                            rmx,
-                            rmy,
-                            sdx,
-                            sdy,
-                            rex,
-                            rey,
-                            ren,
-                            rhx,
-                            rhy,
-                            rhn,
-                            keep,
-                            cand,
-                            m,
-                        )
+                        # rect_reach at each sample (a point) with its own k: same form, branch-free
+                        for i in range(j1 - j0):
+                            j = np.uint64(j0 + i)
+                            k = (izm - sinv[np.uint64(j0 - jb + i)]) * (1.0 + _SLACK)
+                            ddx, ddy = six[j] - rmx, siy[j] - rmy
+                            kx = abs(ddx) <= rex + k * rhx
+                            ky = abs(ddy) <= rey + k * rhy
+                            kn = abs(sdx * ddy - sdy * ddx) <= ren + k * rhn
+                            keep[np.uint64(i)] = np.int8(kx) & np.int8(ky) & np.int8(kn)
+                        for i in range(j1 - j0):
+                            cand[m] = j0 + i
+                            m += keep[i]
                     elif dr > 0.0:
-                        m = disk_candidates(
-                            j0, j1, jb, six, siy, sinv, q5, rad_s, inv_dr, qax, qay, sdx, sdy, s_iuu, keep, cand, m
-                        )
+                        # unsigned indices (no negative-index wrap-around code) and selects:
+                        # the loop vectorizes (1.45x on this loop alone), same values and flags
+                        for i in range(j1 - j0):
+                            j = np.uint64(j0 + i)
+                            px, py = six[j], siy[j]
+                            r2 = px * px + py * py
+                            st = q5 if q5 >= r2 else r2
+                            rs = (1.0 + st) * rad_s * (inv_dr - sinv[np.uint64(j0 - jb + i)]) + 1e-12
+                            a = ((px - qax) * sdx + (py - qay) * sdy) * s_iuu
+                            a = a if a > 0.0 else 0.0
+                            tt = a if a < 1.0 else 1.0
+                            ox, oy = qax + tt * sdx - px, qay + tt * sdy - py
+                            keep[np.uint64(i)] = np.int8(rs >= 0.0) & np.int8(ox * ox + oy * oy <= rs * rs)
+                        for i in range(j1 - j0):
+                            cand[m] = j0 + i
+                            m += keep[i]
                     else:
                         for j in range(j0, j1):
                             cand[m] = j
