@@ -1127,19 +1127,22 @@ def _depth_test_row(zb, tb, t, span, cols, pl, zrow, zr, ortho):
 
 
 @kernel(inline=True)
-def _depth_pass(vw, near, tile, rect, start, bins, box, edges, zinfo, planes, zb, tb, SP, sh):
+def _depth_pass(vw, near, tile, rect, start, bins, box, edges, zinfo, planes, zb, tb, SP, sh, tri, face):
     """The nearest depth ``zb`` and triangle ``tb`` (-1: none) of every pixel of the tile ``rect`` =
-    (y0, y1, x0, x1), from the pieces binned to it (the dense modes: depth and G-buffer)."""
+    (y0, y1, x0, x1), from the pieces binned to it (the dense modes: depth and G-buffer). ``tb``
+    holds the front-end triangle, or with ``face`` its face ``tri[u]`` (the depth mode's output:
+    the same winners, as the bins list the faces in increasing order too)."""
     W, H, ortho, far, wl, wt, wsx, wsy = vw
     y0, _y1, x0, _x1 = rect
     cols = (x0, wl, wsx)
-    for li in range(zb.shape[0]):
-        for k in range(zb.shape[1]):
+    for li in range(TILE):  # zb, tb: (TILE, TILE)
+        for k in range(TILE):
             zb[li, k] = np.inf
             tb[li, k] = -1
     for bi in range(start[tile], start[tile + 1]):
         ct = bins[bi]
         t = ct >> sh
+        tv = t + (np.int64(tri[t]) - t) * face  # the value stored in tb (branch-free)
         prect = _piece_rect(box, ct, rect)
         i0, i1, j0, j1 = prect
         if i0 > i1 or j0 > j1:
@@ -1157,9 +1160,9 @@ def _depth_pass(vw, near, tile, rect, start, bins, box, edges, zinfo, planes, zb
             while lo <= hi:
                 span = (li, lo - x0, hi - x0)
                 if ortho:
-                    _depth_test_row(zb, tb, t, span, cols, pl, zrow, zr, True)
+                    _depth_test_row(zb, tb, tv, span, cols, pl, zrow, zr, True)
                 else:
-                    _depth_test_row(zb, tb, t, span, cols, pl, zrow, zr, False)
+                    _depth_test_row(zb, tb, tv, span, cols, pl, zrow, zr, False)
                 lo, hi = _next_span(scan, hi, j1, e0, e1, e2, r0, r1, r2)
 
 
@@ -1519,19 +1522,53 @@ def _tiles_depth_slot(slot, fe, sc, depth_out, tri_out, zt, ft):
     for ty in range(slot, nty, nslot):  # tile rows dealt round-robin: contiguous output rows
         for tx in range(ntx):
             rect = _tile_rect(ty, tx, T, W, H)
-            _depth_pass(vw, near, ty * ntx + tx, rect, start, bins, box, edges, zinfo, planes, zb, tb, SP, sh)
+            tile = ty * ntx + tx
             y0, y1, x0, x1 = rect
+            # a whole tile (not at the image's right side) without a tiny path: the write-back is a
+            # copy over the constant TILE columns (vectorized; a run-time count is left to the
+            # vector loop's scalar epilogue)
+            copy = (not tiny) and x1 - x0 + 1 == TILE
+            if start[tile] == start[tile + 1]:
+                # no piece: the tile's output is empty (+inf, -1), or the tiny path's
+                for i in range(y0, y1 + 1):
+                    drow = depth_out[i, x0 : x1 + 1]
+                    trow = tri_out[i, x0 : x1 + 1]
+                    if copy:
+                        for k in range(TILE):
+                            drow[k] = np.inf
+                            trow[k] = -1
+                        continue
+                    if tiny:
+                        zrow = zt[i, x0 : x1 + 1]
+                        frow = ft[i, x0 : x1 + 1]
+                        for k in range(drow.shape[0]):
+                            zq = zrow[k]
+                            take = zq < np.inf  # the merge below with z = inf, f = -1 (ft >= -1)
+                            drow[k] = zq if take else np.inf
+                            trow[k] = frow[k] if take else -1
+                        continue
+                    for k in range(drow.shape[0]):
+                        drow[k] = np.inf
+                        trow[k] = -1
+                continue
+            _depth_pass(
+                vw, near, tile, rect, start, bins, box, edges, zinfo, planes, zb, tb, SP, sh, tri, np.bool_(True)
+            )  # not a literal: one specialisation
             for i in range(y0, y1 + 1):
                 # row views: their indices are known non-negative (no wrap-around selects)
                 drow = depth_out[i, x0 : x1 + 1]
                 trow = tri_out[i, x0 : x1 + 1]
+                if copy:
+                    for k in range(TILE):
+                        drow[k] = zb[i - y0, k]
+                        trow[k] = tb[i - y0, k]  # the face (-1: none)
+                    continue
                 if tiny:
                     zrow = zt[i, x0 : x1 + 1]
                     frow = ft[i, x0 : x1 + 1]
                     for k in range(drow.shape[0]):
                         z = zb[i - y0, k]
-                        tv = tb[i - y0, k]
-                        f = tri[max(tv, 0)] if tv >= 0 else -1
+                        f = tb[i - y0, k]  # the face (-1: none)
                         zq = zrow[k]
                         fq = frow[k]
                         take = (zq < z) | ((zq == z) & (fq < f))
@@ -1540,8 +1577,7 @@ def _tiles_depth_slot(slot, fe, sc, depth_out, tri_out, zt, ft):
                     continue
                 for k in range(drow.shape[0]):
                     drow[k] = zb[i - y0, k]
-                    tv = tb[i - y0, k]
-                    trow[k] = tri[max(tv, 0)] if tv >= 0 else -1  # the face (tb: front-end triangle)
+                    trow[k] = tb[i - y0, k]  # the face (-1: none)
 
 
 def _tiles_depth(fe, sc, depth_out, tri_out, zt, ft):
@@ -1565,7 +1601,10 @@ def _tiles_gbuffer_slot(slot, fe, sc, out):
     for ty in range(slot, nty, nslot):
         for tx in range(ntx):
             rect = _tile_rect(ty, tx, T, W, H)
-            _depth_pass(vw, near, ty * ntx + tx, rect, start, bins, box, edges, zinfo, planes, zb, tb, SP, sh)
+            tile = ty * ntx + tx
+            _depth_pass(
+                vw, near, tile, rect, start, bins, box, edges, zinfo, planes, zb, tb, SP, sh, tri, np.bool_(False)
+            )
             y0, y1, x0, x1 = rect
             cols = (x0, wl, wsx)
             for i in range(y0, y1 + 1):
