@@ -1135,8 +1135,8 @@ def _depth_pass(vw, near, tile, rect, start, bins, box, edges, zinfo, planes, zb
     W, H, ortho, far, wl, wt, wsx, wsy = vw
     y0, _y1, x0, _x1 = rect
     cols = (x0, wl, wsx)
-    for li in range(TILE):  # zb, tb: (TILE, TILE)
-        for k in range(TILE):
+    for li in range(zb.shape[0]):
+        for k in range(zb.shape[1]):
             zb[li, k] = np.inf
             tb[li, k] = -1
     for bi in range(start[tile], start[tile + 1]):
