@@ -998,15 +998,18 @@ def _edge_span(lo, hi, j0, j1, r, e):
 def _fast_bound(lo, hi, slow, py, j0, j1, e):
     """Edge e's bound of the covered columns [lo, hi] of the row at py by the fast path of
     :func:`_edge_span` (branch-free, so that the loop over a tile's rows vectorizes); slow is set
-    where the fast path does not apply (the row must then be searched with :func:`_edge_span`)."""
+    where the fast path does not apply (the row must then be searched with :func:`_edge_span`).
+    lo, hi are float64 holding integers (exact: the min / max of integer-valued floats are those of
+    the integers), converted to int once per row by the caller: AVX2 has no vector float64 to int64
+    conversion, so each conversion is done lane by lane."""
     r = _edge_row(e, py)
     x = e[E_C0] + r * e[E_INV]
     fx = np.floor(x)
     f = x - fx
     M = e[E_MARGIN]
     near_int = not (f > M and f < 1.0 - M)
-    cu = int(min(max(fx, j0 - 1.0), j1 + 0.0))
-    cl = int(min(max(fx + 1.0, j0 + 0.0), j1 + 1.0))
+    cu = min(max(fx, j0 - 1.0), j1 + 0.0)
+    cl = min(max(fx + 1.0, j0 + 0.0), j1 + 1.0)
     rej = not _edge_in(e, r, j0)  # kind 0 (dy == 0): the same test for every column
     kind = e[E_KIND]
     if kind > 0.0:
@@ -1016,7 +1019,7 @@ def _fast_bound(lo, hi, slow, py, j0, j1, e):
         lo = max(lo, cl)
         slow = slow | near_int
     elif rej:
-        lo = j1 + 1
+        lo = j1 + 1.0
     return lo, hi, slow
 
 
@@ -1053,11 +1056,11 @@ def _piece_rows(edges, zinfo, ct, prect, y0, x0, W, H, SP, by_texel):
         return e0, e1, e2, not full, i1 - i0 + 1
     for k in range(TILE):
         py = (y0 + k) + 0.5
-        lo, hi, slow = _fast_bound(j0, j1, np.bool_(False), py, j0, j1, e0)  # not a literal: one specialisation
+        lo, hi, slow = _fast_bound(j0 + 0.0, j1 + 0.0, np.bool_(False), py, j0, j1, e0)  # one specialisation
         lo, hi, slow = _fast_bound(lo, hi, slow, py, j0, j1, e1)
         lo, hi, slow = _fast_bound(lo, hi, slow, py, j0, j1, e2)
-        SP[_SP_LO, k] = lo
-        SP[_SP_HI, k] = hi
+        SP[_SP_LO, k] = int(lo)
+        SP[_SP_HI, k] = int(hi)
         SP[_SP_EX, k] = slow
     nrows = 0
     for k in range(i0 - y0, i1 - y0 + 1):
