@@ -1527,29 +1527,11 @@ def _tiles_depth_slot(slot, fe, sc, depth_out, tri_out, zt, ft):
             rect = _tile_rect(ty, tx, T, W, H)
             tile = ty * ntx + tx
             y0, y1, x0, x1 = rect
-            # a whole tile (not at the image's right side) without a tiny path: the write-back is a
-            # copy over the constant TILE columns (vectorized; a run-time count is left to the
-            # vector loop's scalar epilogue)
-            copy = (not tiny) and x1 - x0 + 1 == TILE
-            if start[tile] == start[tile + 1]:
-                # no piece: the tile's output is empty (+inf, -1), or the tiny path's
+            if start[tile] == start[tile + 1] and not tiny:
+                # no piece (and no tiny path): the tile's output is empty (+inf, -1)
                 for i in range(y0, y1 + 1):
                     drow = depth_out[i, x0 : x1 + 1]
                     trow = tri_out[i, x0 : x1 + 1]
-                    if copy:
-                        for k in range(TILE):
-                            drow[k] = np.inf
-                            trow[k] = -1
-                        continue
-                    if tiny:
-                        zrow = zt[i, x0 : x1 + 1]
-                        frow = ft[i, x0 : x1 + 1]
-                        for k in range(drow.shape[0]):
-                            zq = zrow[k]
-                            take = zq < np.inf  # the merge below with z = inf, f = -1 (ft >= -1)
-                            drow[k] = zq if take else np.inf
-                            trow[k] = frow[k] if take else -1
-                        continue
                     for k in range(drow.shape[0]):
                         drow[k] = np.inf
                         trow[k] = -1
@@ -1561,11 +1543,6 @@ def _tiles_depth_slot(slot, fe, sc, depth_out, tri_out, zt, ft):
                 # row views: their indices are known non-negative (no wrap-around selects)
                 drow = depth_out[i, x0 : x1 + 1]
                 trow = tri_out[i, x0 : x1 + 1]
-                if copy:
-                    for k in range(TILE):
-                        drow[k] = zb[i - y0, k]
-                        trow[k] = tb[i - y0, k]  # the face (-1: none)
-                    continue
                 if tiny:
                     zrow = zt[i, x0 : x1 + 1]
                     frow = ft[i, x0 : x1 + 1]
