@@ -998,15 +998,18 @@ def _edge_span(lo, hi, j0, j1, r, e):
 def _fast_bound(lo, hi, slow, py, j0, j1, e):
     """Edge e's bound of the covered columns [lo, hi] of the row at py by the fast path of
     :func:`_edge_span` (branch-free, so that the loop over a tile's rows vectorizes); slow is set
-    where the fast path does not apply (the row must then be searched with :func:`_edge_span`)."""
+    where the fast path does not apply (the row must then be searched with :func:`_edge_span`).
+    lo, hi are float64 holding integers (exact: the min / max of integer-valued floats are those of
+    the integers), converted to int once per row by the caller: AVX2 has no vector float64 to int64
+    conversion, so each conversion is done lane by lane."""
     r = _edge_row(e, py)
     x = e[E_C0] + r * e[E_INV]
     fx = np.floor(x)
     f = x - fx
     M = e[E_MARGIN]
     near_int = not (f > M and f < 1.0 - M)
-    cu = int(min(max(fx, j0 - 1.0), j1 + 0.0))
-    cl = int(min(max(fx + 1.0, j0 + 0.0), j1 + 1.0))
+    cu = min(max(fx, j0 - 1.0), j1 + 0.0)
+    cl = min(max(fx + 1.0, j0 + 0.0), j1 + 1.0)
     rej = not _edge_in(e, r, j0)  # kind 0 (dy == 0): the same test for every column
     kind = e[E_KIND]
     if kind > 0.0:
@@ -1016,7 +1019,7 @@ def _fast_bound(lo, hi, slow, py, j0, j1, e):
         lo = max(lo, cl)
         slow = slow | near_int
     elif rej:
-        lo = j1 + 1
+        lo = j1 + 1.0
     return lo, hi, slow
 
 
@@ -1053,11 +1056,11 @@ def _piece_rows(edges, zinfo, ct, prect, y0, x0, W, H, SP, by_texel):
         return e0, e1, e2, not full, i1 - i0 + 1
     for k in range(TILE):
         py = (y0 + k) + 0.5
-        lo, hi, slow = _fast_bound(j0, j1, np.bool_(False), py, j0, j1, e0)  # not a literal: one specialisation
+        lo, hi, slow = _fast_bound(j0 + 0.0, j1 + 0.0, np.bool_(False), py, j0, j1, e0)  # one specialisation
         lo, hi, slow = _fast_bound(lo, hi, slow, py, j0, j1, e1)
         lo, hi, slow = _fast_bound(lo, hi, slow, py, j0, j1, e2)
-        SP[_SP_LO, k] = lo
-        SP[_SP_HI, k] = hi
+        SP[_SP_LO, k] = int(lo)
+        SP[_SP_HI, k] = int(hi)
         SP[_SP_EX, k] = slow
     nrows = 0
     for k in range(i0 - y0, i1 - y0 + 1):
@@ -1127,9 +1130,11 @@ def _depth_test_row(zb, tb, t, span, cols, pl, zrow, zr, ortho):
 
 
 @kernel(inline=True)
-def _depth_pass(vw, near, tile, rect, start, bins, box, edges, zinfo, planes, zb, tb, SP, sh):
+def _depth_pass(vw, near, tile, rect, start, bins, box, edges, zinfo, planes, zb, tb, SP, sh, tri, face):
     """The nearest depth ``zb`` and triangle ``tb`` (-1: none) of every pixel of the tile ``rect`` =
-    (y0, y1, x0, x1), from the pieces binned to it (the dense modes: depth and G-buffer)."""
+    (y0, y1, x0, x1), from the pieces binned to it (the dense modes: depth and G-buffer). ``tb``
+    holds the front-end triangle, or with ``face`` its face ``tri[u]`` (the depth mode's output:
+    the same winners, as the bins list the faces in increasing order too)."""
     W, H, ortho, far, wl, wt, wsx, wsy = vw
     y0, _y1, x0, _x1 = rect
     cols = (x0, wl, wsx)
@@ -1140,6 +1145,7 @@ def _depth_pass(vw, near, tile, rect, start, bins, box, edges, zinfo, planes, zb
     for bi in range(start[tile], start[tile + 1]):
         ct = bins[bi]
         t = ct >> sh
+        tv = t + (np.int64(tri[t]) - t) * face  # the value stored in tb (branch-free)
         prect = _piece_rect(box, ct, rect)
         i0, i1, j0, j1 = prect
         if i0 > i1 or j0 > j1:
@@ -1157,9 +1163,9 @@ def _depth_pass(vw, near, tile, rect, start, bins, box, edges, zinfo, planes, zb
             while lo <= hi:
                 span = (li, lo - x0, hi - x0)
                 if ortho:
-                    _depth_test_row(zb, tb, t, span, cols, pl, zrow, zr, True)
+                    _depth_test_row(zb, tb, tv, span, cols, pl, zrow, zr, True)
                 else:
-                    _depth_test_row(zb, tb, t, span, cols, pl, zrow, zr, False)
+                    _depth_test_row(zb, tb, tv, span, cols, pl, zrow, zr, False)
                 lo, hi = _next_span(scan, hi, j1, e0, e1, e2, r0, r1, r2)
 
 
@@ -1519,8 +1525,20 @@ def _tiles_depth_slot(slot, fe, sc, depth_out, tri_out, zt, ft):
     for ty in range(slot, nty, nslot):  # tile rows dealt round-robin: contiguous output rows
         for tx in range(ntx):
             rect = _tile_rect(ty, tx, T, W, H)
-            _depth_pass(vw, near, ty * ntx + tx, rect, start, bins, box, edges, zinfo, planes, zb, tb, SP, sh)
+            tile = ty * ntx + tx
             y0, y1, x0, x1 = rect
+            if start[tile] == start[tile + 1] and not tiny:
+                # no piece (and no tiny path): the tile's output is empty (+inf, -1)
+                for i in range(y0, y1 + 1):
+                    drow = depth_out[i, x0 : x1 + 1]
+                    trow = tri_out[i, x0 : x1 + 1]
+                    for k in range(drow.shape[0]):
+                        drow[k] = np.inf
+                        trow[k] = -1
+                continue
+            _depth_pass(
+                vw, near, tile, rect, start, bins, box, edges, zinfo, planes, zb, tb, SP, sh, tri, np.bool_(True)
+            )  # not a literal: one specialisation
             for i in range(y0, y1 + 1):
                 # row views: their indices are known non-negative (no wrap-around selects)
                 drow = depth_out[i, x0 : x1 + 1]
@@ -1530,8 +1548,7 @@ def _tiles_depth_slot(slot, fe, sc, depth_out, tri_out, zt, ft):
                     frow = ft[i, x0 : x1 + 1]
                     for k in range(drow.shape[0]):
                         z = zb[i - y0, k]
-                        tv = tb[i - y0, k]
-                        f = tri[max(tv, 0)] if tv >= 0 else -1
+                        f = tb[i - y0, k]  # the face (-1: none)
                         zq = zrow[k]
                         fq = frow[k]
                         take = (zq < z) | ((zq == z) & (fq < f))
@@ -1540,8 +1557,7 @@ def _tiles_depth_slot(slot, fe, sc, depth_out, tri_out, zt, ft):
                     continue
                 for k in range(drow.shape[0]):
                     drow[k] = zb[i - y0, k]
-                    tv = tb[i - y0, k]
-                    trow[k] = tri[max(tv, 0)] if tv >= 0 else -1  # the face (tb: front-end triangle)
+                    trow[k] = tb[i - y0, k]  # the face (-1: none)
 
 
 def _tiles_depth(fe, sc, depth_out, tri_out, zt, ft):
@@ -1565,7 +1581,10 @@ def _tiles_gbuffer_slot(slot, fe, sc, out):
     for ty in range(slot, nty, nslot):
         for tx in range(ntx):
             rect = _tile_rect(ty, tx, T, W, H)
-            _depth_pass(vw, near, ty * ntx + tx, rect, start, bins, box, edges, zinfo, planes, zb, tb, SP, sh)
+            tile = ty * ntx + tx
+            _depth_pass(
+                vw, near, tile, rect, start, bins, box, edges, zinfo, planes, zb, tb, SP, sh, tri, np.bool_(False)
+            )
             y0, y1, x0, x1 = rect
             cols = (x0, wl, wsx)
             for i in range(y0, y1 + 1):
