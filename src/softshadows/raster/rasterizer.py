@@ -1512,8 +1512,12 @@ def _blend_list(prog, pparams, TL, qa, qb, prect, full, e0, e1, e2, pl, q, ca, z
 # parfor compiled the body twice, docs/results/cold-start.md); its scratch is indexed by the slot.
 # ----------------------------------------------------------------------------------------------
 @kernel(nogil=True, nrt=False)
-def _tiles_depth_slot(slot, fe, sc, depth_out, tri_out, zt, ft):
-    """Slot ``slot`` of :func:`_tiles_depth` (``run_slots``)."""
+def _tiles_depth_slot(slot, fe, sc, depth_out, tri_out, zt, ft, rz, rt):
+    """Slot ``slot`` of :func:`_tiles_depth` (``run_slots``). Each tile's result goes to the slot's
+    row scratch ``rz[slot]``, ``rt[slot]`` (T, W) first, and a finished row of tiles to the output in
+    whole rows: written tile by tile (16 columns per image row), the stores went to 2 x 16 output
+    lines far apart per tile, in a loop too short for LLVM's vector loop (about half of the tile
+    pass's time on a map that the ground covers); whole rows are a vectorized, sequential copy."""
     vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, _normals, _rowbits, sh, tri = fe
     zbuf, tbuf, spbuf, _ibuf, _lbuf, nslot = sc
     vw = _view_window(vp)
@@ -1522,6 +1526,8 @@ def _tiles_depth_slot(slot, fe, sc, depth_out, tri_out, zt, ft):
     zb = zbuf[slot]
     tb = tbuf[slot]
     SP = spbuf[slot]
+    rzs = rz[slot]
+    rts = rt[slot]
     for ty in range(slot, nty, nslot):  # tile rows dealt round-robin: contiguous output rows
         for tx in range(ntx):
             rect = _tile_rect(ty, tx, T, W, H)
@@ -1530,8 +1536,8 @@ def _tiles_depth_slot(slot, fe, sc, depth_out, tri_out, zt, ft):
             if start[tile] == start[tile + 1] and not tiny:
                 # no piece (and no tiny path): the tile's output is empty (+inf, -1)
                 for i in range(y0, y1 + 1):
-                    drow = depth_out[i, x0 : x1 + 1]
-                    trow = tri_out[i, x0 : x1 + 1]
+                    drow = rzs[i - y0, x0 : x1 + 1]
+                    trow = rts[i - y0, x0 : x1 + 1]
                     for k in range(drow.shape[0]):
                         drow[k] = np.inf
                         trow[k] = -1
@@ -1541,8 +1547,8 @@ def _tiles_depth_slot(slot, fe, sc, depth_out, tri_out, zt, ft):
             )  # not a literal: one specialisation
             for i in range(y0, y1 + 1):
                 # row views: their indices are known non-negative (no wrap-around selects)
-                drow = depth_out[i, x0 : x1 + 1]
-                trow = tri_out[i, x0 : x1 + 1]
+                drow = rzs[i - y0, x0 : x1 + 1]
+                trow = rts[i - y0, x0 : x1 + 1]
                 if tiny:
                     zrow = zt[i, x0 : x1 + 1]
                     frow = ft[i, x0 : x1 + 1]
@@ -1558,13 +1564,25 @@ def _tiles_depth_slot(slot, fe, sc, depth_out, tri_out, zt, ft):
                 for k in range(drow.shape[0]):
                     drow[k] = zb[i - y0, k]
                     trow[k] = tb[i - y0, k]  # the face (-1: none)
+        ya = ty * T
+        for i in range(ya, min(ya + T, H)):  # the row of tiles to the output, whole rows
+            drow = depth_out[i]
+            trow = tri_out[i]
+            zr = rzs[i - ya]
+            fr = rts[i - ya]
+            for x in range(W):
+                drow[x] = zr[x]
+                trow[x] = fr[x]
 
 
 def _tiles_depth(fe, sc, depth_out, tri_out, zt, ft):
     """rasterize_depth: the nearest depth (+inf: none) and triangle (-1: none) of every pixel; with a
     tiny path (``zt`` (H,W) not empty: :func:`_tiny_depth`), merged with its nearest depths ``zt`` and
     faces ``ft`` by the same rule (nearer wins, then the smaller face)."""
-    run_slots(_tiles_depth_slot, sc[5], fe, sc, depth_out, tri_out, zt, ft)
+    W = depth_out.shape[1]
+    rz = np.empty((sc[5], fe.tile, W), np.float32)  # the slots' row scratch (see _tiles_depth_slot)
+    rt = np.empty((sc[5], fe.tile, W), np.int32)
+    run_slots(_tiles_depth_slot, sc[5], fe, sc, depth_out, tri_out, zt, ft, rz, rt)
 
 
 @kernel(nogil=True, nrt=False)
