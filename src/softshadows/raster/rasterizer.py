@@ -1586,8 +1586,11 @@ def _tiles_depth(fe, sc, depth_out, tri_out, zt, ft):
 
 
 @kernel(nogil=True, nrt=False)
-def _tiles_gbuffer_slot(slot, fe, sc, out):
-    """Slot ``slot`` of :func:`_tiles_gbuffer` (``run_slots``)."""
+def _tiles_gbuffer_slot(slot, fe, sc, out, rz, rt):
+    """Slot ``slot`` of :func:`_tiles_gbuffer` (``run_slots``). As in :func:`_tiles_depth_slot`, each
+    tile's winners (depth, front-end triangle) go to the slot's row scratch ``rz[slot]``, ``rt[slot]``
+    (T, W) first, and a finished row of tiles is turned into G-buffer rows whole, one image row at
+    a time."""
     vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, normals, _rowbits, sh, tri = fe
     zbuf, tbuf, spbuf, _ibuf, _lbuf, nslot = sc
     vw = _view_window(vp)
@@ -1596,6 +1599,9 @@ def _tiles_gbuffer_slot(slot, fe, sc, out):
     zb = zbuf[slot]
     tb = tbuf[slot]
     SP = spbuf[slot]
+    rzs = rz[slot]
+    rts = rt[slot]
+    cols = (0, wl, wsx)
     for ty in range(slot, nty, nslot):
         for tx in range(ntx):
             rect = _tile_rect(ty, tx, T, W, H)
@@ -1604,18 +1610,27 @@ def _tiles_gbuffer_slot(slot, fe, sc, out):
                 vw, near, tile, rect, start, bins, box, edges, zinfo, planes, zb, tb, SP, sh, tri, np.bool_(False)
             )
             y0, y1, x0, x1 = rect
-            cols = (x0, wl, wsx)
             for i in range(y0, y1 + 1):
-                yw = wt - (i + 0.5) * wsy
-                if ortho:
-                    _gbuffer_row(out, i, i - y0, cols, x1 - x0 + 1, yw, zb, tb, frame, planes, normals, tri, True)
-                else:
-                    _gbuffer_row(out, i, i - y0, cols, x1 - x0 + 1, yw, zb, tb, frame, planes, normals, tri, False)
+                zrow = rzs[i - y0, x0 : x1 + 1]
+                trow = rts[i - y0, x0 : x1 + 1]
+                for k in range(zrow.shape[0]):
+                    zrow[k] = zb[i - y0, k]
+                    trow[k] = tb[i - y0, k]
+        ya = ty * T
+        for i in range(ya, min(ya + T, H)):
+            yw = wt - (i + 0.5) * wsy
+            if ortho:
+                _gbuffer_row(out, i, i - ya, cols, W, yw, rzs, rts, frame, planes, normals, tri, True)
+            else:
+                _gbuffer_row(out, i, i - ya, cols, W, yw, rzs, rts, frame, planes, normals, tri, False)
 
 
 def _tiles_gbuffer(fe, sc, out):
     """rasterize: the nearest surface's G-buffer ``out`` = (depth, tri, pos, nrm, bary, mask)."""
-    run_slots(_tiles_gbuffer_slot, sc[5], fe, sc, out)
+    W = out[0].shape[1]
+    rz = np.empty((sc[5], fe.tile, W), np.float64)  # the slots' row scratch (see _tiles_gbuffer_slot)
+    rt = np.empty((sc[5], fe.tile, W), np.int32)
+    run_slots(_tiles_gbuffer_slot, sc[5], fe, sc, out, rz, rt)
 
 
 @kernel(nogil=True, nrt=False)
