@@ -197,6 +197,38 @@ def _plane_bounds(z, off):
 
 
 @kernel(inline=True)
+def _plane_range(vp, nr, nu, nf, npo, sx, sy, ex, ey, z, off, iw, ih):
+    """Tighter :func:`_plane_bounds` for taps within ``ex``, ``ey`` of (sx, sy): (lo, hi) with every
+    comparison depth ``_plane_depth(vp, nr, nu, nf, npo, tx, ty, z, iw, ih) - off`` of such a tap in
+    [lo, hi]. The plane's denominator is evaluated at the box's corners with the same operations
+    as ``_plane_depth``: each of them (products by fixed factors, sums, rounding) is monotonic in
+    the tap's coordinates, so every tap's denominator lies between the corners' extremes, and where
+    it keeps its sign away from the ``1e-6`` cut-off the depth ``npo / den`` is monotonic in it too;
+    the fallback depth ``z`` is always included. A box where the denominator may reach 0 keeps
+    :func:`_plane_bounds`."""
+    lo, hi = _plane_bounds(z, off)
+    xa, ya = _ray_xy(vp, sx - ex, sy - ey, iw, ih)
+    xb, yb = _ray_xy(vp, sx + ex, sy + ey, iw, ih)
+    d00 = nr * xa + nu * ya + nf
+    d01 = nr * xb + nu * ya + nf
+    d10 = nr * xa + nu * yb + nf
+    d11 = nr * xb + nu * yb + nf
+    dmin = min(min(d00, d01), min(d10, d11))
+    dmax = max(max(d00, d01), max(d10, d11))
+    if not (dmin >= 1e-6 or dmax <= -1e-6):  # (also NaN)
+        return lo, hi
+    qa = npo / dmin
+    qb = npo / dmax
+    pmin = min(qa, qb)
+    pmax = max(qa, qb)
+    pmin -= 1e-12 * abs(pmin)  # a margin on top of the monotonicity
+    pmax += 1e-12 * abs(pmax)
+    pmin = min(max(pmin, 0.5 * z), z)  # depths outside (z/2, 2z) fall back to z
+    pmax = max(min(pmax, 2.0 * z), z)
+    return max(lo, pmin - off), min(hi, pmax - off)
+
+
+@kernel(inline=True)
 def _cmp_bilinear_plane(depth, sx, sy, vp, nr, nu, nf, npo, z, off, iw, ih, lo, hi):
     """:func:`_cmp_bilinear` against the receiver plane's depth at (sx, sy) (``_plane_depth - off``),
     bit for bit, with the plane evaluated only when the 2x2 texels straddle [lo, hi) (see
@@ -243,37 +275,50 @@ OCC_CELL = 16
 
 
 @kernel(parallel=True)
-def _occupancy_rows(depth, cell, counts, row_min):
+def _occupancy_rows(depth, cell, counts, row_min, cmin, cmax):
     """Per grid cell (``cell`` x ``cell`` texels) the number of finite texels, into ``counts``
-    (ny + 1, nx + 1) at [cy + 1, cx + 1]; per grid row the smallest depth, into ``row_min``."""
+    (ny + 1, nx + 1) at [cy + 1, cx + 1], and the smallest and largest depth (+inf for an empty
+    texel), into ``cmin`` and ``cmax`` (ny, nx); per grid row the smallest depth, into ``row_min``."""
     H, W = depth.shape
     ny = row_min.shape[0]
     nx = counts.shape[1] - 1
     for cy in prange(ny):
         m = np.inf
+        for cx in range(nx):
+            cmin[cy, cx] = np.inf
+            cmax[cy, cx] = -np.inf
         for r in range(cy * cell, min(H, cy * cell + cell)):
             for cx in range(nx):
                 n = 0
+                lo = cmin[cy, cx]
+                hi = cmax[cy, cx]
                 for c in range(cx * cell, min(W, cx * cell + cell)):
                     d = depth[r, c]
                     n += d < np.inf
-                    m = min(m, d)
+                    lo = min(lo, d)
+                    hi = max(hi, d)
                 counts[cy + 1, cx + 1] += n
+                cmin[cy, cx] = lo
+                cmax[cy, cx] = hi
+                m = min(m, lo)
         row_min[cy] = m
 
 
-def occupancy_grid(depth: np.ndarray) -> tuple[np.ndarray, float]:
+def occupancy_grid(depth: np.ndarray) -> tuple[np.ndarray, float, np.ndarray, np.ndarray]:
     """(summed-area table (ny + 1, nx + 1) int64 of the finite texels per ``OCC_CELL``-texel cell,
-    the smallest depth of the map: +inf where it holds no occluder), in one pass over the map."""
+    the smallest depth of the map: +inf where it holds no occluder, the smallest and the largest
+    depth per cell (ny, nx) float32: +inf for an empty texel), in one pass over the map."""
     H, W = depth.shape
     ny = (H + OCC_CELL - 1) // OCC_CELL
     nx = (W + OCC_CELL - 1) // OCC_CELL
     counts = np.zeros((ny + 1, nx + 1), np.int64)
     row_min = np.empty(ny, np.float64)
-    _occupancy_rows(depth, OCC_CELL, counts, row_min)
+    cmin = np.empty((ny, nx), depth.dtype)
+    cmax = np.empty((ny, nx), depth.dtype)
+    _occupancy_rows(depth, OCC_CELL, counts, row_min, cmin, cmax)
     np.cumsum(counts, axis=0, out=counts)
     np.cumsum(counts, axis=1, out=counts)
-    return counts, float(row_min.min()) if ny else np.inf
+    return counts, float(row_min.min()) if ny else np.inf, cmin, cmax
 
 
 @kernel(inline=True)
@@ -294,6 +339,34 @@ def _region_empty(sat, cell, H, W, sx, sy, rx, ry):
     gy0 = r0 // cell
     gy1 = r1 // cell + 1
     return sat[gy1, gx1] - sat[gy0, gx1] - sat[gy1, gx0] + sat[gy0, gx0] == 0
+
+
+@kernel(inline=True)
+def _region_decided(cmin, cmax, cell, H, W, sx, sy, ex, ey, lo, hi):
+    """(every texel read is >= ``hi``, every texel read is < ``lo``) for bilinear taps within
+    (ex - 2, ey - 2) texels of (sx, sy), from the cells under their bounding box (grown as in
+    :func:`_region_empty`): texels outside the map count as +inf (lit, never below ``lo``)."""
+    if not (abs(sx) < 1e7 and abs(sy) < 1e7 and ex < 1e7 and ey < 1e7):
+        return False, False  # (also NaN)
+    c0 = int(np.floor(sx - ex))
+    c1 = int(np.floor(sx + ex))
+    r0 = int(np.floor(sy - ey))
+    r1 = int(np.floor(sy + ey))
+    blk = c0 >= 0 and r0 >= 0 and c1 < W and r1 < H
+    c0 = max(c0, 0)
+    c1 = min(c1, W - 1)
+    r0 = max(r0, 0)
+    r1 = min(r1, H - 1)
+    if c0 > c1 or r0 > r1:
+        return True, False
+    lit = True
+    for gy in range(r0 // cell, r1 // cell + 1):
+        for gx in range(c0 // cell, c1 // cell + 1):
+            lit &= cmin[gy, gx] >= hi
+            blk &= cmax[gy, gx] < lo
+        if not (lit or blk):
+            return False, False
+    return lit, blk
 
 
 @kernel(nogil=True, nrt=False)
@@ -362,7 +435,12 @@ def blocker_search_kernel(
                     + nrm[k, 1] * (pts[k, 1] - vp[VP_ORIGIN + 1])
                     + nrm[k, 2] * (pts[k, 2] - vp[VP_ORIGIN + 2])
                 )
-            lo, hi = _plane_bounds(z, off)
+            lo = zt
+            hi = zt
+            if plane:  # bounds of the taps' plane depths (see _plane_range)
+                lo, hi = _plane_range(
+                    vp, nr, nu, nf, npo, sx, sy, rx * (1.0 + 1e-6) + 2.0, ry * (1.0 + 1e-6) + 2.0, z, off, iw, ih
+                )
             c = 1.0
             s = 0.0
             shx = 0.0
@@ -426,6 +504,8 @@ def filtering_kernel(
     seed,
     bilinear,
     plane,
+    cmin,
+    cmax,
     out,
     wp_out,
     radius_out,
@@ -434,6 +514,7 @@ def filtering_kernel(
     """Steps 2 and 3 per point: penumbra estimation, then percentage-closer filtering with a
     kernel of radius w / 2 (per light axis) in texels at the receiver's depth. Run by ``run_slots``, one slot per thread."""
     n = pts.shape[0]
+    H, W = depth_map.shape
     S = pattern.shape[0]
     texel1 = (vp[VP_R] - vp[VP_L]) / vp[VP_W]  # texel size at depth 1 (perspective map)
     iw = _exact_inverse(vp[VP_W])
@@ -461,7 +542,19 @@ def filtering_kernel(
                 + nrm[k, 1] * (pts[k, 1] - vp[VP_ORIGIN + 1])
                 + nrm[k, 2] * (pts[k, 2] - vp[VP_ORIGIN + 2])
             )
-            lo, hi = _plane_bounds(z, off)
+            ex = rx * (1.0 + 1e-6) + 2.0
+            ey = ry * (1.0 + 1e-6) + 2.0
+            lo = zt
+            hi = zt
+            if plane:  # bounds of the taps' plane depths (see _plane_range)
+                lo, hi = _plane_range(vp, nr, nu, nf, npo, sx, sy, ex, ey, z, off, iw, ih)
+            lit, dark = _region_decided(cmin, cmax, OCC_CELL, H, W, sx, sy, ex, ey, lo, hi)
+            if lit:  # every texel read is lit: every tap adds its whole weight, V = 1
+                out[k] = 1.0
+                continue
+            if dark:  # every texel read is a blocker: no tap adds anything, V = 0
+                out[k] = 0.0
+                continue
             c = 1.0
             s = 0.0
             shx = 0.0
@@ -499,16 +592,18 @@ def light_extent(light) -> np.ndarray:
     return np.array([2.0 * light.radius, 2.0 * light.radius], np.float64)
 
 
-def blocker_search(smap, pts, nrm, light, bias, slope_bias, pattern, disk, rotate, seed, plane):
+def blocker_search(smap, pts, nrm, light, bias, slope_bias, pattern, disk, rotate, seed, plane, grid=None):
     """Step 1 over all points -> (z_receiver, avg blocker depth, blocker count, search radius).
     z_receiver is the biased depth where blockers were searched for, the plain depth where the
-    search was skipped (no blocker: the filter does not read it)."""
+    search was skipped (no blocker: the filter does not read it). ``grid``: the map's
+    :func:`occupancy_grid` (computed here if not given)."""
     n = len(pts)
     zr = np.empty(n, np.float64)
     avg = np.empty(n, np.float64)
     nblk = np.empty(n, np.int32)
     search = np.empty(n, np.float64)
-    sat, z_near = occupancy_grid(smap.depth)  # z_near: the map's nearest blocker depth (+inf: none)
+    # z_near: the map's nearest blocker depth (+inf: none)
+    sat, z_near = (occupancy_grid(smap.depth) if grid is None else grid)[:2]
     if not np.isfinite(z_near):
         z_near = float(smap.view.near)
     z_near = max(z_near, 1e-9)
@@ -539,9 +634,11 @@ def blocker_search(smap, pts, nrm, light, bias, slope_bias, pattern, disk, rotat
     return zr, avg, nblk, search
 
 
-def filtering(smap, pts, nrm, zr, avg, nblk, light, pattern, disk, rotate, seed, bilinear, plane):
+def filtering(smap, pts, nrm, zr, avg, nblk, light, pattern, disk, rotate, seed, bilinear, plane, grid=None):
     """Steps 2 + 3 over all points -> (V, penumbra width (world, max over axes), filter radius
-    (texels, max over axes))."""
+    (texels, max over axes)). ``grid``: the map's :func:`occupancy_grid` (computed here if not
+    given)."""
+    cmin, cmax = (occupancy_grid(smap.depth) if grid is None else grid)[2:]
     n = len(pts)
     out = np.empty(n, np.float32)
     wp = np.empty(n, np.float64)
@@ -564,6 +661,8 @@ def filtering(smap, pts, nrm, zr, avg, nblk, light, pattern, disk, rotate, seed,
         int(seed),
         bool(bilinear),
         bool(plane),
+        cmin,
+        cmax,
         out,
         wp,
         radius,
@@ -612,12 +711,13 @@ class PCSS(Method):
             view = fit_light_view(ctx.scene, map_size)
             smap = build_shadow_map(ctx.scene, view)
         with ctx.timer.phase("blocker_search"):
+            grid = occupancy_grid(smap.depth)
             zr, avg, nblk, search = blocker_search(
-                smap, pts, nrm, light, bias, slope_bias, search_pat, disk, rotate, ctx.seed, receiver_plane
+                smap, pts, nrm, light, bias, slope_bias, search_pat, disk, rotate, ctx.seed, receiver_plane, grid
             )
         with ctx.timer.phase("filter"):  # penumbra estimation + filtering, one pass over the points
             v, wp, radius = filtering(
-                smap, pts, nrm, zr, avg, nblk, light, filter_pat, disk, rotate, ctx.seed, bilinear, receiver_plane
+                smap, pts, nrm, zr, avg, nblk, light, filter_pat, disk, rotate, ctx.seed, bilinear, receiver_plane, grid
             )
             out = ctx.scatter(v, idx)
         n = max(len(pts), 1)
