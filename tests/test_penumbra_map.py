@@ -237,6 +237,26 @@ def test_umbra_is_hards_shadow():
         assert umbra.sum() > 100
 
 
+def test_eye_pass_over_the_gbuffer_is_the_per_point_pass():
+    """The frame's eye pass runs straight over the eye G-buffer (``eye_lookups_image``,
+    ``eye_gather``): V and the umbra/penumbra counts are, bit for bit, those of the per-point pass
+    (``eye_pass``) at the gathered points, with the normals of either side (the bias uses |n.l|)."""
+    for name, light in (("bunny", "rect"), ("contact", "sphere")):
+        scene = ss.load_scene(name, light=light)
+        res = ss.render(scene, "penumbra-map", 64, 48, map_size=256, texels="all")
+        m = res.mask
+        pts = res.position[m].astype(np.float64)
+        nrm = res.normal[m].astype(np.float64)
+        d = {p.name: p.default for p in ss.methods()["penumbra-map"].params}
+        smp, pm = _passes(scene, 256, cone_segments=d["cone_segments"], sheet_tolerance=d["sheet_tolerance"])
+        v, umbra = P.eye_pass(smp, pm, pts, nrm, 1.0, 1.0)
+        np.testing.assert_array_equal(res.visibility[m], v)
+        np.testing.assert_array_equal(v, P.eye_pass(smp, pm, pts, -nrm, 1.0, 1.0)[0])
+        assert res.stats["umbra_pixels"] == umbra.sum() > 0
+        assert res.stats["penumbra_pixels"] == ((v > 0) & (v < 1)).sum() > 0
+        assert np.isnan(res.visibility[~m]).all()
+
+
 def test_overlapping_penumbrae_darkest_wins():
     light = SphereLight((0.0, 3.0, 0.0), 0.4)
     # a: x in [-0.9, 0.1] at y = 1 (hard shadow edge x = 0.15, penumbra to 0.35);
