@@ -454,3 +454,34 @@ def test_straight_edge_inherent_error_is_at_least_hards():
     assert e["hard:penumbra"] == pytest.approx(2 / (3 * np.pi), abs=0.01)
     assert e["penumbra-map:penumbra"] >= e["hard:penumbra"]
     assert e["penumbra-map:outer"] >= e["hard:outer"]
+
+
+@pytest.mark.parametrize("shape", [(37, 51), (64, 64), (1, 9), (10, 1)])
+def test_zmax_pyramid_levels_and_the_occluder_minimum(shape):
+    """``build_zmax_pyramid``: Z_P becomes, in place, the minimum with the occluder map at its
+    position (NaN wins, as ``np.minimum``), and every cell of every level is the 2x2 maximum of the
+    level below (odd edges: the cells there), with empty texels (inf, NaN, negative) as 0."""
+    rng = np.random.default_rng(7)
+    h, w = shape
+    zp = rng.uniform(1.0, 5.0, shape).astype(np.float32)
+    zp[rng.random(shape) < 0.2] = np.inf
+    zp[rng.random(shape) < 0.02] = np.nan
+    oh, ow = max(h // 2, 1), max(w // 3, 1)
+    occ = rng.uniform(0.5, 3.0, (oh, ow)).astype(np.float32)
+    occ[rng.random((oh, ow)) < 0.3] = np.inf
+    at = (h - oh, w - ow) if h > 1 else (0, 0)
+    ref = zp.copy()
+    sl = (slice(at[0], at[0] + oh), slice(at[1], at[1] + ow))
+    ref[sl] = np.minimum(ref[sl], occ)
+    data, offs, ws, hs = P.build_zmax_pyramid(zp, occ, at)
+    np.testing.assert_array_equal(zp, ref)
+    lev = np.where(np.isfinite(ref), np.maximum(ref, 0.0), 0.0).astype(np.float32)
+    assert len(offs) > 1 and ws[-1] == hs[-1] == 1
+    for L in range(1, len(offs)):
+        ph, pw = lev.shape
+        pad = np.zeros((ph + ph % 2, pw + pw % 2), np.float32)  # the values are >= 0: zero padding is neutral
+        pad[:ph, :pw] = lev
+        lev = pad.reshape(pad.shape[0] // 2, 2, pad.shape[1] // 2, 2).max(axis=(1, 3))
+        assert lev.shape == (hs[L], ws[L])
+        np.testing.assert_array_equal(data[offs[L] : offs[L] + hs[L] * ws[L]].reshape(lev.shape), lev)
+    assert P.pyramid_max((data, offs, ws, hs)) == lev.max()

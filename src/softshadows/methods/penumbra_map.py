@@ -590,7 +590,7 @@ def build_zmax_pyramid(
         ws.append((ws[-1] + 1) // 2)
         hs.append((hs[-1] + 1) // 2)
         total += ws[-1] * hs[-1]
-    data = np.zeros(max(total, 1), np.float32)
+    data = np.empty(max(total, 1), np.float32)  # every cell of every level is written below
     offs, ws, hs = np.array(offs, np.int64), np.array(ws, np.int64), np.array(hs, np.int64)
     if len(offs) > 1:
         zf = zp.reshape(-1) if occluder_depth is not None else np.ascontiguousarray(zp, dtype=np.float32).reshape(-1)
