@@ -21,10 +21,11 @@ from contextlib import nullcontext
 from dataclasses import dataclass, field
 from typing import ClassVar
 
+import numba
 import numpy as np
 from numba import prange
 
-from .._jit import kernel
+from .._jit import kernel, run_slots
 from ..geometry.silhouette import Silhouette, cached_adjacency, silhouette_adjacency, silhouette_brute
 from ..raster import View, rasterize_depth, rasterize_min_blend
 from ..raster.programs import PROGRAM_PENUMBRA, penumbra_intensity, smoothstep_bernstein  # noqa: F401
@@ -1021,8 +1022,10 @@ LOOKUP_NONE = -1
 LOOKUP_UMBRA = -2
 
 
-@kernel(parallel=True)
-def _eye_lookup_kernel(vp, d_occ, PW, PH, pad_l, pad_t, position, normal, mask, bias, slope_bias, code, needed, mark):
+@kernel(nogil=True, nrt=False)
+def _eye_lookup_slot(
+    slot, vp, d_occ, PW, PH, pad_l, pad_t, position, normal, mask, bias, slope_bias, code, needed, mark, sc, nslot
+):
     """Per pixel of an image of eye points (``position``, ``normal``: (H,W,3); ``mask``: (H,W) True
     where a surface is): the shadow-map test exactly as ``hard`` (its view ``vp`` and map ``d_occ``;
     umbra: ``LOOKUP_UMBRA``), else the flat index of the penumbra-map texel it reads (the same texel
@@ -1031,33 +1034,35 @@ def _eye_lookup_kernel(vp, d_occ, PW, PH, pad_l, pad_t, position, normal, mask, 
 
     Per row, as ``shadowmap.shadow_lookup``: the row's positions and normals copied to one array
     per coordinate, their projections and biased depths in a loop without branches (it
-    vectorizes), then the tests. The normal's side does not matter (the bias uses |n.l|)."""
+    vectorizes), then the tests. The normal's side does not matter (the bias uses |n.l|). A slot
+    kernel run by ``run_slots`` (rows p, p + nslot, ...; ``sc`` (nslot, 10, W) its scratch): a
+    ``prange`` body compiled in about twice the time."""
     Hm, Wm = d_occ.shape
     H, W = mask.shape
-    for i in prange(H):
-        sc = np.empty((10, W))  # x, y, z, nx, ny, nz, then sx, sy, zt, ok
+    for i in range(slot, H, nslot):  # x, y, z, nx, ny, nz, then sx, sy, zt, ok
         for j in range(W):
             for k in range(3):
-                sc[k, j] = position[i, j, k]
-                sc[3 + k, j] = normal[i, j, k]
+                sc[slot, k, j] = position[i, j, k]
+                sc[slot, 3 + k, j] = normal[i, j, k]
         for j in range(W):
             ok, sx, sy, zt = biased_light_depth(
-                vp, sc[0, j], sc[1, j], sc[2, j], sc[3, j], sc[4, j], sc[5, j], bias, slope_bias
-            )
-            sc[6, j] = sx
-            sc[7, j] = sy
-            sc[8, j] = zt
-            sc[9, j] = 1.0 if ok & mask[i, j] else 0.0
+                vp, sc[slot, 0, j], sc[slot, 1, j], sc[slot, 2, j], sc[slot, 3, j], sc[slot, 4, j], sc[slot, 5, j],
+                bias, slope_bias,
+            )  # fmt: skip
+            sc[slot, 6, j] = sx
+            sc[slot, 7, j] = sy
+            sc[slot, 8, j] = zt
+            sc[slot, 9, j] = 1.0 if ok & mask[i, j] else 0.0
         for j in range(W):
             c = LOOKUP_NONE
-            fx = math.floor(sc[6, j])
-            fy = math.floor(sc[7, j])
-            if sc[9, j] != 0.0 and not (fx < -PW or fx > 2 * PW or fy < -PH or fy > 2 * PH):
+            fx = math.floor(sc[slot, 6, j])
+            fy = math.floor(sc[slot, 7, j])
+            if sc[slot, 9, j] != 0.0 and not (fx < -PW or fx > 2 * PW or fy < -PH or fy > 2 * PH):
                 ci = int(fx)
                 ri = int(fy)
                 r2 = ri + pad_t
                 c2 = ci + pad_l
-                if 0 <= ri < Hm and 0 <= ci < Wm and d_occ[ri, ci] < sc[8, j]:
+                if 0 <= ri < Hm and 0 <= ci < Wm and d_occ[ri, ci] < sc[slot, 8, j]:
                     c = LOOKUP_UMBRA
                 elif 0 <= r2 < PH and 0 <= c2 < PW:
                     c = r2 * PW + c2
@@ -1066,25 +1071,22 @@ def _eye_lookup_kernel(vp, d_occ, PW, PH, pad_l, pad_t, position, normal, mask, 
             code[i, j] = c
 
 
-@kernel(parallel=True)
+@kernel
 def _eye_gather_kernel(code, pm_flat, v_out):
     """V per pixel from its lookup code: 0 (umbra), 1 (none) or the penumbra-map texel read.
-    Returns (umbra pixels, pixels with 0 < V < 1)."""
+    Returns (umbra pixels, pixels with 0 < V < 1). Serial: a short pass (a parallel region
+    costs compile time and, under load, waits for its slowest thread)."""
     H, W = code.shape
     n_umbra = 0
     n_pen = 0
-    for i in prange(H):
-        nu = 0
-        npen = 0
+    for i in range(H):
         for j in range(W):
             t = code[i, j]
             v = pm_flat[max(t, 0)]
             v = v if t >= 0 else (np.float32(0.0) if t == LOOKUP_UMBRA else np.float32(1.0))
             v_out[i, j] = v
-            nu += t == LOOKUP_UMBRA
-            npen += (v > 0.0) & (v < 1.0)
-        n_umbra += nu
-        n_pen += npen
+            n_umbra += t == LOOKUP_UMBRA
+            n_pen += (v > 0.0) & (v < 1.0)
     return n_umbra, n_pen
 
 
@@ -1124,7 +1126,10 @@ def eye_lookups_image(
     PH, PW = smp.view.height, smp.view.width
     needed = np.zeros((PH, PW), np.uint8) if mark else np.zeros((0, 0), np.uint8)
     pl, _, pt, _ = smp.border
-    _eye_lookup_kernel(
+    nslot = numba.get_num_threads()
+    run_slots(
+        _eye_lookup_slot,
+        nslot,
         smp.hard_view.params(),
         smp.occluder_depth,
         PW,
@@ -1139,6 +1144,8 @@ def eye_lookups_image(
         code,
         needed,
         bool(mark),
+        np.empty((nslot, 10, W)),
+        nslot,
     )
     return EyeLookups(code, needed if mark else None)
 
