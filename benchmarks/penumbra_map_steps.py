@@ -44,8 +44,8 @@ def main() -> int:
     captured = {}
     run = pm.run
 
-    def capture(ctx, **kw):  # the frame's eye points
-        captured["points"] = ctx.points()
+    def capture(ctx, **kw):  # the frame's eye G-buffer
+        captured["eye"] = ctx.eye
         return run(ctx, **kw)
 
     pm.run = capture
@@ -53,7 +53,7 @@ def main() -> int:
         api._render(scene, hard, a.size, a.size, ph, 0, False)
         api._render(scene, pm, a.size, a.size, pp, 0, False)
     pm.run = run
-    pts, nrm, _ = captured["points"]
+    eye = captured["eye"]
     flat = scene.flat
     lr = P.light_radius_of(scene.light)
     ms, bias, slope = pp["map_size"], pp["bias"], pp["slope_bias"]
@@ -76,7 +76,9 @@ def main() -> int:
         zr, _ = timed("  receivers' Z_P raster", rasterize_depth, smp.view, flat.vertices, recv, cull="none")
         pl, _, pt, _ = smp.border
         timed("  Z_P min + pyramid (one pass)", P.build_zmax_pyramid, zr, smp.occluder_depth, (pt, pl))
-        look = timed("eye_lookups", P.eye_lookups, smp, pts, nrm, bias, slope, mark=True)
+        look = timed(
+            "eye_lookups_image", P.eye_lookups_image, smp, eye.position, eye.normal, eye.mask, bias, slope, mark=True
+        )
         view, pyr = smp.view, smp.zmax_pyramid
         sil, _ = timed("silhouettes", P.find_silhouettes, scene, view.origin, pp["silhouettes"])
         z_far = P.pyramid_max(pyr) * (1.0 + 1e-6)
@@ -121,7 +123,7 @@ def main() -> int:
         )
         timed("  its front end", R._front_end, *R._prepare(rview, prims.vertices, prims.triangles, "none"), look.needed)
         pmap = P.PenumbraMap(view, out, sil, z_far)
-        timed("eye_pass (gather)", P.eye_pass, smp, pmap, pts, nrm, bias, slope, lookups=look)
+        timed("eye_gather", P.eye_gather, pmap, look)
         if r == 0:  # the first round warms the steps called here only
             times = {}
     unit = "wall ms, default threads" if a.wall else "CPU ms, 1 thread"

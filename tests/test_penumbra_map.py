@@ -237,6 +237,26 @@ def test_umbra_is_hards_shadow():
         assert umbra.sum() > 100
 
 
+def test_eye_pass_over_the_gbuffer_is_the_per_point_pass():
+    """The frame's eye pass runs straight over the eye G-buffer (``eye_lookups_image``,
+    ``eye_gather``): V and the umbra/penumbra counts are, bit for bit, those of the per-point pass
+    (``eye_pass``) at the gathered points, with the normals of either side (the bias uses |n.l|)."""
+    for name, light in (("bunny", "rect"), ("contact", "sphere")):
+        scene = ss.load_scene(name, light=light)
+        res = ss.render(scene, "penumbra-map", 64, 48, map_size=256, texels="all")
+        m = res.mask
+        pts = res.position[m].astype(np.float64)
+        nrm = res.normal[m].astype(np.float64)
+        d = {p.name: p.default for p in ss.methods()["penumbra-map"].params}
+        smp, pm = _passes(scene, 256, cone_segments=d["cone_segments"], sheet_tolerance=d["sheet_tolerance"])
+        v, umbra = P.eye_pass(smp, pm, pts, nrm, 1.0, 1.0)
+        np.testing.assert_array_equal(res.visibility[m], v)
+        np.testing.assert_array_equal(v, P.eye_pass(smp, pm, pts, -nrm, 1.0, 1.0)[0])
+        assert res.stats["umbra_pixels"] == umbra.sum() > 0
+        assert res.stats["penumbra_pixels"] == ((v > 0) & (v < 1)).sum() > 0
+        assert np.isnan(res.visibility[~m]).all()
+
+
 def test_overlapping_penumbrae_darkest_wins():
     light = SphereLight((0.0, 3.0, 0.0), 0.4)
     # a: x in [-0.9, 0.1] at y = 1 (hard shadow edge x = 0.15, penumbra to 0.35);
@@ -434,3 +454,34 @@ def test_straight_edge_inherent_error_is_at_least_hards():
     assert e["hard:penumbra"] == pytest.approx(2 / (3 * np.pi), abs=0.01)
     assert e["penumbra-map:penumbra"] >= e["hard:penumbra"]
     assert e["penumbra-map:outer"] >= e["hard:outer"]
+
+
+@pytest.mark.parametrize("shape", [(37, 51), (64, 64), (1, 9), (10, 1)])
+def test_zmax_pyramid_levels_and_the_occluder_minimum(shape):
+    """``build_zmax_pyramid``: Z_P becomes, in place, the minimum with the occluder map at its
+    position (NaN wins, as ``np.minimum``), and every cell of every level is the 2x2 maximum of the
+    level below (odd edges: the cells there), with empty texels (inf, NaN, negative) as 0."""
+    rng = np.random.default_rng(7)
+    h, w = shape
+    zp = rng.uniform(1.0, 5.0, shape).astype(np.float32)
+    zp[rng.random(shape) < 0.2] = np.inf
+    zp[rng.random(shape) < 0.02] = np.nan
+    oh, ow = max(h // 2, 1), max(w // 3, 1)
+    occ = rng.uniform(0.5, 3.0, (oh, ow)).astype(np.float32)
+    occ[rng.random((oh, ow)) < 0.3] = np.inf
+    at = (h - oh, w - ow) if h > 1 else (0, 0)
+    ref = zp.copy()
+    sl = (slice(at[0], at[0] + oh), slice(at[1], at[1] + ow))
+    ref[sl] = np.minimum(ref[sl], occ)
+    data, offs, ws, hs = P.build_zmax_pyramid(zp, occ, at)
+    np.testing.assert_array_equal(zp, ref)
+    lev = np.where(np.isfinite(ref), np.maximum(ref, 0.0), 0.0).astype(np.float32)
+    assert len(offs) > 1 and ws[-1] == hs[-1] == 1
+    for L in range(1, len(offs)):
+        ph, pw = lev.shape
+        pad = np.zeros((ph + ph % 2, pw + pw % 2), np.float32)  # the values are >= 0: zero padding is neutral
+        pad[:ph, :pw] = lev
+        lev = pad.reshape(pad.shape[0] // 2, 2, pad.shape[1] // 2, 2).max(axis=(1, 3))
+        assert lev.shape == (hs[L], ws[L])
+        np.testing.assert_array_equal(data[offs[L] : offs[L] + hs[L] * ws[L]].reshape(lev.shape), lev)
+    assert P.pyramid_max((data, offs, ws, hs)) == lev.max()
