@@ -764,6 +764,49 @@ def bin_patches_by_band(ext, n_bands, band_rows):
     return cnt, idx
 
 
+ROW_LANES = 16  # rect light, float32 sums: the row pass covers whole vectors of this many texels
+
+
+@kernel(inline=True, nrt=False)
+def _rect_row_pass(recv_depth, recv_mesh, ssm, ramp, i, base, nl, lo, hi, zo, ax, dax, wx, c0, c1, pm, check_mesh):
+    """One SSM row of one micro-patch for :func:`accumulate_soft_shadow_map` with float32 sums:
+    the fragment program (:func:`_occlusion_percentage32`, float32 arithmetic like a GPU's) at the
+    ``nl`` texels ``[base, base + nl)``, which contain the patch's columns ``[base + lo, base + hi)``.
+    Branch-free, so it vectorizes; the caller makes ``nl`` a multiple of :data:`ROW_LANES` (whole
+    vectors, no scalar remainder loop). A texel outside the patch's columns, whose receiver is not
+    behind the patch, or (``check_mesh``) of the patch's own mesh gets k = 0: it adds exactly 0.
+    ``ax - jj dax`` with jj = column - (base + lo) is the x term a0 (``jj`` as float32(ramp) -
+    float32(lo): exact), so every texel of the patch's columns gets the value the per-column program gives.
+    ``ramp``: 0, 1, 2, ... (int32; 8 lanes per compare and conversion, unlike int64: an int64 column
+    index made LLVM convert it to float32 one lane at a time). 2-D subscripts, no row views (a view
+    costs a contended atomic refcount update); unsigned indices: no negative-index wraparound."""
+    ii = np.uint64(i)
+    ub = np.uint64(base)
+    lo32 = np.int32(lo)
+    hi32 = np.int32(hi)
+    lof = np.float32(lo)
+    pm32 = np.int32(pm)
+    not_check = not check_mesh
+    zo32 = np.float32(zo)
+    ax32 = np.float32(ax)
+    dax32 = np.float32(dax)
+    wx32 = np.float32(wx)
+    c032 = np.float32(c0)
+    c132 = np.float32(c1)
+    for jj in range(nl):
+        ju = np.uint64(jj)
+        jx = ub + ju
+        zr = recv_depth[ii, jx]
+        rj = ramp[ju]
+        k = zr / (zr - zo32)
+        # no short-circuit: it vectorizes
+        ok = (zr > zo32) & (not_check | (recv_mesh[ii, jx] != pm32)) & (rj >= lo32) & (rj < hi32)
+        k = k if ok else _F0
+        # float32(rj) - float32(lo) is exact (integers < 2^24): float32 of the column index jj
+        a0 = ax32 - (np.float32(rj) - lof) * dax32
+        ssm[ii, jx] += _occlusion_percentage32(k, a0, a0 + wx32, c032, c132)
+
+
 @kernel(nogil=True, nrt=False)
 def accumulate_soft_shadow_map_slot(
     slot,
@@ -783,6 +826,7 @@ def accumulate_soft_shadow_map_slot(
     check_mesh,
     ssm,
     touched,
+    ramp,
     nslot,
 ):
     """Slot ``slot`` of :func:`accumulate_soft_shadow_map` (``run_slots``): bands slot, slot + nslot, ..."""
@@ -810,6 +854,13 @@ def accumulate_soft_shadow_map_slot(
             ax = (x0 - ux0 * zo) / (2.0 * hx)
             wx = (x1 - x0) / (2.0 * hx)
             dax = dxs * zo / (2.0 * hx)
+            # the float32 row pass runs over whole vectors of ROW_LANES texels from ``base``
+            nl = ROW_LANES * ((j1 - j0 + ROW_LANES - 1) // ROW_LANES)
+            if nl <= W:
+                base = min(j0, W - nl)
+            else:
+                base = j0
+                nl = j1 - j0
             for i in range(i0, i1 + 1):
                 uy = t - (i + 0.5) * dys
                 c0 = (y0 - uy * zo) / (2.0 * hy)
@@ -825,40 +876,46 @@ def accumulate_soft_shadow_map_slot(
                             c = occlusion_percentage(zr / (zr - zo), a0, a0 + wx, c0, c1)
                             if c > 0.0:
                                 out[jj] = np.float32(round_half(np.float64(out[jj]) + round_half(c, rtz), rtz))
-                elif check_mesh:
-                    ii = np.uint64(i)
-                    zo32 = np.float32(zo)
-                    ax32 = np.float32(ax)
-                    dax32 = np.float32(dax)
-                    wx32 = np.float32(wx)
-                    c032 = np.float32(c0)
-                    c132 = np.float32(c1)
-                    for jj in range(j1 - j0):
-                        jx = np.uint64(j0 + jj)
-                        zr = recv_depth[ii, jx]
-                        k = zr / (zr - zo32)
-                        k = k if zr > zo32 else _F0
-                        k = k if recv_mesh[ii, jx] != pm else _F0
-                        a0 = ax32 - np.float32(jj) * dax32
-                        ssm[ii, jx] += _occlusion_percentage32(k, a0, a0 + wx32, c032, c132)
+                elif check_mesh:  # one instance per value of check_mesh: the mesh test folds away
+                    _rect_row_pass(
+                        recv_depth,
+                        recv_mesh,
+                        ssm,
+                        ramp,
+                        i,
+                        base,
+                        nl,
+                        j0 - base,
+                        j1 - base,
+                        zo,
+                        ax,
+                        dax,
+                        wx,
+                        c0,
+                        c1,
+                        pm,
+                        True,
+                    )
                 else:
-                    # float32 arithmetic (a GPU fragment program's; 16 lanes per vector); 2-D subscripts,
-                    # no row views (a view costs a contended atomic refcount update); unsigned
-                    # indices: no negative-index wraparound, so the loop vectorizes
-                    ii = np.uint64(i)
-                    zo32 = np.float32(zo)
-                    ax32 = np.float32(ax)
-                    dax32 = np.float32(dax)
-                    wx32 = np.float32(wx)
-                    c032 = np.float32(c0)
-                    c132 = np.float32(c1)
-                    for jj in range(j1 - j0):
-                        jx = np.uint64(j0 + jj)
-                        zr = recv_depth[ii, jx]
-                        k = zr / (zr - zo32)
-                        k = k if zr > zo32 else _F0
-                        a0 = ax32 - np.float32(jj) * dax32
-                        ssm[ii, jx] += _occlusion_percentage32(k, a0, a0 + wx32, c032, c132)
+                    _rect_row_pass(
+                        recv_depth,
+                        recv_mesh,
+                        ssm,
+                        ramp,
+                        i,
+                        base,
+                        nl,
+                        j0 - base,
+                        j1 - base,
+                        zo,
+                        ax,
+                        dax,
+                        wx,
+                        c0,
+                        c1,
+                        pm,
+                        False,
+                    )
         touched[bnd] = cnt
 
 
@@ -910,6 +967,7 @@ def accumulate_soft_shadow_map(
         check_mesh,
         ssm,
         touched,
+        np.arange(recv_depth.shape[1], dtype=np.int32),
         nslot,
     )
     return touched
