@@ -440,20 +440,23 @@ _INV_PI32 = np.float32(1.0 / math.pi)
 
 
 @kernel(inline=True)
-def _sat32(x):
-    x = x if x > _F0 else _F0
-    return x if x < _F1 else _F1
+def _overlap32(p, q):
+    """``sat(q) - sat(p)`` for p <= q (float32), the same value bit for bit in fewer operations:
+    where p < 1 and q > 0 it subtracts the same two values, sat(q) = min(q, 1) and
+    sat(p) = max(p, 0); otherwise (p >= 1 or q <= 0) both give +0. Each select is written on
+    its own, so that LLVM vectorizes it as one compare and one blend (nested, they took more)."""
+    hi = q if q < _F1 else _F1
+    lo = p if p > _F0 else _F0
+    d = hi - lo
+    return d if d > _F0 else _F0
 
 
 @kernel(inline=True)
 def _occlusion_percentage32(k, a0, a1, c0, c1):
     """:func:`occlusion_percentage` in float32 arithmetic (the precision of a GPU fragment program;
-    16 lanes per vector instead of 8)."""
-    a = _sat32(k * a0 + _FH)
-    b = _sat32(k * a1 + _FH)
-    c = _sat32(k * c0 + _FH)
-    d = _sat32(k * c1 + _FH)
-    return (b - a) * (d - c)
+    16 vector lanes instead of 8): ``(sat(b) - sat(a)) (sat(d) - sat(c))`` with each difference
+    taken by :func:`_overlap32` (a <= b and c <= d: a0 <= a1, c0 <= c1 and k >= 0)."""
+    return _overlap32(k * a0 + _FH, k * a1 + _FH) * _overlap32(k * c0 + _FH, k * c1 + _FH)
 
 
 @kernel(inline=True)
@@ -764,6 +767,18 @@ def bin_patches_by_band(ext, n_bands, band_rows):
     return cnt, idx
 
 
+@kernel(inline=True, nrt=False)
+def _clamp_rows(ssm, r0, r1):
+    """Clamp the summed percentages of SSM rows ``r0..r1`` to [0, 1] in place (the paper clamps at
+    display; NaN -> 0). Each slot kernel clamps a band's rows once the band is summed: no pass of
+    its own over the map."""
+    W = ssm.shape[1]
+    for i in range(r0, r1 + 1):
+        for j in range(W):
+            v = ssm[i, j]
+            ssm[i, j] = 0.0 if not (v > 0.0) else (1.0 if v > 1.0 else v)
+
+
 ROW_LANES = 16  # rect light, float32 sums: the row pass covers whole vectors of this many texels
 
 
@@ -916,6 +931,7 @@ def accumulate_soft_shadow_map_slot(
                         pm,
                         False,
                     )
+        _clamp_rows(ssm, r0, r1)
         touched[bnd] = cnt
 
 
@@ -940,8 +956,9 @@ def accumulate_soft_shadow_map(
     """Add every micro-patch's occlusion percentage into ``ssm`` (H,W) float32 at the texels of
     its penumbra extent. One thread per band of rows, micro-patches in draw order: race-free and
     with the same per-texel order of additions as GPU blending. ``fp16``: round the running sum to
-    half precision after every addition (scalar loop; ``rtz``: toward zero). Returns the
-    fragment-program invocations per band.
+    half precision after every addition (scalar loop; ``rtz``: toward zero). Each band's sums are
+    then clamped to [0, 1] (:func:`_clamp_rows`). Returns the fragment-program invocations per
+    band.
 
     ``recv_depth``: receiver depths with 0 where there is no receiver. A texel whose receiver is
     not behind the patch (or, with ``check_mesh``, belongs to the patch's own mesh: no
@@ -1373,6 +1390,7 @@ def accumulate_soft_shadow_map_sphere_slot(
             _flush_crossings(
                 F1, f12, Q, rows, cols, vals, bad, UV, m, ssm, l, t, dxs, dys, rho, sx, sy, sz, sh, tx, ty, tz, th
             )
+        _clamp_rows(ssm, r0, r1)
         touched[bnd] = cnt
 
 
@@ -1397,7 +1415,7 @@ def accumulate_soft_shadow_map_sphere(
 ):
     """:func:`accumulate_soft_shadow_map` for a sphere light: the fragment program is
     :func:`occlusion_percentage_disk` (float64 arithmetic; the sum is stored in float32, or
-    rounded to half precision with ``fp16``). Same bands, order and skipping rules. ``frames``:
+    rounded to half precision with ``fp16``). Same bands, order, skipping rules and clamping. ``frames``:
     :func:`disk_frames` of the texels (read with ``fp16`` only), ``frames32``: :func:`disk_frames32`;
     ``svp``: the SSM's view parameters, ``rho``: the light's radius (the crossing pairs' frames are
     recomputed)."""
@@ -1427,16 +1445,6 @@ def accumulate_soft_shadow_map_sphere(
     return touched
 
 
-@kernel(parallel=True)
-def clamp_soft_shadow_map(ssm):
-    """Clamp the summed percentages to [0, 1] in place (the paper clamps at display)."""
-    H, W = ssm.shape
-    for i in prange(H):
-        for j in range(W):
-            v = ssm[i, j]
-            ssm[i, j] = 0.0 if not (v > 0.0) else (1.0 if v > 1.0 else v)
-
-
 # ---- 8. two-pass merge -------------------------------------------------------------------------
 def merge_two_pass(front: np.ndarray, back: np.ndarray) -> np.ndarray:
     """The two soft shadow maps merged by their maximum (Sec. 3.5)."""
@@ -1445,29 +1453,41 @@ def merge_two_pass(front: np.ndarray, back: np.ndarray) -> np.ndarray:
 
 # ---- 9. projection onto the eye view -----------------------------------------------------------
 @kernel(parallel=True)
-def project_soft_shadow_map(pts, idx, tri_id, receiver, svp, ssm):
-    """V per eye point: receivers read the SSM (bilinear) at their projection from the light;
-    V = 1 - occlusion. Outside the SSM, behind the light, or on occluder-only geometry: V = 1.
-    ``pts``, ``idx``: the eye points and their flat pixel indices; ``tri_id``: the eye G-buffer's
-    triangle per pixel (flat, -1 where none); ``receiver``: per triangle, whether it is a receiver.
-    Returns (V per point, the number of receiver points)."""
-    n = pts.shape[0]
-    H, W = ssm.shape
-    out = np.empty(n, np.float32)
-    n_recv = 0
-    for k in prange(n):
-        out[k] = 1.0
-        tri = tri_id[idx[k]]
-        if tri < 0 or not receiver[tri]:
-            continue
-        n_recv += 1
-        sx, sy, z = view_project(svp, pts[k, 0], pts[k, 1], pts[k, 2])
-        if not (z > 0.0) or not (sx >= 0.0 and sx <= W and sy >= 0.0 and sy <= H):
-            continue
-        o = sample_bilinear(ssm, sx, sy)
-        if o > 0.0:
-            out[k] = 1.0 - min(o, 1.0)
-    return out, n_recv
+def project_soft_shadow_map(position, tri_id, receiver, svp, ssm):
+    """V (H,W) float32 of the eye view straight from its G-buffer image (``position`` (H,W,3),
+    ``tri_id`` (H,W), -1 where no surface; ``receiver``: per triangle, whether it is a receiver):
+    receivers read the SSM (bilinear) at their projection from the light; V = 1 - occlusion.
+    Outside the SSM, behind the light, on occluder-only geometry or without a surface: V = 1.
+    Per row, the projections first (one float64 array per coordinate, no branch: LLVM vectorizes
+    it), then the lookups. Returns (V, the number of receiver pixels)."""
+    H, W = tri_id.shape
+    Hs, Ws = ssm.shape
+    out = np.empty((H, W), np.float32)
+    n_row = np.zeros(H, np.int64)
+    for i in prange(H):
+        sc = np.empty((3, W))
+        for j in range(W):
+            sx, sy, z = view_project(
+                svp, np.float64(position[i, j, 0]), np.float64(position[i, j, 1]), np.float64(position[i, j, 2])
+            )
+            sc[0, j] = sx
+            sc[1, j] = sy
+            sc[2, j] = z
+        n = 0
+        for j in range(W):
+            out[i, j] = 1.0
+            tri = tri_id[i, j]
+            if tri < 0 or not receiver[tri]:
+                continue
+            n += 1
+            sx, sy, z = sc[0, j], sc[1, j], sc[2, j]
+            if not (z > 0.0) or not (sx >= 0.0 and sx <= Ws and sy >= 0.0 and sy <= Hs):
+                continue
+            o = sample_bilinear(ssm, sx, sy)
+            if o > 0.0:
+                out[i, j] = 1.0 - min(o, 1.0)
+        n_row[i] = n
+    return out, n_row.sum()
 
 
 # ---- orchestration -----------------------------------------------------------------------------
@@ -1604,7 +1624,6 @@ def compute_soft_shadow_map(
                     ssm,
                     nslot,
                 )
-            clamp_soft_shadow_map(ssm)
         passes[s] = ssm
         stats[f"micro_patches_{s}"] = int(len(patches))
         stats["micro_patches"] += int(len(patches))
@@ -1672,11 +1691,9 @@ class SoftShadowMapMethod(Method):
     def run(self, ctx, map_size, ssm_size, two_pass, accumulate, margin):
         smap = compute_soft_shadow_map(ctx.scene, map_size, ssm_size, two_pass, accumulate, margin, ctx.timer)
         with ctx.timer.phase("eye_projection"):
-            pts, _, idx = ctx.points()
-            v, n_recv = project_soft_shadow_map(
-                pts, idx, ctx.eye.tri_id.ravel(), ctx.flat.receiver, smap.view.params(), smap.occlusion
+            out, n_recv = project_soft_shadow_map(
+                ctx.eye.position, ctx.eye.tri_id, ctx.flat.receiver, smap.view.params(), smap.occlusion
             )
-            out = ctx.scatter(v, idx)
         stats = dict(smap.stats)
         stats["eye_receiver_pixels"] = int(n_recv)
         return MethodOutput(out, stats)
