@@ -122,12 +122,19 @@ def _compute_map_views(scene, map_size: int, ssm_size: int, margin: float) -> tu
 
 
 # ---- 2. receiver depth map ---------------------------------------------------------------------
-def compute_receiver_depth_map(scene, view: View) -> tuple[np.ndarray, np.ndarray]:
-    """(depth (H,W) float32 +inf where empty, mesh id (H,W) int32 -1 where empty) of receivers."""
+def _mesh_ids(flat, faces_mask, tri) -> np.ndarray:
+    """Mesh id (int32, -1 where no triangle) per pixel of a map of the faces ``faces_mask``."""
+    idx = np.flatnonzero(faces_mask)
+    return np.where(tri >= 0, flat.mesh_id[idx][np.maximum(tri, 0)], -1).astype(np.int32)
+
+
+def compute_receiver_depth_map(scene, view: View, mesh: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """(depth (H,W) float32 +inf where empty, mesh id (H,W) int32 -1 where empty) of receivers.
+    ``mesh=False``: the mesh ids are not needed (no mesh of role ``both``: the accumulation never
+    reads them), zeros instead."""
     flat = scene.flat
-    idx = np.flatnonzero(flat.receiver)
     depth, tri = rasterize_depth(view, flat.vertices, flat.faces_where(flat.receiver), cull="none")
-    mesh = np.where(tri >= 0, flat.mesh_id[idx][np.maximum(tri, 0)], -1).astype(np.int32)
+    mesh = _mesh_ids(flat, flat.receiver, tri) if mesh else np.zeros(tri.shape, np.int32)
     return np.ascontiguousarray(depth, dtype=np.float32), mesh
 
 
@@ -147,13 +154,15 @@ def _max_depth_per_pixel(pixel, depth, tri, n_pix):
     return out, who
 
 
-def compute_occluder_depth_map(scene, view: View, side: str = "nearest") -> tuple[np.ndarray, np.ndarray]:
+def compute_occluder_depth_map(
+    scene, view: View, side: str = "nearest", mesh: bool = True
+) -> tuple[np.ndarray, np.ndarray]:
     """(depth (H,W) float32 +inf where empty, mesh id (H,W) int32) of the occluders.
 
     ``side``: ``nearest`` (one pass: the usual depth buffer, no culling), ``front`` (closest
-    front-facing faces) or ``back`` (furthest back-facing faces), the two maps of Sec. 3.5."""
+    front-facing faces) or ``back`` (furthest back-facing faces), the two maps of Sec. 3.5.
+    ``mesh=False``: zeros instead of the mesh ids (see :func:`compute_receiver_depth_map`)."""
     flat = scene.flat
-    idx = np.flatnonzero(flat.occluder)
     faces = flat.faces_where(flat.occluder)  # once per geometry
     if side == "back":
         fr = rasterize_fragments(view, flat.vertices, faces, cull="front")
@@ -166,7 +175,7 @@ def compute_occluder_depth_map(scene, view: View, side: str = "nearest") -> tupl
         depth, tri = d.reshape(view.height, view.width), tri.reshape(view.height, view.width)
     else:
         depth, tri = rasterize_depth(view, flat.vertices, faces, cull="back" if side == "front" else "none")
-    mesh = np.where(tri >= 0, flat.mesh_id[idx][np.maximum(tri, 0)], -1).astype(np.int32)
+    mesh = _mesh_ids(flat, flat.occluder, tri) if mesh else np.zeros(tri.shape, np.int32)
     return np.ascontiguousarray(depth, dtype=np.float32), mesh
 
 
@@ -1548,17 +1557,18 @@ def compute_soft_shadow_map(
         v = View.frame(scene.light.center, scene.light.normal, (0, 1, 0), (-1, 1, -1, 1), 1e-3, 1.0, ssm_size, ssm_size)
         z = np.zeros((ssm_size, ssm_size), np.float32)
         return SoftShadowMap(v, z, np.full_like(z, np.inf), v, {}, stats)
+    # the mesh ids only serve the no-self-shadowing rule of meshes of role ``both``
+    check_mesh = any(m.role == "both" for m in scene.meshes)
     with timer.phase("receiver_map"):
         ov, sv = compute_map_views(scene, map_size, ssm_size, margin)
-        rdepth, rmesh = compute_receiver_depth_map(scene, sv)
+        rdepth, rmesh = compute_receiver_depth_map(scene, sv, check_mesh)
     with timer.phase("occluder_map"):
         sides = ("front", "back") if two_pass else ("nearest",)
-        omaps = {s: compute_occluder_depth_map(scene, ov, s) for s in sides}
+        omaps = {s: compute_occluder_depth_map(scene, ov, s, check_mesh) for s in sides}
     hx, hy = light_half_extents(scene.light, ov)
     finite = rdepth[np.isfinite(rdepth)]
     rdepth0 = np.where(np.isfinite(rdepth), rdepth, np.float32(0.0)).astype(np.float32)  # 0: no receiver
     z_plane = float(finite.max()) if finite.size else 0.0
-    check_mesh = any(m.role == "both" for m in scene.meshes)
     ovp, svp = ov.params(), sv.params()
     n_bands = (ssm_size + BAND_ROWS - 1) // BAND_ROWS
     passes = {}
