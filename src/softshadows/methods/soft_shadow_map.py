@@ -759,11 +759,15 @@ def bin_patches_by_band(ext, n_bands, band_rows):
     """CSR lists (ptr (n_bands+1,), idx) of the micro-patches whose extent meets each band of
     ``band_rows`` SSM rows, each list in micro-patch (draw) order."""
     n = ext.shape[0]
-    cnt = np.zeros(n_bands + 1, np.int64)
+    # counts per band from a difference array (two updates per patch, not one per band it meets):
+    # after the first prefix sum cnt[b + 1] is the count of band b, after the second the offsets
+    cnt = np.zeros(n_bands + 2, np.int64)
     for k in range(n):
         if ext[k, 0] <= ext[k, 1]:
-            for bnd in range(ext[k, 0] // band_rows, ext[k, 1] // band_rows + 1):
-                cnt[bnd + 1] += 1
+            cnt[ext[k, 0] // band_rows + 1] += 1
+            cnt[ext[k, 1] // band_rows + 2] -= 1
+    for bnd in range(1, n_bands + 1):
+        cnt[bnd + 1] += cnt[bnd]
     for bnd in range(n_bands):
         cnt[bnd + 1] += cnt[bnd]
     idx = np.empty(cnt[n_bands], np.int32)
@@ -773,7 +777,7 @@ def bin_patches_by_band(ext, n_bands, band_rows):
             for bnd in range(ext[k, 0] // band_rows, ext[k, 1] // band_rows + 1):
                 idx[fill[bnd]] = k
                 fill[bnd] += 1
-    return cnt, idx
+    return cnt[: n_bands + 1], idx
 
 
 @kernel(inline=True, nrt=False)
