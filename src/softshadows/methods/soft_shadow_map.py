@@ -122,12 +122,19 @@ def _compute_map_views(scene, map_size: int, ssm_size: int, margin: float) -> tu
 
 
 # ---- 2. receiver depth map ---------------------------------------------------------------------
-def compute_receiver_depth_map(scene, view: View) -> tuple[np.ndarray, np.ndarray]:
-    """(depth (H,W) float32 +inf where empty, mesh id (H,W) int32 -1 where empty) of receivers."""
+def _mesh_ids(flat, faces_mask, tri) -> np.ndarray:
+    """Mesh id (int32, -1 where no triangle) per pixel of a map of the faces ``faces_mask``."""
+    idx = np.flatnonzero(faces_mask)
+    return np.where(tri >= 0, flat.mesh_id[idx][np.maximum(tri, 0)], -1).astype(np.int32)
+
+
+def compute_receiver_depth_map(scene, view: View, mesh: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """(depth (H,W) float32 +inf where empty, mesh id (H,W) int32 -1 where empty) of receivers.
+    ``mesh=False``: the mesh ids are not needed (no mesh of role ``both``: the accumulation never
+    reads them), zeros instead."""
     flat = scene.flat
-    idx = np.flatnonzero(flat.receiver)
     depth, tri = rasterize_depth(view, flat.vertices, flat.faces_where(flat.receiver), cull="none")
-    mesh = np.where(tri >= 0, flat.mesh_id[idx][np.maximum(tri, 0)], -1).astype(np.int32)
+    mesh = _mesh_ids(flat, flat.receiver, tri) if mesh else np.zeros(tri.shape, np.int32)
     return np.ascontiguousarray(depth, dtype=np.float32), mesh
 
 
@@ -147,13 +154,15 @@ def _max_depth_per_pixel(pixel, depth, tri, n_pix):
     return out, who
 
 
-def compute_occluder_depth_map(scene, view: View, side: str = "nearest") -> tuple[np.ndarray, np.ndarray]:
+def compute_occluder_depth_map(
+    scene, view: View, side: str = "nearest", mesh: bool = True
+) -> tuple[np.ndarray, np.ndarray]:
     """(depth (H,W) float32 +inf where empty, mesh id (H,W) int32) of the occluders.
 
     ``side``: ``nearest`` (one pass: the usual depth buffer, no culling), ``front`` (closest
-    front-facing faces) or ``back`` (furthest back-facing faces), the two maps of Sec. 3.5."""
+    front-facing faces) or ``back`` (furthest back-facing faces), the two maps of Sec. 3.5.
+    ``mesh=False``: zeros instead of the mesh ids (see :func:`compute_receiver_depth_map`)."""
     flat = scene.flat
-    idx = np.flatnonzero(flat.occluder)
     faces = flat.faces_where(flat.occluder)  # once per geometry
     if side == "back":
         fr = rasterize_fragments(view, flat.vertices, faces, cull="front")
@@ -166,7 +175,7 @@ def compute_occluder_depth_map(scene, view: View, side: str = "nearest") -> tupl
         depth, tri = d.reshape(view.height, view.width), tri.reshape(view.height, view.width)
     else:
         depth, tri = rasterize_depth(view, flat.vertices, faces, cull="back" if side == "front" else "none")
-    mesh = np.where(tri >= 0, flat.mesh_id[idx][np.maximum(tri, 0)], -1).astype(np.int32)
+    mesh = _mesh_ids(flat, flat.occluder, tri) if mesh else np.zeros(tri.shape, np.int32)
     return np.ascontiguousarray(depth, dtype=np.float32), mesh
 
 
@@ -440,20 +449,23 @@ _INV_PI32 = np.float32(1.0 / math.pi)
 
 
 @kernel(inline=True)
-def _sat32(x):
-    x = x if x > _F0 else _F0
-    return x if x < _F1 else _F1
+def _overlap32(p, q):
+    """``sat(q) - sat(p)`` for p <= q (float32), the same value bit for bit in fewer operations:
+    where p < 1 and q > 0 it subtracts the same two values, sat(q) = min(q, 1) and
+    sat(p) = max(p, 0); otherwise (p >= 1 or q <= 0) both give +0. Each select is written on
+    its own, so that LLVM vectorizes it as one compare and one blend (nested, they took more)."""
+    hi = q if q < _F1 else _F1
+    lo = p if p > _F0 else _F0
+    d = hi - lo
+    return d if d > _F0 else _F0
 
 
 @kernel(inline=True)
 def _occlusion_percentage32(k, a0, a1, c0, c1):
     """:func:`occlusion_percentage` in float32 arithmetic (the precision of a GPU fragment program;
-    16 lanes per vector instead of 8)."""
-    a = _sat32(k * a0 + _FH)
-    b = _sat32(k * a1 + _FH)
-    c = _sat32(k * c0 + _FH)
-    d = _sat32(k * c1 + _FH)
-    return (b - a) * (d - c)
+    16 vector lanes instead of 8): ``(sat(b) - sat(a)) (sat(d) - sat(c))`` with each difference
+    taken by :func:`_overlap32` (a <= b and c <= d: a0 <= a1, c0 <= c1 and k >= 0)."""
+    return _overlap32(k * a0 + _FH, k * a1 + _FH) * _overlap32(k * c0 + _FH, k * c1 + _FH)
 
 
 @kernel(inline=True)
@@ -747,11 +759,15 @@ def bin_patches_by_band(ext, n_bands, band_rows):
     """CSR lists (ptr (n_bands+1,), idx) of the micro-patches whose extent meets each band of
     ``band_rows`` SSM rows, each list in micro-patch (draw) order."""
     n = ext.shape[0]
-    cnt = np.zeros(n_bands + 1, np.int64)
+    # counts per band from a difference array (two updates per patch, not one per band it meets):
+    # after the first prefix sum cnt[b + 1] is the count of band b, after the second the offsets
+    cnt = np.zeros(n_bands + 2, np.int64)
     for k in range(n):
         if ext[k, 0] <= ext[k, 1]:
-            for bnd in range(ext[k, 0] // band_rows, ext[k, 1] // band_rows + 1):
-                cnt[bnd + 1] += 1
+            cnt[ext[k, 0] // band_rows + 1] += 1
+            cnt[ext[k, 1] // band_rows + 2] -= 1
+    for bnd in range(1, n_bands + 1):
+        cnt[bnd + 1] += cnt[bnd]
     for bnd in range(n_bands):
         cnt[bnd + 1] += cnt[bnd]
     idx = np.empty(cnt[n_bands], np.int32)
@@ -761,7 +777,62 @@ def bin_patches_by_band(ext, n_bands, band_rows):
             for bnd in range(ext[k, 0] // band_rows, ext[k, 1] // band_rows + 1):
                 idx[fill[bnd]] = k
                 fill[bnd] += 1
-    return cnt, idx
+    return cnt[: n_bands + 1], idx
+
+
+@kernel(inline=True, nrt=False)
+def _clamp_rows(ssm, r0, r1):
+    """Clamp the summed percentages of SSM rows ``r0..r1`` to [0, 1] in place (the paper clamps at
+    display; NaN -> 0). Each slot kernel clamps a band's rows once the band is summed: no pass of
+    its own over the map."""
+    W = ssm.shape[1]
+    for i in range(r0, r1 + 1):
+        for j in range(W):
+            v = ssm[i, j]
+            ssm[i, j] = 0.0 if not (v > 0.0) else (1.0 if v > 1.0 else v)
+
+
+ROW_LANES = 16  # rect light, float32 sums: the row pass covers whole vectors of this many texels
+
+
+@kernel(inline=True, nrt=False)
+def _rect_row_pass(recv_depth, recv_mesh, ssm, ramp, i, base, nl, lo, hi, zo, ax, dax, wx, c0, c1, pm, check_mesh):
+    """One SSM row of one micro-patch for :func:`accumulate_soft_shadow_map` with float32 sums:
+    the fragment program (:func:`_occlusion_percentage32`, float32 arithmetic like a GPU's) at the
+    ``nl`` texels ``[base, base + nl)``, which contain the patch's columns ``[base + lo, base + hi)``.
+    Branch-free, so it vectorizes; the caller makes ``nl`` a multiple of :data:`ROW_LANES` (whole
+    vectors, no scalar remainder loop). A texel outside the patch's columns, whose receiver is not
+    behind the patch, or (``check_mesh``) of the patch's own mesh gets k = 0: it adds exactly 0.
+    ``ax - jj dax`` with jj = column - (base + lo) is the x term a0 (``jj`` as float32(ramp) -
+    float32(lo): exact), so every texel of the patch's columns gets the value the per-column program gives.
+    ``ramp``: 0, 1, 2, ... (int32; 8 lanes per compare and conversion, unlike int64: an int64 column
+    index made LLVM convert it to float32 one lane at a time). 2-D subscripts, no row views (a view
+    costs a contended atomic refcount update); unsigned indices: no negative-index wraparound."""
+    ii = np.uint64(i)
+    ub = np.uint64(base)
+    lo32 = np.int32(lo)
+    hi32 = np.int32(hi)
+    lof = np.float32(lo)
+    pm32 = np.int32(pm)
+    not_check = not check_mesh
+    zo32 = np.float32(zo)
+    ax32 = np.float32(ax)
+    dax32 = np.float32(dax)
+    wx32 = np.float32(wx)
+    c032 = np.float32(c0)
+    c132 = np.float32(c1)
+    for jj in range(nl):
+        ju = np.uint64(jj)
+        jx = ub + ju
+        zr = recv_depth[ii, jx]
+        rj = ramp[ju]
+        k = zr / (zr - zo32)
+        # no short-circuit: it vectorizes
+        ok = (zr > zo32) & (not_check | (recv_mesh[ii, jx] != pm32)) & (rj >= lo32) & (rj < hi32)
+        k = k if ok else _F0
+        # float32(rj) - float32(lo) is exact (integers < 2^24): float32 of the column index jj
+        a0 = ax32 - (np.float32(rj) - lof) * dax32
+        ssm[ii, jx] += _occlusion_percentage32(k, a0, a0 + wx32, c032, c132)
 
 
 @kernel(nogil=True, nrt=False)
@@ -783,6 +854,7 @@ def accumulate_soft_shadow_map_slot(
     check_mesh,
     ssm,
     touched,
+    ramp,
     nslot,
 ):
     """Slot ``slot`` of :func:`accumulate_soft_shadow_map` (``run_slots``): bands slot, slot + nslot, ..."""
@@ -810,6 +882,13 @@ def accumulate_soft_shadow_map_slot(
             ax = (x0 - ux0 * zo) / (2.0 * hx)
             wx = (x1 - x0) / (2.0 * hx)
             dax = dxs * zo / (2.0 * hx)
+            # the float32 row pass runs over whole vectors of ROW_LANES texels from ``base``
+            nl = ROW_LANES * ((j1 - j0 + ROW_LANES - 1) // ROW_LANES)
+            if nl <= W:
+                base = min(j0, W - nl)
+            else:
+                base = j0
+                nl = j1 - j0
             for i in range(i0, i1 + 1):
                 uy = t - (i + 0.5) * dys
                 c0 = (y0 - uy * zo) / (2.0 * hy)
@@ -825,40 +904,47 @@ def accumulate_soft_shadow_map_slot(
                             c = occlusion_percentage(zr / (zr - zo), a0, a0 + wx, c0, c1)
                             if c > 0.0:
                                 out[jj] = np.float32(round_half(np.float64(out[jj]) + round_half(c, rtz), rtz))
-                elif check_mesh:
-                    ii = np.uint64(i)
-                    zo32 = np.float32(zo)
-                    ax32 = np.float32(ax)
-                    dax32 = np.float32(dax)
-                    wx32 = np.float32(wx)
-                    c032 = np.float32(c0)
-                    c132 = np.float32(c1)
-                    for jj in range(j1 - j0):
-                        jx = np.uint64(j0 + jj)
-                        zr = recv_depth[ii, jx]
-                        k = zr / (zr - zo32)
-                        k = k if zr > zo32 else _F0
-                        k = k if recv_mesh[ii, jx] != pm else _F0
-                        a0 = ax32 - np.float32(jj) * dax32
-                        ssm[ii, jx] += _occlusion_percentage32(k, a0, a0 + wx32, c032, c132)
+                elif check_mesh:  # one instance per value of check_mesh: the mesh test folds away
+                    _rect_row_pass(
+                        recv_depth,
+                        recv_mesh,
+                        ssm,
+                        ramp,
+                        i,
+                        base,
+                        nl,
+                        j0 - base,
+                        j1 - base,
+                        zo,
+                        ax,
+                        dax,
+                        wx,
+                        c0,
+                        c1,
+                        pm,
+                        True,
+                    )
                 else:
-                    # float32 arithmetic (a GPU fragment program's; 16 lanes per vector); 2-D subscripts,
-                    # no row views (a view costs a contended atomic refcount update); unsigned
-                    # indices: no negative-index wraparound, so the loop vectorizes
-                    ii = np.uint64(i)
-                    zo32 = np.float32(zo)
-                    ax32 = np.float32(ax)
-                    dax32 = np.float32(dax)
-                    wx32 = np.float32(wx)
-                    c032 = np.float32(c0)
-                    c132 = np.float32(c1)
-                    for jj in range(j1 - j0):
-                        jx = np.uint64(j0 + jj)
-                        zr = recv_depth[ii, jx]
-                        k = zr / (zr - zo32)
-                        k = k if zr > zo32 else _F0
-                        a0 = ax32 - np.float32(jj) * dax32
-                        ssm[ii, jx] += _occlusion_percentage32(k, a0, a0 + wx32, c032, c132)
+                    _rect_row_pass(
+                        recv_depth,
+                        recv_mesh,
+                        ssm,
+                        ramp,
+                        i,
+                        base,
+                        nl,
+                        j0 - base,
+                        j1 - base,
+                        zo,
+                        ax,
+                        dax,
+                        wx,
+                        c0,
+                        c1,
+                        pm,
+                        False,
+                    )
+        _clamp_rows(ssm, r0, r1)
         touched[bnd] = cnt
 
 
@@ -883,8 +969,9 @@ def accumulate_soft_shadow_map(
     """Add every micro-patch's occlusion percentage into ``ssm`` (H,W) float32 at the texels of
     its penumbra extent. One thread per band of rows, micro-patches in draw order: race-free and
     with the same per-texel order of additions as GPU blending. ``fp16``: round the running sum to
-    half precision after every addition (scalar loop; ``rtz``: toward zero). Returns the
-    fragment-program invocations per band.
+    half precision after every addition (scalar loop; ``rtz``: toward zero). Each band's sums are
+    then clamped to [0, 1] (:func:`_clamp_rows`). Returns the fragment-program invocations per
+    band.
 
     ``recv_depth``: receiver depths with 0 where there is no receiver. A texel whose receiver is
     not behind the patch (or, with ``check_mesh``, belongs to the patch's own mesh: no
@@ -910,6 +997,7 @@ def accumulate_soft_shadow_map(
         check_mesh,
         ssm,
         touched,
+        np.arange(recv_depth.shape[1], dtype=np.int32),
         nslot,
     )
     return touched
@@ -1315,6 +1403,7 @@ def accumulate_soft_shadow_map_sphere_slot(
             _flush_crossings(
                 F1, f12, Q, rows, cols, vals, bad, UV, m, ssm, l, t, dxs, dys, rho, sx, sy, sz, sh, tx, ty, tz, th
             )
+        _clamp_rows(ssm, r0, r1)
         touched[bnd] = cnt
 
 
@@ -1339,7 +1428,7 @@ def accumulate_soft_shadow_map_sphere(
 ):
     """:func:`accumulate_soft_shadow_map` for a sphere light: the fragment program is
     :func:`occlusion_percentage_disk` (float64 arithmetic; the sum is stored in float32, or
-    rounded to half precision with ``fp16``). Same bands, order and skipping rules. ``frames``:
+    rounded to half precision with ``fp16``). Same bands, order, skipping rules and clamping. ``frames``:
     :func:`disk_frames` of the texels (read with ``fp16`` only), ``frames32``: :func:`disk_frames32`;
     ``svp``: the SSM's view parameters, ``rho``: the light's radius (the crossing pairs' frames are
     recomputed)."""
@@ -1369,16 +1458,6 @@ def accumulate_soft_shadow_map_sphere(
     return touched
 
 
-@kernel(parallel=True)
-def clamp_soft_shadow_map(ssm):
-    """Clamp the summed percentages to [0, 1] in place (the paper clamps at display)."""
-    H, W = ssm.shape
-    for i in prange(H):
-        for j in range(W):
-            v = ssm[i, j]
-            ssm[i, j] = 0.0 if not (v > 0.0) else (1.0 if v > 1.0 else v)
-
-
 # ---- 8. two-pass merge -------------------------------------------------------------------------
 def merge_two_pass(front: np.ndarray, back: np.ndarray) -> np.ndarray:
     """The two soft shadow maps merged by their maximum (Sec. 3.5)."""
@@ -1387,29 +1466,41 @@ def merge_two_pass(front: np.ndarray, back: np.ndarray) -> np.ndarray:
 
 # ---- 9. projection onto the eye view -----------------------------------------------------------
 @kernel(parallel=True)
-def project_soft_shadow_map(pts, idx, tri_id, receiver, svp, ssm):
-    """V per eye point: receivers read the SSM (bilinear) at their projection from the light;
-    V = 1 - occlusion. Outside the SSM, behind the light, or on occluder-only geometry: V = 1.
-    ``pts``, ``idx``: the eye points and their flat pixel indices; ``tri_id``: the eye G-buffer's
-    triangle per pixel (flat, -1 where none); ``receiver``: per triangle, whether it is a receiver.
-    Returns (V per point, the number of receiver points)."""
-    n = pts.shape[0]
-    H, W = ssm.shape
-    out = np.empty(n, np.float32)
-    n_recv = 0
-    for k in prange(n):
-        out[k] = 1.0
-        tri = tri_id[idx[k]]
-        if tri < 0 or not receiver[tri]:
-            continue
-        n_recv += 1
-        sx, sy, z = view_project(svp, pts[k, 0], pts[k, 1], pts[k, 2])
-        if not (z > 0.0) or not (sx >= 0.0 and sx <= W and sy >= 0.0 and sy <= H):
-            continue
-        o = sample_bilinear(ssm, sx, sy)
-        if o > 0.0:
-            out[k] = 1.0 - min(o, 1.0)
-    return out, n_recv
+def project_soft_shadow_map(position, tri_id, receiver, svp, ssm):
+    """V (H,W) float32 of the eye view straight from its G-buffer image (``position`` (H,W,3),
+    ``tri_id`` (H,W), -1 where no surface; ``receiver``: per triangle, whether it is a receiver):
+    receivers read the SSM (bilinear) at their projection from the light; V = 1 - occlusion.
+    Outside the SSM, behind the light, on occluder-only geometry or without a surface: V = 1.
+    Per row, the projections first (one float64 array per coordinate, no branch: LLVM vectorizes
+    it), then the lookups. Returns (V, the number of receiver pixels)."""
+    H, W = tri_id.shape
+    Hs, Ws = ssm.shape
+    out = np.empty((H, W), np.float32)
+    n_row = np.zeros(H, np.int64)
+    for i in prange(H):
+        sc = np.empty((3, W))
+        for j in range(W):
+            sx, sy, z = view_project(
+                svp, np.float64(position[i, j, 0]), np.float64(position[i, j, 1]), np.float64(position[i, j, 2])
+            )
+            sc[0, j] = sx
+            sc[1, j] = sy
+            sc[2, j] = z
+        n = 0
+        for j in range(W):
+            out[i, j] = 1.0
+            tri = tri_id[i, j]
+            if tri < 0 or not receiver[tri]:
+                continue
+            n += 1
+            sx, sy, z = sc[0, j], sc[1, j], sc[2, j]
+            if not (z > 0.0) or not (sx >= 0.0 and sx <= Ws and sy >= 0.0 and sy <= Hs):
+                continue
+            o = sample_bilinear(ssm, sx, sy)
+            if o > 0.0:
+                out[i, j] = 1.0 - min(o, 1.0)
+        n_row[i] = n
+    return out, n_row.sum()
 
 
 # ---- orchestration -----------------------------------------------------------------------------
@@ -1470,17 +1561,18 @@ def compute_soft_shadow_map(
         v = View.frame(scene.light.center, scene.light.normal, (0, 1, 0), (-1, 1, -1, 1), 1e-3, 1.0, ssm_size, ssm_size)
         z = np.zeros((ssm_size, ssm_size), np.float32)
         return SoftShadowMap(v, z, np.full_like(z, np.inf), v, {}, stats)
+    # the mesh ids only serve the no-self-shadowing rule of meshes of role ``both``
+    check_mesh = any(m.role == "both" for m in scene.meshes)
     with timer.phase("receiver_map"):
         ov, sv = compute_map_views(scene, map_size, ssm_size, margin)
-        rdepth, rmesh = compute_receiver_depth_map(scene, sv)
+        rdepth, rmesh = compute_receiver_depth_map(scene, sv, check_mesh)
     with timer.phase("occluder_map"):
         sides = ("front", "back") if two_pass else ("nearest",)
-        omaps = {s: compute_occluder_depth_map(scene, ov, s) for s in sides}
+        omaps = {s: compute_occluder_depth_map(scene, ov, s, check_mesh) for s in sides}
     hx, hy = light_half_extents(scene.light, ov)
     finite = rdepth[np.isfinite(rdepth)]
     rdepth0 = np.where(np.isfinite(rdepth), rdepth, np.float32(0.0)).astype(np.float32)  # 0: no receiver
     z_plane = float(finite.max()) if finite.size else 0.0
-    check_mesh = any(m.role == "both" for m in scene.meshes)
     ovp, svp = ov.params(), sv.params()
     n_bands = (ssm_size + BAND_ROWS - 1) // BAND_ROWS
     passes = {}
@@ -1546,7 +1638,6 @@ def compute_soft_shadow_map(
                     ssm,
                     nslot,
                 )
-            clamp_soft_shadow_map(ssm)
         passes[s] = ssm
         stats[f"micro_patches_{s}"] = int(len(patches))
         stats["micro_patches"] += int(len(patches))
@@ -1614,11 +1705,9 @@ class SoftShadowMapMethod(Method):
     def run(self, ctx, map_size, ssm_size, two_pass, accumulate, margin):
         smap = compute_soft_shadow_map(ctx.scene, map_size, ssm_size, two_pass, accumulate, margin, ctx.timer)
         with ctx.timer.phase("eye_projection"):
-            pts, _, idx = ctx.points()
-            v, n_recv = project_soft_shadow_map(
-                pts, idx, ctx.eye.tri_id.ravel(), ctx.flat.receiver, smap.view.params(), smap.occlusion
+            out, n_recv = project_soft_shadow_map(
+                ctx.eye.position, ctx.eye.tri_id, ctx.flat.receiver, smap.view.params(), smap.occlusion
             )
-            out = ctx.scatter(v, idx)
         stats = dict(smap.stats)
         stats["eye_receiver_pixels"] = int(n_recv)
         return MethodOutput(out, stats)
