@@ -41,6 +41,7 @@ def main() -> int:
     from softshadows import api
     from softshadows.methods import get_method
 
+    ss.tune_malloc()  # a benchmark owns its process: the CLI's allocator setting (softshadows._malloc)
     clock = time.process_time if a.cpu else time.perf_counter
     tmp = tempfile.mkdtemp(prefix="frame_ab_")
     tar = subprocess.run(["git", "archive", a.base, "src/softshadows/methods"], check=True, capture_output=True).stdout
