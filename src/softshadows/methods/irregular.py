@@ -104,24 +104,14 @@ def slice_of(d, sb):
 
 
 @kernel(parallel=True)
-def _sample_keys(pts, vp, gx, gy, rx, ry, slices, sb, near, rec, key, full):
+def _sample_keys(pts, vp, gx, gy, rx, ry, slices, sb, near, rec, key):
     """Per sample: its grid key (bin, cell in bin, slice; -1 behind the view) and its record
     ``rec[k]`` = (image x, image y, distance to the light centre, position): one row, so that the
     counting sort's gather reads one cache line per sample. ``rx[cx] + ry[cy]`` is cell (cx, cy)'s
-    number, bin-major (:func:`cell_numbers`: tables instead of two integer divisions per sample).
-    Unless ``full``, the record and the flags -1 (behind) / 0 are already there (``_extent`` and
-    ``_window_of`` computed them on their passes, the same expressions): only the key is left."""
+    number, bin-major (:func:`cell_numbers`: tables instead of two integer divisions per sample)."""
     n = pts.shape[0]
     l, r, b, t = vp[VP_L], vp[VP_R], vp[VP_B], vp[VP_T]
     for k in prange(n):
-        if not full:
-            if key[k] < 0:
-                continue
-            xx, yy, d = rec[k, 0], rec[k, 1], rec[k, 2]
-            cx = int(min(max(np.floor((xx - l) / (r - l) * gx), 0.0), gx - 1.0))
-            cy = int(min(max(np.floor((t - yy) / (t - b) * gy), 0.0), gy - 1.0))
-            key[k] = (rx[np.uint64(cx)] + ry[np.uint64(cy)]) * slices + slice_of(d, sb)
-            continue
         dx = pts[k, 0] - vp[VP_ORIGIN]
         dy = pts[k, 1] - vp[VP_ORIGIN + 1]
         dz = pts[k, 2] - vp[VP_ORIGIN + 2]
@@ -228,10 +218,9 @@ _CHUNKS = 64
 
 
 @kernel(parallel=True)
-def _extent(pts, c, rec):
+def _extent(pts, c):
     """(lo (3,), hi (3,), d0, d1): the samples' bounding box and their smallest and largest distance
-    to c, by chunks in parallel (min and max are exact: any order gives the same bits). Writes
-    each sample's distance and position into its record ``rec[k, 2:6]`` (``_sample_keys``)."""
+    to c, by chunks in parallel (min and max are exact: any order gives the same bits)."""
     n = pts.shape[0]
     part = np.empty((_CHUNKS, 8))
     for q in prange(_CHUNKS):
@@ -245,7 +234,6 @@ def _extent(pts, c, rec):
             dx, dy, dz = x - c[0], y - c[1], z - c[2]
             d = np.sqrt(dx * dx + dy * dy + dz * dz)
             d0, d1 = min(d0, d), max(d1, d)
-            rec[k, 2], rec[k, 3], rec[k, 4], rec[k, 5] = d, x, y, z
         part[q, 0], part[q, 1], part[q, 2], part[q, 3] = lo0, lo1, lo2, d0
         part[q, 4], part[q, 5], part[q, 6], part[q, 7] = hi0, hi1, hi2, d1
     lo = np.full(3, np.inf)
@@ -262,10 +250,9 @@ def _extent(pts, c, rec):
 
 
 @kernel(parallel=True)
-def _window_of(pts, o, r, u, f, near, rec, key):
+def _window_of(pts, o, r, u, f, near):
     """The image-plane window (x0, x1, y0, y1) and depth range (z0, z1) of the samples in front of
-    the view (o; r, u, f), by chunks in parallel. Writes each sample's image-plane position into
-    its record ``rec[k, :2]`` and ``key[k]`` = 0 in front, -1 behind (``_sample_keys``)."""
+    the view (o; r, u, f), by chunks in parallel."""
     n = pts.shape[0]
     part = np.empty((_CHUNKS, 6))
     for q in prange(_CHUNKS):
@@ -278,9 +265,6 @@ def _window_of(pts, o, r, u, f, near, rec, key):
                 y = (dx * u[0] + dy * u[1] + dz * u[2]) / z
                 x0, x1, y0, y1 = min(x0, x), max(x1, x), min(y0, y), max(y1, y)
                 z0, z1 = min(z0, z), max(z1, z)
-                rec[k, 0], rec[k, 1], key[k] = x, y, 0
-            else:
-                rec[k, 0], rec[k, 1], key[k] = 0.0, 0.0, -1
         part[q, 0], part[q, 1], part[q, 2], part[q, 3], part[q, 4], part[q, 5] = x0, x1, y0, y1, z0, z1
     x0, x1, y0, y1, z0, z1 = np.inf, -np.inf, np.inf, -np.inf, np.inf, -np.inf
     for q in range(_CHUNKS):
@@ -289,23 +273,19 @@ def _window_of(pts, o, r, u, f, near, rec, key):
     return x0, x1, y0, y1, z0, z1
 
 
-def fit_grid_view(light, pts: np.ndarray, grid: int, lo, hi, rec, key) -> tuple[View, bool]:
-    """(view, filled): the light view of the grid, from the light centre (``light_frame``: along the
-    rectangle's normal, toward the samples' box centre for the sphere), its window fitted to the
-    samples in front of it (one pass, no temporary arrays); ``filled`` when that pass also wrote
-    the samples' image-plane positions for this view into ``rec`` and their front flags into
-    ``key`` (``_window_of``; not when the view falls back to ``light_view``)."""
+def fit_grid_view(light, pts: np.ndarray, grid: int, lo, hi) -> View:
+    """The light view of the grid: from the light centre (``light_frame``: along the rectangle's
+    normal, toward the samples' box centre for the sphere), its window fitted to the samples in
+    front of it (one pass, no temporary arrays)."""
     if len(pts) == 0:
-        return light_view(light, np.zeros((1, 3)), grid, grid), False
+        return light_view(light, np.zeros((1, 3)), grid, grid)
     r, u, f = light_frame(light, toward=(lo + hi) / 2)
     near = 1e-6 * max(float(np.linalg.norm(hi - lo)), 1e-12)
-    c = np.asarray(light.center, np.float64)
-    x0, x1, y0, y1, _z0, z1 = _window_of(pts, c, r, u, f, near, rec, key)
+    x0, x1, y0, y1, _z0, z1 = _window_of(pts, light.center, r, u, f, near)
     if not np.isfinite(x0):
-        return light_view(light, pts, grid, grid), False
+        return light_view(light, pts, grid, grid)
     mx, my = 1e-3 * (x1 - x0) + 1e-12, 1e-3 * (y1 - y0) + 1e-12
-    view = View(c.copy(), r, u, f, (x0 - mx, x1 + mx, y0 - my, y1 + my), near, z1 * 1.02, grid, grid)
-    return view, True
+    return View(light.center.copy(), r, u, f, (x0 - mx, x1 + mx, y0 - my, y1 + my), near, z1 * 1.02, grid, grid)
 
 
 def cell_numbers(gx: int, gy: int, B: int, nbx: int) -> tuple[np.ndarray, np.ndarray]:
@@ -320,18 +300,18 @@ def build_sample_grid(light, pts: np.ndarray, grid: int, bins: int, slices: int)
     """Step (a): insert every eye sample into the light-view grid by a counting sort (O(n)) and record
     each screen bin's maximum receiver distance (used by the coarse penumbra step)."""
     n = len(pts)
-    rec = np.empty((n, 6))
-    key = np.empty(n, np.int64)
-    lo, hi, d0, d1 = _extent(pts, np.asarray(light.center, np.float64), rec)
-    view, filled = fit_grid_view(light, pts, grid, lo, hi, rec, key)
+    lo, hi, d0, d1 = _extent(pts, np.asarray(light.center, np.float64))
+    view = fit_grid_view(light, pts, grid, lo, hi)
     vp = view.params()
     nbx = nby = -(-grid // bins)
     dlo = max(d0 * (1 - 1e-9), 1e-12)
     dhi = max(d1 * (1 + 1e-9), dlo * (1 + 1e-9))
+    rec = np.empty((n, 6))
+    key = np.empty(n, np.int64)
     near = view.near
     sb = slice_bounds(dlo, dhi, slices)
     rx, ry = cell_numbers(grid, grid, bins, nbx)
-    _sample_keys(pts, vp, grid, grid, rx, ry, slices, sb, near, rec, key, not filled)
+    _sample_keys(pts, vp, grid, grid, rx, ry, slices, sb, near, rec, key)
     n_keys = nbx * nby * bins * bins * slices
     start, order = counting_sort(key, n_keys)
     m = len(order)
