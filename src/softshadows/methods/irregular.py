@@ -1087,9 +1087,9 @@ def _quad_bins(qd, radius, dmax, corner2, bin_maxd, per_bin, vp, gx, gy, B, nbx,
                     continue
                 rx0, _rx, ry0, ry1 = _bin_box(vp, gx, gy, B, bx0, by)
                 _rx, rx1, _ry0, _ry1 = _bin_box(vp, gx, gy, B, bx1 - 1, by)
-                Rr = quad_half_width(qd, e, radius, dr, box_corner2(rx0, rx1, ry0, ry1))
-                if not (Rr > 0.0):
-                    continue
+                # every bin's R is at most this: R = A r (1/(d - r) - 1/D) (1 + slack) + 1e-12 with A
+                # and D at most the row's, and at most 1e-12 where the middle factor is <= 0
+                Rr = max(quad_half_width(qd, e, radius, dr, box_corner2(rx0, rx1, ry0, ry1)), 1e-12)
                 if np.isfinite(Rr):
                     Rr = Rr * (1.0 + 1e-9) + 1e-12
                     pad = 1e-9 * (abs(rx0) + abs(rx1) + abs(ry0) + abs(ry1)) + 1e-12
