@@ -274,12 +274,19 @@ def test_vectorized_disk_terms_equal_the_scalar_path_bit_for_bit():
         cp = np.ascontiguousarray(pts.T)
         z = np.zeros(3)
         buf = np.zeros((4, 8))
+        sc = np.empty((16, n))
+        sel = np.empty(n, np.int64)
         for j in range(n):
             sample_row(1, center, z, pts, j, rw, j)
         for e in range(ea.shape[0]):
             for j in range(n):
                 scalar[e, j] = sample_edge_term(1, rw, j, z, z, radius, 0.0, 0.0, e, ea, eb, tv_start, tv, buf)
-            disk_edge_terms(cp, n, center, radius, e, ea, eb, tv_start, tv, batch[e])
+            cand = np.arange(n)
+            out = np.empty(n)
+            k = disk_edge_terms(cp, n, center, radius, e, ea, eb, tv_start, tv, sc, sel, cand, out)
+            batch[e] = 0.0  # every term not returned is an exact zero
+            for t in range(k):
+                batch[e, cand[t]] = out[t]
         return scalar, batch
 
     rng = np.random.default_rng(3)

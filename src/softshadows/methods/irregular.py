@@ -68,6 +68,8 @@ class SampleGrid:
     bin_maxd: np.ndarray  # (nbx*nby,) float64 maximum receiver distance per bin (0 when empty)
     dmax: float
     col_box: np.ndarray  # (n_columns, 6) 3D box (min xyz, max xyz) of each cell column's samples
+    nonempty_cells: int = 0  # cells holding samples (a statistic)
+    max_cell: int = 0  # the most samples in one cell
 
     @property
     def n_bins(self) -> int:
@@ -102,10 +104,11 @@ def slice_of(d, sb):
 
 
 @kernel(parallel=True)
-def _sample_keys(pts, vp, gx, gy, B, nbx, slices, sb, near, rec, key):
+def _sample_keys(pts, vp, gx, gy, rx, ry, slices, sb, near, rec, key):
     """Per sample: its grid key (bin, cell in bin, slice; -1 behind the view) and its record
     ``rec[k]`` = (image x, image y, distance to the light centre, position): one row, so that the
-    counting sort's gather reads one cache line per sample."""
+    counting sort's gather reads one cache line per sample. ``rx[cx] + ry[cy]`` is cell (cx, cy)'s
+    number, bin-major (:func:`cell_numbers`: tables instead of two integer divisions per sample)."""
     n = pts.shape[0]
     l, r, b, t = vp[VP_L], vp[VP_R], vp[VP_B], vp[VP_T]
     for k in prange(n):
@@ -131,11 +134,7 @@ def _sample_keys(pts, vp, gx, gy, B, nbx, slices, sb, near, rec, key):
         rec[k, 1] = yy
         cx = int(min(max(np.floor((xx - l) / (r - l) * gx), 0.0), gx - 1.0))
         cy = int(min(max(np.floor((t - yy) / (t - b) * gy), 0.0), gy - 1.0))
-        # cell -> (bin, cell in bin): unsigned division (the cells are >= 0; no floor-division fix-ups)
-        ux, uy, ub = np.uint64(cx), np.uint64(cy), np.uint64(B)
-        bi = np.int64((uy // ub) * np.uint64(nbx) + ux // ub)
-        loc = np.int64((uy % ub) * ub + ux % ub)
-        key[k] = (bi * B * B + loc) * slices + slice_of(d, sb)
+        key[k] = (rx[np.uint64(cx)] + ry[np.uint64(cy)]) * slices + slice_of(d, sb)
 
 
 @kernel
@@ -172,11 +171,21 @@ def _gather_sorted(order, rec, sx, sy, sp, sd):
 
 @kernel(parallel=True)
 def _column_boxes(start, sp, sd, S):
-    """Per cell column: 3D box of its samples and their maximum distance to the light centre."""
+    """Per cell column: 3D box of its samples, their maximum distance to the light centre, and
+    (for the statistics) how many of its cells hold samples and the most samples in one of them."""
     nc = (start.shape[0] - 1) // S
     box = np.empty((nc, 6))
     dmax = np.zeros(nc)
+    occ = np.zeros((nc, 2), np.int64)
     for c in prange(nc):
+        ne = 0
+        mc = 0
+        for s in range(S):
+            k = start[c * S + s + 1] - start[c * S + s]
+            ne += k > 0
+            mc = max(mc, k)
+        occ[c, 0] = ne
+        occ[c, 1] = mc
         m = 0.0
         for j in range(start[c * S], start[c * S + S]):
             m = max(m, sd[j])
@@ -188,7 +197,7 @@ def _column_boxes(start, sp, sd, S):
             for k in range(3):
                 box[c, k] = min(box[c, k], sp[j, k])
                 box[c, 3 + k] = max(box[c, 3 + k], sp[j, k])
-    return box, dmax
+    return box, dmax, occ
 
 
 @kernel
@@ -279,6 +288,14 @@ def fit_grid_view(light, pts: np.ndarray, grid: int, lo, hi) -> View:
     return View(light.center.copy(), r, u, f, (x0 - mx, x1 + mx, y0 - my, y1 + my), near, z1 * 1.02, grid, grid)
 
 
+def cell_numbers(gx: int, gy: int, B: int, nbx: int) -> tuple[np.ndarray, np.ndarray]:
+    """(rx (gx,), ry (gy,)): cell (cx, cy) is number rx[cx] + ry[cy] in bin-major order, i.e.
+    (bin * B * B + cell in bin) with bin = (cy // B) * nbx + cx // B and cell in bin =
+    (cy % B) * B + cx % B (``SampleGrid``)."""
+    cx, cy = np.arange(gx, dtype=np.int64), np.arange(gy, dtype=np.int64)
+    return (cx // B) * (B * B) + cx % B, (cy // B) * (nbx * B * B) + (cy % B) * B
+
+
 def build_sample_grid(light, pts: np.ndarray, grid: int, bins: int, slices: int) -> SampleGrid:
     """Step (a): insert every eye sample into the light-view grid by a counting sort (O(n)) and record
     each screen bin's maximum receiver distance (used by the coarse penumbra step)."""
@@ -293,14 +310,15 @@ def build_sample_grid(light, pts: np.ndarray, grid: int, bins: int, slices: int)
     key = np.empty(n, np.int64)
     near = view.near
     sb = slice_bounds(dlo, dhi, slices)
-    _sample_keys(pts, vp, grid, grid, bins, nbx, slices, sb, near, rec, key)
+    rx, ry = cell_numbers(grid, grid, bins, nbx)
+    _sample_keys(pts, vp, grid, grid, rx, ry, slices, sb, near, rec, key)
     n_keys = nbx * nby * bins * bins * slices
     start, order = counting_sort(key, n_keys)
     m = len(order)
     sx, sy, sd = np.empty(m), np.empty(m), np.empty(m)
     sp = np.empty((m, 3))
     _gather_sorted(order, rec, sx, sy, sp, sd)
-    cbox, cmax = _column_boxes(start, sp, sd, slices)
+    cbox, cmax, occ = _column_boxes(start, sp, sd, slices)
     bmax = cmax.reshape(nbx * nby, bins * bins).max(axis=1)
     return SampleGrid(
         vp,
@@ -322,6 +340,8 @@ def build_sample_grid(light, pts: np.ndarray, grid: int, bins: int, slices: int)
         bmax,
         float(sd.max()) if m else 0.0,
         cbox,
+        int(occ[:, 0].sum()),
+        int(occ[:, 1].max()) if len(occ) else 0,
     )
 
 
@@ -616,7 +636,7 @@ def _umbra_kernel(
                         k2 = (e2 > 0.0) | ((e2 == 0.0) & t2)
                         keep[w, np.uint64(i)] = np.int8(k0) & np.int8(k1) & np.int8(k2)
                     for i in range(j1 - j0):
-                        cand[w, m] = j0 + i
+                        cand[w, np.uint64(m)] = j0 + i  # unsigned: no wrap-around code
                         m += keep[w, i]
             for i in range(m):
                 j = cand[w, i]
@@ -1054,6 +1074,27 @@ def _quad_bins(qd, radius, dmax, corner2, bin_maxd, per_bin, vp, gx, gy, B, nbx,
         Rg = quad_half_width(qd, e, radius, dmax, corner2)
         ux, uy, qcx, qcy, hl0, _hw = quad_axes(qd, e, 0.0)  # once per quad (only R varies per bin)
         for by in range(by0, by1):
+            if per_bin and not (qd[e, 7] > 0.0):
+                # the sphere: skip a row of bins that no bin of it can hit. R grows with the
+                # receiver distance and the stretch, so the row's largest distance and its box's
+                # corner bound every bin's R; the quad with that R (and some slack) against the
+                # row's box fails the separating axes if each bin's does (about 95% of the bins the
+                # bounding range gives miss; this leaves the same list)
+                dr = 0.0
+                for bx in range(bx0, bx1):
+                    dr = max(dr, bin_maxd[by * nbx + bx])
+                if dr <= 0.0:
+                    continue
+                rx0, _rx, ry0, ry1 = _bin_box(vp, gx, gy, B, bx0, by)
+                _rx, rx1, _ry0, _ry1 = _bin_box(vp, gx, gy, B, bx1 - 1, by)
+                # every bin's R is at most this: R = A r (1/(d - r) - 1/D) (1 + slack) + 1e-12 with A
+                # and D at most the row's, and at most 1e-12 where the middle factor is <= 0
+                Rr = max(quad_half_width(qd, e, radius, dr, box_corner2(rx0, rx1, ry0, ry1)), 1e-12)
+                if np.isfinite(Rr):
+                    Rr = Rr * (1.0 + 1e-9) + 1e-12
+                    pad = 1e-9 * (abs(rx0) + abs(rx1) + abs(ry0) + abs(ry1)) + 1e-12
+                    if not axes_overlap_box(ux, uy, qcx, qcy, hl0 + Rr, Rr, rx0 - pad, rx1 + pad, ry0 - pad, ry1 + pad):
+                        continue
             for bx in range(bx0, bx1):
                 bi = by * nbx + bx
                 if bin_maxd[bi] <= 0.0:
@@ -1427,7 +1468,7 @@ def drop_cancelling(cp, m, center, e, ea, eb, tv_start, tv, sel, cand):
     n = 0
     for i in range(m):
         keep = sel[i]
-        sel[n] = i
+        sel[np.uint64(n)] = i
         n += keep
     for t in range(n):
         i = sel[t]  # >= t
@@ -1436,13 +1477,25 @@ def drop_cancelling(cp, m, center, e, ea, eb, tv_start, tv, sel, cand):
     return n
 
 
+#: rows of :func:`disk_edge_terms`' scratch between its passes: w = (c - p) / L, n, L, n.(c - p),
+#: m2, ha, hb, the sign factor, the first exits' flag; then d, w0, w1 (over the first rows)
+_DW, _DN, _DL, _DNC, _DM2, _DHA, _DHB, _DF, _DOK = 0, 3, 6, 7, 8, 9, 10, 11, 12
+_DD, _DW0, _DW1 = 0, 1, 2
+
+
 @kernel(inline=True)
-def disk_edge_terms(cp, m, center, radius, e, ea, eb, tv_start, tv, out):
-    """``sample_edge_term`` for the disk (``shape == 1``) at the m samples whose positions are
-    ``cp[:, :m]`` (copied contiguous when the candidates are compacted), for one edge with one or
-    two counted triangles, into ``out[:m]``: the same arithmetic in the same order (``sample_row``'s
-    c - p, L and w included), every early exit made a select (``ok``), so that the loop runs
-    branch-free on contiguous data and vectorizes. Bit for bit the values of the scalar path."""
+def disk_edge_terms(cp, m, center, radius, e, ea, eb, tv_start, tv, sc, sel, cand, out):
+    """``sample_edge_term`` for the disk (``shape == 1``) at the m samples ``cand[:m]`` whose
+    positions are ``cp[:, :m]`` (copied contiguous when the candidates are compacted), for one edge
+    with one or two counted triangles: the same arithmetic in the same order (``sample_row``'s
+    c - p, L and w included), every early exit made a select, so that the loops run branch-free on
+    contiguous data and vectorize. Bit for bit the values of the scalar path. In three passes
+    through the scratch ``sc`` (rows ``_D*``): the term is one long chain of dependent square roots
+    and divisions, which kept a single loop waiting on their latencies (its body too long for the
+    core to overlap two iterations); the exits and the clipped segment first, then, for the
+    survivors only (compacted, as :func:`rect_edge_terms`: 43% of the sphere's candidates on
+    ``bunny`` exit there), Eq. 3. Returns n: the terms that can be nonzero are ``out[:n]``, at the
+    samples ``cand[:n]`` (compacted in place; every other term is an exact 0)."""
     rr = radius * radius
     ax, ay, az, bx, by, bz = ea[e, 0], ea[e, 1], ea[e, 2], eb[e, 0], eb[e, 1], eb[e, 2]
     k1 = tv_start[e]
@@ -1473,6 +1526,20 @@ def disk_edge_terms(cp, m, center, radius, e, ea, eb, tv_start, tv, out):
         ha = rax * wx + ray * wy + raz * wz
         hb = rbx * wx + rby * wy + rbz * wz
         ok &= ~((ha <= 0.0) & (hb <= 0.0))
+        so = 1.0 if nc > 0.0 else -1.0
+        sc[_DW, i], sc[_DW + 1, i], sc[_DW + 2, i] = wx, wy, wz
+        sc[_DN, i], sc[_DN + 1, i], sc[_DN + 2, i] = nx, ny, nz
+        sc[_DL, i], sc[_DNC, i], sc[_DM2, i], sc[_DHA, i], sc[_DHB, i] = L, nc, m2, ha, hb
+        sc[_DF, i] = -so * wsum
+        sc[_DOK, i] = 1.0 if ok else 0.0
+    for i in range(m):
+        p0, p1, p2 = cp[0, i], cp[1, i], cp[2, i]
+        wx, wy, wz = sc[_DW, i], sc[_DW + 1, i], sc[_DW + 2, i]
+        nx, ny, nz = sc[_DN, i], sc[_DN + 1, i], sc[_DN + 2, i]
+        L, nc, m2, ha, hb = sc[_DL, i], sc[_DNC, i], sc[_DM2, i], sc[_DHA, i], sc[_DHB, i]
+        ok = sc[_DOK, i] != 0.0
+        rax, ray, raz = ax - p0, ay - p1, az - p2
+        rbx, rby, rbz = bx - p0, by - p1, bz - p2
         imr = 1.0 / (math.sqrt(m2) * radius)
         d = abs(nc) * imr
         ok &= ~(d >= 1.0)
@@ -1492,10 +1559,19 @@ def disk_edge_terms(cp, m, center, radius, e, ea, eb, tv_start, tv, out):
         w0 = max(min(sa, sb), -h)
         w1 = min(max(sa, sb), h)
         ok &= w1 > w0
-        vt = segment_area(d, w0, w1)
-        so = 1.0 if nc > 0.0 else -1.0
-        c = -so * wsum * vt
-        out[i] = c if ok else 0.0
+        sc[_DD, i], sc[_DW0, i], sc[_DW1, i] = d, w0, w1
+        sc[_DOK, i] = 1.0 if ok else 0.0
+    n = 0
+    for i in range(m):
+        sel[np.uint64(n)] = i  # unsigned: no wrap-around code
+        n += sc[_DOK, i] != 0.0
+    for t in range(n):
+        i = sel[t]  # >= t: compacted in place
+        cand[t] = cand[i]
+        sc[_DD, t], sc[_DW0, t], sc[_DW1, t], sc[_DF, t] = sc[_DD, i], sc[_DW0, i], sc[_DW1, i], sc[_DF, i]
+    for t in range(n):
+        out[t] = sc[_DF, t] * segment_area(sc[_DD, t], sc[_DW0, t], sc[_DW1, t])
+    return n
 
 
 #: rows of :func:`rect_edge_terms`' scratch: the first half-plane (beyond the edge's line), the two
@@ -1583,7 +1659,7 @@ def rect_edge_terms(cp, m, center, nrm_l, lu, lv, hu, hv, e, ea, eb, tv_start, t
         sc[_RF, i] = f if ok else 0.0
     n = 0
     for i in range(m):
-        sel[n] = i
+        sel[np.uint64(n)] = i
         n += sc[_RF, i] != 0.0
     for t in range(n):
         i = sel[t]
@@ -1841,7 +1917,7 @@ def _penumbra_kernel(
                             kn = abs(sdx * ddy - sdy * ddx) <= ren + k * rhn
                             keep[np.uint64(i)] = np.int8(kx) & np.int8(ky) & np.int8(kn)
                         for i in range(j1 - j0):
-                            cand[m] = j0 + i
+                            cand[np.uint64(m)] = j0 + i  # unsigned: no wrap-around code
                             m += keep[i]
                     elif dr > 0.0:
                         # unsigned indices (no negative-index wrap-around code) and selects:
@@ -1858,7 +1934,7 @@ def _penumbra_kernel(
                             ox, oy = qax + tt * sdx - px, qay + tt * sdy - py
                             keep[np.uint64(i)] = np.int8(rs >= 0.0) & np.int8(ox * ox + oy * oy <= rs * rs)
                         for i in range(j1 - j0):
-                            cand[m] = j0 + i
+                            cand[np.uint64(m)] = j0 + i  # unsigned: no wrap-around code
                             m += keep[i]
                     else:
                         for j in range(j0, j1):
@@ -1873,7 +1949,7 @@ def _penumbra_kernel(
                 if nt_e == 2:  # (both lights: the same first two exits as either terms' loop)
                     m = drop_cancelling(cp, np.int64(m), center, e, ea, eb, tv_start, tv, sel, cand)
                 if shape == 1:
-                    disk_edge_terms(cp, np.int64(m), center, radius, e, ea, eb, tv_start, tv, cval)
+                    m = disk_edge_terms(cp, np.int64(m), center, radius, e, ea, eb, tv_start, tv, rsc, sel, cand, cval)
                 else:
                     m = rect_edge_terms(
                         cp, np.int64(m), center, nrm_l, u, v, hu, hv, e, ea, eb, tv_start, tv, rsc, sel, cand, cval
@@ -2127,15 +2203,13 @@ def irregular_visibility(
         bl = bin_penumbra_quads(g, qd, bound_r, per_bin)
         pen, st_p = accumulate_penumbrae(g, edges, qd, bl, light, per_bin, wedge)
         v = compose_visibility(g, umbra, pen, len(pts))
-    cells = np.diff(g.start)
-    ne = cells[cells > 0]
     stats.update(
         samples=int(len(pts)),
         grid_samples=int(len(g.order)),
         grid=f"{g.gx}x{g.gy}x{g.slices}",
-        nonempty_cells=int(len(ne)),
-        mean_samples_per_cell=float(ne.mean()) if len(ne) else 0.0,
-        max_samples_per_cell=int(ne.max()) if len(ne) else 0,
+        nonempty_cells=g.nonempty_cells,
+        mean_samples_per_cell=len(g.order) / g.nonempty_cells if g.nonempty_cells else 0.0,
+        max_samples_per_cell=g.max_cell,
         quads=int(len(edges)),
         quad_bin_pairs=int(len(bl[1])),
         quad_fragments=st_p["fragments"],
@@ -2228,7 +2302,11 @@ class Irregular(Method):
                 pts, bound = error_bound_samples(ctx.flat, ctx.eye, idx, nrm, eps)
             # the samples are in place: no further offset
             offset = 0.0
-            extra = {"eps": eps, "origin_bound_median": float(np.median(bound)) if len(bound) else 0.0}
+            # (bound is not used again: the median may partition it in place)
+            extra = {
+                "eps": eps,
+                "origin_bound_median": float(np.median(bound, overwrite_input=True)) if len(bound) else 0.0,
+            }
         v, stats = irregular_visibility(
             ctx.scene,
             pts,
