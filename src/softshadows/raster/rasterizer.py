@@ -1130,6 +1130,50 @@ def _depth_test_row(zb, tb, t, span, cols, pl, zrow, zr, ortho):
 
 
 @kernel(inline=True)
+def _piece_depth_floor(ortho, pl, prect, vw, zlo, zhi):
+    """A lower bound of every depth the depth pass computes for the piece of plane ``pl`` at the
+    pixel centers of ``prect`` (after its clamp to [zlo, zhi]), for the coarse depth test. In a
+    perspective view the depth is pd / den, den affine in the window point, so over the rectangle
+    den lies between its values at the corners; those are widened by a bound of the rounding of
+    every computed den (16 u times the magnitude of its terms) and the quotient by 8 u. Where den may
+    change sign (or anything is not finite), or in an orthographic view, the bound is the clamp's zlo."""
+    _W, _H, _o, _far, wl, wt, wsx, wsy = vw
+    i0, i1, j0, j1 = prect
+    pnx, pny, pnz, pd = pl
+    lo = zlo
+    if not ortho:
+        xa = wl + (j0 + 0.5) * wsx
+        xb = wl + (j1 + 0.5) * wsx
+        ya = wt - (i0 + 0.5) * wsy
+        yb = wt - (i1 + 0.5) * wsy
+        ra = pny * ya + pnz
+        rb = pny * yb + pnz
+        d0 = pnx * xa + ra
+        d1 = pnx * xb + ra
+        d2 = pnx * xa + rb
+        d3 = pnx * xb + rb
+        dmin = min(min(d0, d1), min(d2, d3))
+        dmax = max(max(d0, d1), max(d2, d3))
+        m = 16.0 * _U * (abs(pnx) * max(abs(xa), abs(xb)) + abs(pny) * max(abs(ya), abs(yb)) + abs(pnz))
+        if pd > 0.0 and dmin - m > 0.0:
+            lo = max(lo, pd / (dmax + m) * (1.0 - 8.0 * _U))
+        elif pd < 0.0 and dmax + m < 0.0:
+            lo = max(lo, pd / (dmin - m) * (1.0 - 8.0 * _U))
+    return min(lo, zhi)
+
+
+@kernel(inline=True)
+def _tile_zmax(zb):
+    """The largest depth of the tile's pixels (+inf while one is empty)."""
+    m = -np.inf
+    for li in range(zb.shape[0]):
+        for k in range(zb.shape[1]):
+            z = zb[li, k]
+            m = z if z > m else m
+    return m
+
+
+@kernel(inline=True)
 def _depth_pass(vw, near, tile, rect, start, bins, box, edges, zinfo, planes, zb, tb, SP, sh, tri, face):
     """The nearest depth ``zb`` and triangle ``tb`` (-1: none) of every pixel of the tile ``rect`` =
     (y0, y1, x0, x1), from the pieces binned to it (the dense modes: depth and G-buffer). ``tb``
@@ -1142,6 +1186,8 @@ def _depth_pass(vw, near, tile, rect, start, bins, box, edges, zinfo, planes, zb
         for k in range(zb.shape[1]):
             zb[li, k] = np.inf
             tb[li, k] = -1
+    tmax = np.inf
+    since = 0
     for bi in range(start[tile], start[tile + 1]):
         ct = bins[bi]
         t = ct >> sh
@@ -1153,6 +1199,14 @@ def _depth_pass(vw, near, tile, rect, start, bins, box, edges, zinfo, planes, zb
         zlo, zhi = _depth_bounds(zinfo, ct, ortho, near)
         zr = (zlo, zhi, far)
         pl = _plane(planes, t)
+        # coarse depth test: no fragment of the piece is strictly nearer than the tile's farthest
+        # pixel (tmax: its largest depth when last computed; depths only decrease, so it bounds it)
+        if _piece_depth_floor(ortho, pl, prect, vw, zlo, zhi) >= tmax:
+            continue
+        since += 1
+        if since == 8:
+            tmax = _tile_zmax(zb)
+            since = 0
         e0, e1, e2, scan, nrows = _piece_rows(edges, zinfo, ct, prect, y0, x0, W, H, SP, False)
         for rr in range(nrows):
             li = SP[_SP_RW, rr]
