@@ -833,13 +833,14 @@ def test_tile_row_bits_words_equal_bytes():
             np.testing.assert_array_equal(anyt, (ref != 0).any(axis=1))
 
 
-def test_coarse_depth_test_bound_is_below_every_fragment_depth():
+@pytest.mark.parametrize("ortho", [True, False])
+def test_coarse_depth_test_bound_is_below_every_fragment_depth(ortho):
     """The depth pass skips a piece whose depth floor (``_piece_depth_floor``) is at or beyond the
     tile's farthest stored depth: exact only if that floor is at or below every depth the pass
     computes for the piece (after the clamp) at the pixel centers of its rectangle in the tile.
     Checked with the pass's own operations (numpy float64, no fused multiply-add) on random
-    perspective triangles, many of them nearly edge-on or crossing the near plane; and the floor
-    must be useful (above the clamp's zlo) for most pieces, or the test would skip nothing."""
+    triangles, many of them steep (nearly edge-on) or crossing the near plane; the floor must be
+    attained (equal to the smallest depth) for most pieces, or the test would skip little."""
     from softshadows._jit import py_callable
     from softshadows.raster import rasterizer as R
 
@@ -855,15 +856,19 @@ def test_coarse_depth_test_bound_is_below_every_fragment_depth():
     z[: n // 4] = rng.uniform(0.6, 0.65, size=(n // 4, 1)) * np.array([1.0, 1.0, 30.0])  # steep planes
     z[n // 4 : n // 3, 0] = 0.2  # one corner behind near: clipped pieces
     xy, z = xy.reshape(-1, 2), z.reshape(-1)
-    V = np.stack([(1 - 2 * xy[:, 0] / W) * z, (1 - 2 * xy[:, 1] / H) * z, z], 1)
-    view = View.frame([0, 0, 0], [0, 0, 1], [0, 1, 0], (-1, 1, -1, 1), 0.5, 50.0, W, H)
+    if ortho:
+        V = np.stack([-xy[:, 0], H - xy[:, 1], z], 1)
+        view = View.frame([0, 0, 0], [0, 0, 1], [0, 1, 0], (0, W, 0, H), 0.5, 50.0, W, H, ortho=True)
+    else:
+        V = np.stack([(1 - 2 * xy[:, 0] / W) * z, (1 - 2 * xy[:, 1] / H) * z, z], 1)
+        view = View.frame([0, 0, 0], [0, 0, 1], [0, 1, 0], (-1, 1, -1, 1), 0.5, 50.0, W, H)
     F = np.arange(len(V), dtype=np.int64).reshape(-1, 3)
     vp, W_, H_, verts, fcs, code, near = R._prepare(view, V, F, "none")
     fe = R._front_end(vp, W_, H_, verts, fcs, code, near)
     vw = view_window(vp)
-    _W, _H, ortho, _far, wl, wt, wsx, wsy = vw
-    assert not ortho
-    checked = useful = 0
+    _W, _H, vortho, _far, wl, wt, wsx, wsy = vw
+    assert vortho == ortho
+    checked = exact = 0
     for tile in range(fe.ntx * fe.nty):
         rect = tile_rect(tile // fe.ntx, tile % fe.ntx, fe.tile, W_, H_)
         for ct in fe.bins[fe.start[tile] : fe.start[tile + 1]]:
@@ -876,13 +881,13 @@ def test_coarse_depth_test_bound_is_below_every_fragment_depth():
             pnx, pny, pnz, pd = pl
             i, j = np.mgrid[i0 : i1 + 1, j0 : j1 + 1]
             xw = wl + (j + 0.5) * wsx
-            zrow = pny * (wt - (i + 0.5) * wsy) + pnz
-            with np.errstate(divide="ignore", invalid="ignore"):
-                zf = pd / (pnx * xw + zrow)
+            yw = wt - (i + 0.5) * wsy
+            with np.errstate(divide="ignore", invalid="ignore"):  # _row_depth, then _frag_depth
+                zf = (pd - pny * yw - pnx * xw) / pnz if ortho else pd / (pnx * xw + (pny * yw + pnz))
             zf = np.where(zf >= zlo, zf, zlo)
             zf = np.where(zf > zhi, zhi, zf)
             assert floor <= zf.min(), (ct, floor, zf.min())
             checked += 1
-            useful += floor > zlo
+            exact += floor == zf.min()
     assert checked > 300
-    assert useful > 0.5 * checked
+    assert exact > 0.9 * checked

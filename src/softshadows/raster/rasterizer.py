@@ -1132,34 +1132,10 @@ def _depth_test_row(zb, tb, t, span, cols, pl, zrow, zr, ortho):
 @kernel(inline=True)
 def _piece_depth_floor(ortho, pl, prect, vw, zlo, zhi):
     """A lower bound of every depth the depth pass computes for the piece of plane ``pl`` at the
-    pixel centers of ``prect`` (after its clamp to [zlo, zhi]), for the coarse depth test. In a
-    perspective view the depth is pd / den, den affine in the window point, so over the rectangle
-    den lies between its values at the corners; those are widened by a bound of the rounding of
-    every computed den (16 u times the magnitude of its terms) and the quotient by 8 u. Where den may
-    change sign (or anything is not finite), or in an orthographic view, the bound is the clamp's zlo."""
-    _W, _H, _o, _far, wl, wt, wsx, wsy = vw
-    i0, i1, j0, j1 = prect
-    pnx, pny, pnz, pd = pl
-    lo = zlo
-    if not ortho:
-        xa = wl + (j0 + 0.5) * wsx
-        xb = wl + (j1 + 0.5) * wsx
-        ya = wt - (i0 + 0.5) * wsy
-        yb = wt - (i1 + 0.5) * wsy
-        ra = pny * ya + pnz
-        rb = pny * yb + pnz
-        d0 = pnx * xa + ra
-        d1 = pnx * xb + ra
-        d2 = pnx * xa + rb
-        d3 = pnx * xb + rb
-        dmin = min(min(d0, d1), min(d2, d3))
-        dmax = max(max(d0, d1), max(d2, d3))
-        m = 16.0 * _U * (abs(pnx) * max(abs(xa), abs(xb)) + abs(pny) * max(abs(ya), abs(yb)) + abs(pnz))
-        if pd > 0.0 and dmin - m > 0.0:
-            lo = max(lo, pd / (dmax + m) * (1.0 - 8.0 * _U))
-        elif pd < 0.0 and dmax + m < 0.0:
-            lo = max(lo, pd / (dmin - m) * (1.0 - 8.0 * _U))
-    return min(lo, zhi)
+    pixel centers of ``prect``, after its clamp to [zlo, zhi] (for the coarse depth test): the
+    plane's exact minimum over those centers (:func:`_rect_min_depth`, -inf where it has none),
+    clamped the same way."""
+    return min(max(_rect_min_depth(ortho, pl, vw, prect), zlo), zhi)
 
 
 @kernel(inline=True)
