@@ -184,6 +184,20 @@ def _random_screen_triangles(rng, n, W, H, kind):
     return xy.reshape(-1, 2)
 
 
+def _screen_scene(xy, z, W, H, ortho, ortho_near, far):
+    """Triangles given by screen positions ``xy`` (pixels, y down) and view depths ``z``, as world
+    vertices seen by a W x H view along +z (near ``ortho_near`` when orthographic, 0.5 in
+    perspective): (V, view, F), every three vertices a face. Orthographic: window (0, W, 0, H), right
+    = -x, so x = -sx, y = H - sy; perspective: window (-1, 1, -1, 1) at depth 1."""
+    if ortho:
+        V = np.stack([-xy[:, 0], H - xy[:, 1], z], 1)
+        view = View.frame([0, 0, 0], [0, 0, 1], [0, 1, 0], (0, W, 0, H), ortho_near, far, W, H, ortho=True)
+    else:
+        V = np.stack([(1 - 2 * xy[:, 0] / W) * z, (1 - 2 * xy[:, 1] / H) * z, z], 1)
+        view = View.frame([0, 0, 0], [0, 0, 1], [0, 1, 0], (-1, 1, -1, 1), 0.5, far, W, H)
+    return V, view, np.arange(len(V), dtype=np.int64).reshape(-1, 3)
+
+
 @pytest.mark.parametrize("kind", ["grid", "axis", "sliver", "huge", "random"])
 @pytest.mark.parametrize("ortho", [True, False])
 def test_span_coverage_equals_pixel_edge_tests(kind, ortho):
@@ -194,14 +208,7 @@ def test_span_coverage_equals_pixel_edge_tests(kind, ortho):
     n = 300
     xy = _random_screen_triangles(rng, n, W, H, kind)
     z = rng.uniform(1.0, 3.0, size=len(xy))
-    if ortho:
-        # view along +z with up +y: right = -x; window (0, W, 0, H): x = -sx, y = H - sy
-        V = np.stack([-xy[:, 0], H - xy[:, 1], z], 1)
-        view = View.frame([0, 0, 0], [0, 0, 1], [0, 1, 0], (0, W, 0, H), 0.0, 10.0, W, H, ortho=True)
-    else:
-        V = np.stack([(1 - 2 * xy[:, 0] / W) * z, (1 - 2 * xy[:, 1] / H) * z, z], 1)
-        view = View.frame([0, 0, 0], [0, 0, 1], [0, 1, 0], (-1, 1, -1, 1), 0.5, 10.0, W, H)
-    F = np.arange(len(xy), dtype=np.int64).reshape(-1, 3)
+    V, view, F = _screen_scene(xy, z, W, H, ortho, 0.0, 10.0)
     fr = rasterize_fragments(view, V, F)
     got = sorted(zip(fr.tri.tolist(), fr.pixel.tolist()))
     assert len(got) > 0
@@ -681,13 +688,7 @@ def test_small_triangle_rejection_agrees_with_full_setup(ortho):
     xy[: n // 10] = np.round(xy[: n // 10] * 2) / 2
     z = rng.uniform(0.2, 3.0, size=(n, 3))
     xy, z = xy.reshape(-1, 2), z.reshape(-1)
-    if ortho:
-        V = np.stack([-xy[:, 0], H - xy[:, 1], z], 1)
-        view = View.frame([0, 0, 0], [0, 0, 1], [0, 1, 0], (0, W, 0, H), 0.5, 2.5, W, H, ortho=True)
-    else:
-        V = np.stack([(1 - 2 * xy[:, 0] / W) * z, (1 - 2 * xy[:, 1] / H) * z, z], 1)
-        view = View.frame([0, 0, 0], [0, 0, 1], [0, 1, 0], (-1, 1, -1, 1), 0.5, 2.5, W, H)
-    F = np.arange(len(V), dtype=np.int64).reshape(-1, 3)
+    V, view, F = _screen_scene(xy, z, W, H, ortho, 0.5, 2.5)
     for cull in ("none", "back"):
         vp, W_, H_, verts, fcs, code, near = R._prepare(view, V, F, cull)
         fe = R._front_end(vp, W_, H_, verts, fcs, code, near)
@@ -734,13 +735,7 @@ def test_tiny_path_is_bit_identical_to_the_tile_pass(ortho, monkeypatch):
     xy = np.concatenate([xy[: n // 4], quads, xy[n // 4 :]])  # the quads are faces n/4 and n/4 + 1
     z = np.concatenate([z[: n // 4], np.full((2, 3), 2.0), z[n // 4 :]])
     xy, z = xy.reshape(-1, 2), z.reshape(-1)
-    if ortho:
-        V = np.stack([-xy[:, 0], H - xy[:, 1], z], 1)
-        view = View.frame([0, 0, 0], [0, 0, 1], [0, 1, 0], (0, W, 0, H), 0.5, 2.5, W, H, ortho=True)
-    else:
-        V = np.stack([(1 - 2 * xy[:, 0] / W) * z, (1 - 2 * xy[:, 1] / H) * z, z], 1)
-        view = View.frame([0, 0, 0], [0, 0, 1], [0, 1, 0], (-1, 1, -1, 1), 0.5, 2.5, W, H)
-    F = np.arange(len(V), dtype=np.int64).reshape(-1, 3)
+    V, view, F = _screen_scene(xy, z, W, H, ortho, 0.5, 2.5)
     for cull in ("none", "back"):
         vp, W_, H_, verts, fcs, code, near = R._prepare(view, V, F, cull)
         _fe, tiny = R._front_end(vp, W_, H_, verts, fcs, code, near, tiny=True)
@@ -780,13 +775,7 @@ def test_min_blend_texel_lists_equal_row_passes(kind, ortho, monkeypatch):
     W, H, n = 83, 61, 300
     xy = _random_screen_triangles(rng, n, W, H, kind)
     z = rng.uniform(0.3, 3.0, size=len(xy))  # near = 0.5: some faces cross it (two pieces)
-    if ortho:
-        V = np.stack([-xy[:, 0], H - xy[:, 1], z], 1)
-        view = View.frame([0, 0, 0], [0, 0, 1], [0, 1, 0], (0, W, 0, H), 0.0, 10.0, W, H, ortho=True)
-    else:
-        V = np.stack([(1 - 2 * xy[:, 0] / W) * z, (1 - 2 * xy[:, 1] / H) * z, z], 1)
-        view = View.frame([0, 0, 0], [0, 0, 1], [0, 1, 0], (-1, 1, -1, 1), 0.5, 10.0, W, H)
-    F = np.arange(3 * n, dtype=np.int64).reshape(n, 3)
+    V, view, F = _screen_scene(xy, z, W, H, ortho, 0.0, 10.0)
     za = rng.uniform(0.3, 2.5, size=(n, 3))
     za[: n // 2] = za[: n // 2, :1]  # constant attributes (cones): the coarse value test applies
     zp = rng.uniform(0.5, 3.5, size=(H, W)).astype(np.float32)
@@ -856,13 +845,7 @@ def test_coarse_depth_test_bound_is_below_every_fragment_depth(ortho):
     z[: n // 4] = rng.uniform(0.6, 0.65, size=(n // 4, 1)) * np.array([1.0, 1.0, 30.0])  # steep planes
     z[n // 4 : n // 3, 0] = 0.2  # one corner behind near: clipped pieces
     xy, z = xy.reshape(-1, 2), z.reshape(-1)
-    if ortho:
-        V = np.stack([-xy[:, 0], H - xy[:, 1], z], 1)
-        view = View.frame([0, 0, 0], [0, 0, 1], [0, 1, 0], (0, W, 0, H), 0.5, 50.0, W, H, ortho=True)
-    else:
-        V = np.stack([(1 - 2 * xy[:, 0] / W) * z, (1 - 2 * xy[:, 1] / H) * z, z], 1)
-        view = View.frame([0, 0, 0], [0, 0, 1], [0, 1, 0], (-1, 1, -1, 1), 0.5, 50.0, W, H)
-    F = np.arange(len(V), dtype=np.int64).reshape(-1, 3)
+    V, view, F = _screen_scene(xy, z, W, H, ortho, 0.5, 50.0)
     vp, W_, H_, verts, fcs, code, near = R._prepare(view, V, F, "none")
     fe = R._front_end(vp, W_, H_, verts, fcs, code, near)
     vw = view_window(vp)

@@ -31,7 +31,7 @@ from ..raster import View, rasterize_depth, rasterize_min_blend
 from ..raster.programs import PROGRAM_PENUMBRA, penumbra_intensity, smoothstep_bernstein  # noqa: F401
 from ..scene.types import light_key
 from .base import Method, MethodOutput, Param, register
-from .shadowmap import biased_light_depth, fit_light_view
+from .shadowmap import biased_light_row, fit_light_view
 
 #: most fragments rasterized at once (memory bound: 24 bytes each)
 #: border of the penumbra map, at most this fraction of ``map_size`` per side
@@ -1032,27 +1032,14 @@ def _eye_lookup_slot(
     grid, shifted by the border; ``LOOKUP_NONE``: no surface, no valid lookup or outside the map,
     V = 1), in ``code`` (H,W) int32. With ``mark``, the texels read are set in ``needed`` (PH, PW).
 
-    Per row, as ``shadowmap.shadow_lookup``: the row's positions and normals copied to one array
-    per coordinate, their projections and biased depths in a loop without branches (it
-    vectorizes), then the tests. The normal's side does not matter (the bias uses |n.l|). A slot
+    Per row, as ``shadowmap.shadow_lookup``: the projections and biased depths of
+    ``shadowmap.biased_light_row`` (vectorized), then the tests. The normal's side does not matter (the bias uses |n.l|). A slot
     kernel run by ``run_slots`` (rows p, p + nslot, ...; ``sc`` (nslot, 10, W) its scratch): a
     ``prange`` body compiled in about twice the time."""
     Hm, Wm = d_occ.shape
     H, W = mask.shape
-    for i in range(slot, H, nslot):  # x, y, z, nx, ny, nz, then sx, sy, zt, ok
-        for j in range(W):
-            for k in range(3):
-                sc[slot, k, j] = position[i, j, k]
-                sc[slot, 3 + k, j] = normal[i, j, k]
-        for j in range(W):
-            ok, sx, sy, zt = biased_light_depth(
-                vp, sc[slot, 0, j], sc[slot, 1, j], sc[slot, 2, j], sc[slot, 3, j], sc[slot, 4, j], sc[slot, 5, j],
-                bias, slope_bias,
-            )  # fmt: skip
-            sc[slot, 6, j] = sx
-            sc[slot, 7, j] = sy
-            sc[slot, 8, j] = zt
-            sc[slot, 9, j] = 1.0 if ok & mask[i, j] else 0.0
+    for i in range(slot, H, nslot):
+        biased_light_row(vp, position, normal, mask, i, bias, slope_bias, sc[slot])
         for j in range(W):
             c = LOOKUP_NONE
             fx = math.floor(sc[slot, 6, j])

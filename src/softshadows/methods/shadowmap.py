@@ -110,6 +110,30 @@ def biased_light_depth(vp, px, py, pz, nx, ny, nz, bias, slope_bias):
     return True, sx, sy, z - off
 
 
+@kernel(inline=True)
+def biased_light_row(vp, position, normal, mask, i, bias, slope_bias, sc):
+    """:func:`biased_light_depth` of every pixel of row ``i`` of an image of points (``position``,
+    ``normal``: (H,W,3), ``mask``: (H,W) True where a surface is), into ``sc`` (10, W): rows 0-5 the
+    row's positions and normals copied to one float64 array per coordinate (the G-buffer
+    interleaves them: as rows of 3 the next loop ran 1.7x slower), then sx, sy, zt (NaN where the
+    lookup is not ``ok`` or there is no surface: no stored depth is below it) and 1.0 / 0.0 for
+    ``ok`` and a surface. The second loop has no branch and no gather: LLVM vectorizes it."""
+    W = mask.shape[1]
+    for j in range(W):
+        for k in range(3):
+            sc[k, j] = position[i, j, k]
+            sc[3 + k, j] = normal[i, j, k]
+    for j in range(W):
+        ok, sx, sy, zt = biased_light_depth(
+            vp, sc[0, j], sc[1, j], sc[2, j], sc[3, j], sc[4, j], sc[5, j], bias, slope_bias
+        )
+        hit = ok & mask[i, j]
+        sc[6, j] = sx
+        sc[7, j] = sy
+        sc[8, j] = zt if hit else np.nan
+        sc[9, j] = 1.0 if hit else 0.0
+
+
 @kernel(parallel=True)
 def shadow_lookup(vp, depth_map, position, normal, mask, bias, slope_bias, pcf_radius):
     """V per surface pixel of an image of points (``position``, ``normal``: (H,W,3), ``mask``:
@@ -117,27 +141,15 @@ def shadow_lookup(vp, depth_map, position, normal, mask, bias, slope_bias, pcf_r
     lit tests over the (2r+1)^2 texels around the point (percentage-closer filtering). Pixels
     without a surface get 1. The normal's sign does not matter (the bias uses |n.l|).
 
-    Per row, three loops: the row's positions and normals copied to one float64 array per
-    coordinate (the G-buffer interleaves them: as rows of 3 the next loop ran 1.7x slower), their
-    projections and biased depths (no branch, no gather: LLVM vectorizes it), then the depth tests
-    (a point that is not ``ok`` or has no surface gets ``zt`` = NaN, which no stored depth is
-    below: lit, as before)."""
+    Per row, the projections and biased depths of :func:`biased_light_row`, then the depth tests
+    (a point that is not ``ok`` or has no surface has ``zt`` = NaN, which no stored depth is below:
+    lit)."""
     Hm, Wm = depth_map.shape
     H, W = mask.shape
     out = np.empty((H, W), np.float32)
     for i in prange(H):
-        sc = np.empty((9, W))  # x, y, z, nx, ny, nz, then sx, sy, zt
-        for j in range(W):
-            for k in range(3):
-                sc[k, j] = position[i, j, k]
-                sc[3 + k, j] = normal[i, j, k]
-        for j in range(W):
-            ok, sx, sy, zt = biased_light_depth(
-                vp, sc[0, j], sc[1, j], sc[2, j], sc[3, j], sc[4, j], sc[5, j], bias, slope_bias
-            )
-            sc[6, j] = sx
-            sc[7, j] = sy
-            sc[8, j] = zt if ok & mask[i, j] else np.nan
+        sc = np.empty((10, W))  # x, y, z, nx, ny, nz, then sx, sy, zt, ok
+        biased_light_row(vp, position, normal, mask, i, bias, slope_bias, sc)
         if pcf_radius == 0:
             for j in range(W):
                 ci = int(np.floor(sc[6, j]))

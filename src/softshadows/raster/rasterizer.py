@@ -1176,8 +1176,9 @@ def _depth_pass(vw, near, tile, rect, start, bins, box, edges, zinfo, planes, zb
         zr = (zlo, zhi, far)
         pl = _plane(planes, t)
         # coarse depth test: no fragment of the piece is strictly nearer than the tile's farthest
-        # pixel (tmax: its largest depth when last computed; depths only decrease, so it bounds it)
-        if _piece_depth_floor(ortho, pl, prect, vw, zlo, zhi) >= tmax:
+        # pixel (tmax: its largest depth when last computed; depths only decrease, so it bounds it;
+        # +inf while a pixel is empty: no floor is computed then)
+        if tmax < np.inf and _piece_depth_floor(ortho, pl, prect, vw, zlo, zhi) >= tmax:
             continue
         since += 1
         if since == 8:
