@@ -42,6 +42,7 @@ Atty et al. 2006) against the parameter:
 from __future__ import annotations
 
 import sys
+import time
 
 import numpy as np
 
@@ -49,7 +50,7 @@ from .api import check_seed, check_size
 from .compare import REFERENCE, jsonable, load, parse_method_sets, parse_size, resolve_methods
 from .errors import SoftShadowsError
 from .io import IMAGE_EXTS, JSON_EXTS, check_outputs, write_json
-from .peer import PEERS
+from .peer import AGREEMENT_TOL, PEERS, agreement, make_peer, peer_params
 
 SHARED_PHASES = ("eye_gbuffer", "shading")
 SWEEP_KINDS = ("light-size", "occluder-height", "resolution", "map-size", "triangles")
@@ -441,10 +442,6 @@ def _time_peer(peer: dict, method: str, sc, w, h, params: dict, v_ours, repeats)
     warm-up frame: shader compile) and the agreement of its V with ours (``peer.AGREEMENT_TOL``);
     NaN (and ``peer["reason"]``) where no GL context can be made or the GL frame does not implement
     the parameters."""
-    import time
-
-    from .peer import AGREEMENT_TOL, agreement, make_peer, peer_params
-
     gl, why = None, peer["reason"]
     if why is None:
         try:
@@ -478,8 +475,6 @@ def triangles_table(data: dict) -> str:
     """The table of issue 15 from an icosphere triangles sweep: per level the triangle count, each
     method's median ms (x hard's), ground truth's and the llvmpipe peers' frames (x our frame of the
     same method), or n/a and why."""
-    from .peer import AGREEMENT_TOL
-
     ms = data["methods"]
     hard = ms["hard"]["time_ms"]
     peers = data.get("peers") or {}
