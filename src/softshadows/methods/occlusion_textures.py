@@ -632,7 +632,12 @@ def eye_pass(
     arrays, -1 for an empty slice (skipped: its occlusion is 0). ``bbox[slot]`` = (x0, x1, y0, y1)
     texel bounds of the slice's occupied texels: a kernel whose filter support (the rectangle,
     widened by what the N-Buffer boxes or the mipmap probes read beyond it) misses them has
-    occlusion 0 and is skipped, so the result is unchanged. Run by ``run_slots``, one slot per thread."""
+    occlusion 0 and is skipped, so the result is unchanged. Run by ``run_slots``, one slot per thread.
+
+    Points go in blocks of 64 (consecutive eye pixels: neighbouring kernels), dealt round-robin to
+    the slots, and each block visits the slices in the outer loop: one slice's texels stay in cache
+    over the block and the culling branch follows the image's coherence. Every point still
+    combines its slices in order (the same products, the same V)."""
     n = z_planes.shape[0] - 1
     thick = (z_planes[n] - z_planes[0]) / n
     # per slice plane, the constants of kernel_rect's map to texels (no division per point)
@@ -644,37 +649,63 @@ def eye_pass(
         ky[k] = sp[20] / ((sp[18] - sp[17]) * D)
     ox = sp[15] * sp[19] / (sp[16] - sp[15])
     oy = sp[18] * sp[20] / (sp[18] - sp[17])
-    nblock = (pts.shape[0] + 63) // 64  # blocks of 64 dealt round-robin to one slot per thread
+    # per point of the block: light-frame position, 1 / pz, running combination, slices left
+    bx = np.empty(64)
+    by = np.empty(64)
+    bz = np.empty(64)
+    bi = np.empty(64)
+    bacc = np.empty(64)
+    live = np.empty(64, np.bool_)
+    acc0 = 1.0 if combine == 0 else 0.0
+    npts = pts.shape[0]
+    nblock = (npts + 63) // 64  # blocks of 64 dealt round-robin to one slot per thread
     for blk in range(tslot, nblock, nslot):
-        for i in range(blk * 64, min(pts.shape[0], blk * 64 + 64)):
+        i0 = blk * 64
+        m = min(npts, i0 + 64) - i0
+        zmax = 0.0
+        for c in range(m):
+            i = i0 + c
             qx = pts[i, 0] - sp[0]
             qy = pts[i, 1] - sp[1]
             qz = pts[i, 2] - sp[2]
             px = qx * sp[3] + qy * sp[4] + qz * sp[5]
             py = qx * sp[6] + qy * sp[7] + qz * sp[8]
             pz = qx * sp[9] + qy * sp[10] + qz * sp[11]
-            if not (pz > 0.0):
-                out[i] = 1.0  # at or behind the light plane: nothing lies between P and the light
+            bx[c] = px
+            by[c] = py
+            bz[c] = pz
+            bacc[c] = acc0
+            # at or behind the light plane: nothing lies between P and the light (V = 1)
+            live[c] = pz > 0.0
+            bi[c] = 1.0 / pz if pz > 0.0 else 0.0
+            if pz > zmax:
+                zmax = pz
+        for k in range(n):
+            if z_planes[k] >= zmax:
+                break  # this slice and all later ones are below every point of the block
+            s = slot[k]
+            if s < 0:
                 continue
-            acc = 1.0 if combine == 0 else 0.0
-            ipz = 1.0 / pz
-            for k in range(n):
-                if z_planes[k] >= pz:
-                    break  # this slice and all later ones are below P
-                w = slice_weight(pz, z_planes[k], z_planes[k + 1], thick, self_mode)
-                s = slot[k]
-                if w <= 0.0 or s < 0:
+            zt = z_planes[k]
+            zl = z_planes[k + 1]
+            for c in range(m):
+                if not live[c]:
                     continue
-                x0, x1, y0, y1 = _kernel_rect_fast(
-                    px, py, pz, ipz, z_planes[k + 1], sp[12], sp[13], kx[k], ky[k], ox, oy
-                )
+                pz = bz[c]
+                if zt >= pz:
+                    live[c] = False  # this slice and all later ones are below P
+                    continue
+                w = slice_weight(pz, zt, zl, thick, self_mode)
+                if w <= 0.0:
+                    continue
+                x0, x1, y0, y1 = _kernel_rect_fast(bx[c], by[c], pz, bi[c], zl, sp[12], sp[13], kx[k], ky[k], ox, oy)
                 if filt == 0:  # probes inside the rectangle read +-1.5 texels of their upper level
-                    m = _mip_support(x0, x1, y0, y1, max_aniso, offs.shape[0])
+                    mg = _mip_support(x0, x1, y0, y1, max_aniso, offs.shape[0])
                 elif filt == 1:  # the larger N-Buffer box is at most twice the short side, +1 bilinear
-                    m = 0.5 * min(x1 - x0, y1 - y0) + 1.5
+                    mg = 0.5 * min(x1 - x0, y1 - y0) + 1.5
                 else:  # exact box
-                    m = 1.0
-                if x1 + m < bbox[s, 0] or x0 - m > bbox[s, 1] or y1 + m < bbox[s, 2] or y0 - m > bbox[s, 3]:
+                    mg = 1.0
+                if x1 + mg < bbox[s, 0] or x0 - mg > bbox[s, 1] or y1 + mg < bbox[s, 2] or y0 - mg > bbox[s, 3]:
                     continue
                 if filt == 0:
                     o = lookup_mipmap(pyr, s, offs, sizes, max_aniso, x0, x1, y0, y1)
@@ -683,10 +714,12 @@ def eye_pass(
                 else:
                     o = lookup_sat(sat, s, x0, x1, y0, y1)
                 o = min(max(o, 0.0), 1.0)
-                acc = combine_occlusion(acc, w * o, combine)
-                if combine == 0 and acc <= 0.0:
-                    break  # product already 0
-            out[i] = finish_visibility(acc, combine)
+                a = combine_occlusion(bacc[c], w * o, combine)
+                bacc[c] = a
+                if combine == 0 and a <= 0.0:
+                    live[c] = False  # product already 0
+        for c in range(m):
+            out[i0 + c] = finish_visibility(bacc[c], combine) if bz[c] > 0.0 else 1.0
 
 
 def nbuffer_levels_needed(setup: SlicingSetup, pz_max: float) -> int:
