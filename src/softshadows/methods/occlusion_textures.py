@@ -517,8 +517,12 @@ def _nb_square(nb, s, cx, cy, size):
     lmax = nb.shape[1] - 1
     if size <= 1.0:
         return _nb_box(nb, s, np.int64(0), cx - 0.5, cy - 0.5)  # not a literal: one specialisation
-    lf = math.log2(size)
-    l0 = int(math.floor(lf))
+    # floor(log2(size)) from the exponent bits (size > 1 here), exact; math.log2 only within 2^-40
+    # below a power of two, where its rounding might reach the next level (same l0 as before)
+    bits = np.float64(size).view(np.int64)
+    l0 = (bits >> 52) - 1023
+    if (bits & 0xFFFFFFFFFFFFF) > 0xFFFFFFFFFF000:
+        l0 = int(math.floor(math.log2(size)))
     if l0 >= lmax:
         h = 0.5 * (1 << lmax)
         return _nb_box(nb, s, lmax, cx - h, cy - h)
@@ -656,6 +660,13 @@ def eye_pass(
     bi = np.empty(64)
     bacc = np.empty(64)
     live = np.empty(64, np.bool_)
+    # per point of the block on the current slice: kernel rectangle, weight, whether to look up
+    rx0 = np.empty(64)
+    rx1 = np.empty(64)
+    ry0 = np.empty(64)
+    ry1 = np.empty(64)
+    rw = np.empty(64)
+    hit = np.empty(64, np.bool_)
     acc0 = 1.0 if combine == 0 else 0.0
     npts = pts.shape[0]
     nblock = (npts + 63) // 64  # blocks of 64 dealt round-robin to one slot per thread
@@ -688,33 +699,43 @@ def eye_pass(
                 continue
             zt = z_planes[k]
             zl = z_planes[k + 1]
+            b0 = bbox[s, 0]
+            b1 = bbox[s, 1]
+            b2 = bbox[s, 2]
+            b3 = bbox[s, 3]
+            # the kernels of the block's points on this slice and their culling, branch-free (vectorizes)
             for c in range(m):
-                if not live[c]:
-                    continue
                 pz = bz[c]
-                if zt >= pz:
-                    live[c] = False  # this slice and all later ones are below P
-                    continue
                 w = slice_weight(pz, zt, zl, thick, self_mode)
-                if w <= 0.0:
-                    continue
                 x0, x1, y0, y1 = _kernel_rect_fast(bx[c], by[c], pz, bi[c], zl, sp[12], sp[13], kx[k], ky[k], ox, oy)
+                # the larger N-Buffer box is at most twice the short side, +1 bilinear; the exact box 1;
+                # the mipmap probes' reach is tested below
+                mg = 0.5 * min(x1 - x0, y1 - y0) + 1.5 if filt == 1 else 1.0
+                miss = (x1 + mg < b0) | (x0 - mg > b1) | (y1 + mg < b2) | (y0 - mg > b3)
+                rx0[c] = x0
+                rx1[c] = x1
+                ry0[c] = y0
+                ry1[c] = y1
+                rw[c] = w
+                hit[c] = live[c] & (zt < pz) & (w > 0.0) & ((filt == 0) | ~miss)
+            for c in range(m):
+                if not hit[c]:
+                    continue
+                x0 = rx0[c]
+                x1 = rx1[c]
+                y0 = ry0[c]
+                y1 = ry1[c]
                 if filt == 0:  # probes inside the rectangle read +-1.5 texels of their upper level
                     mg = _mip_support(x0, x1, y0, y1, max_aniso, offs.shape[0])
-                elif filt == 1:  # the larger N-Buffer box is at most twice the short side, +1 bilinear
-                    mg = 0.5 * min(x1 - x0, y1 - y0) + 1.5
-                else:  # exact box
-                    mg = 1.0
-                if x1 + mg < bbox[s, 0] or x0 - mg > bbox[s, 1] or y1 + mg < bbox[s, 2] or y0 - mg > bbox[s, 3]:
-                    continue
-                if filt == 0:
+                    if x1 + mg < b0 or x0 - mg > b1 or y1 + mg < b2 or y0 - mg > b3:
+                        continue
                     o = lookup_mipmap(pyr, s, offs, sizes, max_aniso, x0, x1, y0, y1)
                 elif filt == 1:
                     o = lookup_nbuffers(nb, s, max_aniso, x0, x1, y0, y1)
                 else:
                     o = lookup_sat(sat, s, x0, x1, y0, y1)
                 o = min(max(o, 0.0), 1.0)
-                a = combine_occlusion(bacc[c], w * o, combine)
+                a = combine_occlusion(bacc[c], rw[c] * o, combine)
                 bacc[c] = a
                 if combine == 0 and a <= 0.0:
                     live[c] = False  # product already 0
