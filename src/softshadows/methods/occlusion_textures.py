@@ -528,8 +528,18 @@ def _nb_square(nb, s, cx, cy, size):
         return _nb_box(nb, s, lmax, cx - h, cy - h)
     s0 = float(1 << l0)
     t = size / s0 - 1.0
+    bx = cx - s0
+    by = cy - s0
+    if l0 + 2 <= lmax:
+        # every texel the eight taps below read (levels l0 and l0 + 1, after clamping) lies in the
+        # 2^(l0+2) box of level l0 + 2 at the first tap of level l0 + 1: when that box is empty
+        # (exactly 0: sums of non-negative dyadic means) both boxes are 0 and so is the result
+        ja = min(max(int(math.floor(bx)), 0), nb.shape[3] - 1)
+        ia = min(max(int(math.floor(by)), 0), nb.shape[2] - 1)
+        if nb[s, l0 + 2, ia, ja] == 0.0:
+            return 0.0
     a = _nb_box(nb, s, l0, cx - 0.5 * s0, cy - 0.5 * s0)
-    b = _nb_box(nb, s, l0 + 1, cx - s0, cy - s0)
+    b = _nb_box(nb, s, l0 + 1, bx, by)
     return (1 - t) * a + t * b
 
 
@@ -673,7 +683,14 @@ def eye_pass(
     for blk in range(tslot, nblock, nslot):
         i0 = blk * 64
         m = min(npts, i0 + 64) - i0
+        # bounds over the block's points in front of the light: px / pz, py / pz, 1 / pz, pz
         zmax = 0.0
+        umin = np.inf
+        umax = -np.inf
+        vmin = np.inf
+        vmax = -np.inf
+        imin = np.inf
+        imax = 0.0
         for c in range(m):
             i = i0 + c
             qx = pts[i, 0] - sp[0]
@@ -689,8 +706,15 @@ def eye_pass(
             # at or behind the light plane: nothing lies between P and the light (V = 1)
             live[c] = pz > 0.0
             bi[c] = 1.0 / pz if pz > 0.0 else 0.0
-            if pz > zmax:
-                zmax = pz
+            if pz > 0.0:
+                ip = bi[c]
+                umin = min(umin, px * ip)
+                umax = max(umax, px * ip)
+                vmin = min(vmin, py * ip)
+                vmax = max(vmax, py * ip)
+                imin = min(imin, ip)
+                imax = max(imax, ip)
+                zmax = max(zmax, pz)
         for k in range(n):
             if z_planes[k] >= zmax:
                 break  # this slice and all later ones are below every point of the block
@@ -703,6 +727,21 @@ def eye_pass(
             b1 = bbox[s, 1]
             b2 = bbox[s, 2]
             b3 = bbox[s, 3]
+            if filt != 0:
+                # the whole block at once: every point's rectangle (centre (px, py) zl / pz, half sizes
+                # (hu, hv) |1 - zl / pz|, mapped by kx, ky) widened by the margin below (at most half
+                # its side + 1.5) lies in these bounds, pushed out by far more than rounding; when they
+                # miss the occupied texels so does every point's test below (same lookups, same V)
+                am = max(abs(1.0 - zl * imin), abs(1.0 - zl * imax))
+                ex = 2.0 * sp[12] * am * kx[k] + 1.5
+                ey = 2.0 * sp[13] * am * ky[k] + 1.5
+                cxa = umin * zl * kx[k] - ox
+                cxb = umax * zl * kx[k] - ox
+                cya = oy - vmax * zl * ky[k]
+                cyb = oy - vmin * zl * ky[k]
+                tol = 1e-3 + 1e-9 * (abs(cxa) + abs(cxb) + abs(cya) + abs(cyb) + ex + ey + abs(ox) + abs(oy))
+                if cxb + ex + tol < b0 or cxa - ex - tol > b1 or cyb + ey + tol < b2 or cya - ey - tol > b3:
+                    continue
             # the kernels of the block's points on this slice and their culling, branch-free (vectorizes)
             for c in range(m):
                 pz = bz[c]
