@@ -90,34 +90,43 @@ def to_light_frame(points, frame) -> np.ndarray:
     return np.stack([q @ r, q @ u, q @ f], axis=1)
 
 
+@kernel(inline=True)
+def _fit_point(px, py, pz, o, r, u, f, hu, hv, eps, dm, zm):
+    """One point of :func:`_fit_reduce`: the running (dm, zm) updated (a NaN point leaves them)."""
+    qx = px - o[0]
+    qy = py - o[1]
+    qz = pz - o[2]
+    x = abs(qx * r[0] + qy * r[1] + qz * r[2])
+    y = abs(qx * u[0] + qy * u[1] + qz * u[2])
+    z = qx * f[0] + qy * f[1] + qz * f[2]
+    zm = max(zm, z)
+    if z > eps:
+        if x > hu * (1.0 + 1e-9):
+            dm = min(dm, hu * z / (x - hu))
+        if y > hv * (1.0 + 1e-9):
+            dm = min(dm, hv * z / (y - hv))
+    return dm, zm
+
+
 @kernel(parallel=True)
-def _fit_reduce(pts, o, r, u, f, hu, hv, eps):
-    """Per point in front of the light (z > eps): the largest d keeping it in the frustum
-    (hu z / (|x| - hu) when |x| > hu, likewise in y; inf otherwise); also max z. Parallel chunks
-    with private results merged after."""
+def _fit_reduce(pts, pts2, o, r, u, f, hu, hv, eps):
+    """Per point of ``pts`` and ``pts2`` in front of the light (z > eps): the largest d keeping it
+    in the frustum (hu z / (|x| - hu) when |x| > hu, likewise in y; inf otherwise); also max z.
+    Rows with a NaN (pixels without a surface) count for nothing. Two arrays in one call (the
+    occluders' float64 vertices and the eye G-buffer's float32 positions: one compile). Parallel
+    chunks with private results merged after (min and max: the same result in any order)."""
     nchunk = 64
     n = pts.shape[0]
+    n2 = pts2.shape[0]
     dmin = np.full(nchunk, np.inf)
     zmax = np.full(nchunk, -np.inf)
     for c in prange(nchunk):
-        a = c * n // nchunk
-        b = (c + 1) * n // nchunk
         dm = np.inf
         zm = -np.inf
-        for i in range(a, b):
-            qx = pts[i, 0] - o[0]
-            qy = pts[i, 1] - o[1]
-            qz = pts[i, 2] - o[2]
-            x = abs(qx * r[0] + qy * r[1] + qz * r[2])
-            y = abs(qx * u[0] + qy * u[1] + qz * u[2])
-            z = qx * f[0] + qy * f[1] + qz * f[2]
-            zm = max(zm, z)
-            if z <= eps:
-                continue
-            if x > hu * (1.0 + 1e-9):
-                dm = min(dm, hu * z / (x - hu))
-            if y > hv * (1.0 + 1e-9):
-                dm = min(dm, hv * z / (y - hv))
+        for i in range(c * n // nchunk, (c + 1) * n // nchunk):
+            dm, zm = _fit_point(pts[i, 0], pts[i, 1], pts[i, 2], o, r, u, f, hu, hv, eps, dm, zm)
+        for i in range(c * n2 // nchunk, (c + 1) * n2 // nchunk):
+            dm, zm = _fit_point(pts2[i, 0], pts2[i, 1], pts2[i, 2], o, r, u, f, hu, hv, eps, dm, zm)
         dmin[c] = dm
         zmax[c] = zm
     return dmin.min(), zmax.max()
@@ -132,6 +141,15 @@ def fit_cop_distance(dmax: float, zmax: float, light_size: float) -> float:
     return max(d * 0.98, 0.02 * light_size)
 
 
+def _points_array(points) -> np.ndarray:
+    """(K,3) C-contiguous points: float32 ones (an eye G-buffer's positions, NaN where no surface)
+    as they are, anything else as float64 (the kernels read either; float32 converts exactly)."""
+    a = np.asarray(points)
+    if a.dtype != np.float32:
+        a = a.astype(np.float64, copy=False)
+    return np.ascontiguousarray(a.reshape(-1, 3))
+
+
 def fit_slicing_view(
     light, occluder_points, fit_points, size: int, slices: int, cop_distance: float = 0.0
 ) -> SlicingSetup:
@@ -142,10 +160,11 @@ def fit_slicing_view(
     o, r, u, f, hu, hv = light_rect_frame(light)
     frame = (o, r, u, f)
     qo = to_light_frame(occluder_points, frame)
-    fp = np.ascontiguousarray(np.asarray(fit_points, dtype=np.float64).reshape(-1, 3))
+    op = np.ascontiguousarray(np.asarray(occluder_points, dtype=np.float64).reshape(-1, 3))
+    fp = _points_array(fit_points)
     light_size = 2.0 * max(hu, hv)
     zo = float(qo[:, 2].max()) if len(qo) else -np.inf
-    _, zf = _fit_reduce(fp, o, r, u, f, hu, hv, np.inf) if len(fp) else (np.inf, -np.inf)
+    _, zf = _fit_reduce(op[:0], fp, o, r, u, f, hu, hv, np.inf) if len(fp) else (np.inf, -np.inf)
     scene_depth = float(max(zo, zf))
     if not scene_depth > 0:
         raise SoftShadowsError("method 'occlusion-textures': the scene is entirely behind the light")
@@ -154,10 +173,7 @@ def fit_slicing_view(
     if cop_distance > 0:
         d = float(cop_distance)
     else:
-        dmax = np.inf
-        for pts in (np.ascontiguousarray(occluder_points, dtype=np.float64).reshape(-1, 3), fp):
-            if len(pts):
-                dmax = min(dmax, _fit_reduce(pts, o, r, u, f, hu, hv, eps)[0])
+        dmax = _fit_reduce(op, fp, o, r, u, f, hu, hv, eps)[0]
         d = fit_cop_distance(dmax, scene_depth, light_size)
     # window: the light's section (x/(z+d) at z=0), widened if needed to contain the occluders
     l, rr, b, t = -hu / d, hu / d, -hv / d, hv / d
@@ -837,8 +853,9 @@ def occlusion_visibility(
 ):
     """The whole method on arbitrary points: V (K,) float64 and stats. ``flat`` is the scene's
     FlatGeometry (occluders = faces of role both|occluder); ``points`` (K,3) world points to shade
-    (they also enter the frustum fit). ``timer`` (optional) gets the phases slicing / prefilter /
-    eye_pass."""
+    (they also enter the frustum fit): float64, or float32 as an eye G-buffer's positions are, read
+    as they are (a point with a NaN, a pixel without a surface, gets V = 1 and leaves the fit).
+    ``timer`` (optional) gets the phases slicing / prefilter / eye_pass."""
     from contextlib import contextmanager, nullcontext
 
     own: dict = {}
@@ -857,7 +874,7 @@ def occlusion_visibility(
         lo, hi = scene_bounds if scene_bounds is not None else (flat.vertices.min(0), flat.vertices.max(0))
         light = sphere_to_rect(light, direction=(np.asarray(lo) + np.asarray(hi)) / 2 - light.center)
         stats["light_approximation"] = "sphere as equal-area square"
-    pos = np.ascontiguousarray(np.asarray(points, dtype=np.float64).reshape(-1, 3))
+    pos = _points_array(points)
 
     # 1. slicing
     with phase("slicing"):
@@ -986,11 +1003,12 @@ class OcclusionTextures(Method):
         anisotropy=16,
         self_shadow="fade",
     ) -> MethodOutput:
-        pos, _nrm, idx = ctx.points()
+        # straight over the eye G-buffer (NaN where no surface: V = 1 there, as ctx.scatter fills)
+        g = ctx.eye
         vis, stats = occlusion_visibility(
             ctx.light,
             ctx.flat,
-            pos,
+            g.position.reshape(-1, 3),
             slices,
             texture_size,
             filter,
@@ -1002,4 +1020,4 @@ class OcclusionTextures(Method):
             timer=ctx.timer,
             scene_bounds=ctx.scene.bounds(),
         )
-        return MethodOutput(visibility=ctx.scatter(vis.astype(np.float32), idx), stats=stats)
+        return MethodOutput(visibility=vis.astype(np.float32).reshape(g.mask.shape), stats=stats)
