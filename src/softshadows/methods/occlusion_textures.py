@@ -91,8 +91,8 @@ def to_light_frame(points, frame) -> np.ndarray:
 
 
 @kernel(inline=True)
-def _fit_point(px, py, pz, o, r, u, f, hu, hv, eps, dm, zm):
-    """One point of :func:`_fit_reduce`: the running (dm, zm) updated (a NaN point leaves them)."""
+def _fit_point(px, py, pz, o, r, u, f, hu, hv, eps, dm, zm, zc):
+    """One point of :func:`_fit_reduce`: the running (dm, zm, zc) updated (a NaN point leaves them)."""
     qx = px - o[0]
     qy = py - o[1]
     qz = pz - o[2]
@@ -103,33 +103,40 @@ def _fit_point(px, py, pz, o, r, u, f, hu, hv, eps, dm, zm):
     if z > eps:
         if x > hu * (1.0 + 1e-9):
             dm = min(dm, hu * z / (x - hu))
+            zc = min(zc, z)
         if y > hv * (1.0 + 1e-9):
             dm = min(dm, hv * z / (y - hv))
-    return dm, zm
+            zc = min(zc, z)
+    return dm, zm, zc
 
 
 @kernel(parallel=True)
 def _fit_reduce(pts, pts2, o, r, u, f, hu, hv, eps):
     """Per point of ``pts`` and ``pts2`` in front of the light (z > eps): the largest d keeping it
-    in the frustum (hu z / (|x| - hu) when |x| > hu, likewise in y; inf otherwise); also max z.
-    Rows with a NaN (pixels without a surface) count for nothing. Two arrays in one call (the
-    occluders' float64 vertices and the eye G-buffer's float32 positions: one compile). Parallel
-    chunks with private results merged after (min and max: the same result in any order)."""
+    in the frustum (hu z / (|x| - hu) when |x| > hu, likewise in y; inf otherwise); returns their
+    minimum, the max z of ``pts2`` and the least z of a point that gave a bound (the caller checks
+    that a larger eps would have kept the same points). Rows with a NaN (pixels without a surface)
+    count for nothing. Two arrays in one call (the occluders' float64 vertices and the eye
+    G-buffer's float32 positions: one compile). Parallel chunks with private results merged after
+    (min and max: the same result in any order)."""
     nchunk = 64
     n = pts.shape[0]
     n2 = pts2.shape[0]
     dmin = np.full(nchunk, np.inf)
     zmax = np.full(nchunk, -np.inf)
+    zcut = np.full(nchunk, np.inf)
     for c in prange(nchunk):
         dm = np.inf
         zm = -np.inf
+        zc = np.inf
         for i in range(c * n // nchunk, (c + 1) * n // nchunk):
-            dm, zm = _fit_point(pts[i, 0], pts[i, 1], pts[i, 2], o, r, u, f, hu, hv, eps, dm, zm)
+            dm, _, zc = _fit_point(pts[i, 0], pts[i, 1], pts[i, 2], o, r, u, f, hu, hv, eps, dm, zm, zc)
         for i in range(c * n2 // nchunk, (c + 1) * n2 // nchunk):
-            dm, zm = _fit_point(pts2[i, 0], pts2[i, 1], pts2[i, 2], o, r, u, f, hu, hv, eps, dm, zm)
+            dm, zm, zc = _fit_point(pts2[i, 0], pts2[i, 1], pts2[i, 2], o, r, u, f, hu, hv, eps, dm, zm, zc)
         dmin[c] = dm
         zmax[c] = zm
-    return dmin.min(), zmax.max()
+        zcut[c] = zc
+    return dmin.min(), zmax.max(), zcut.min()
 
 
 def fit_cop_distance(dmax: float, zmax: float, light_size: float) -> float:
@@ -164,7 +171,10 @@ def fit_slicing_view(
     fp = _points_array(fit_points)
     light_size = 2.0 * max(hu, hv)
     zo = float(qo[:, 2].max()) if len(qo) else -np.inf
-    _, zf = _fit_reduce(op[:0], fp, o, r, u, f, hu, hv, np.inf) if len(fp) else (np.inf, -np.inf)
+    # one pass for the points' depth and the frustum bound with the occluders' eps (the final eps
+    # below is at least that); a second only when a point between the two gave a bound
+    eps0 = 1e-4 * zo if zo > 0 else 0.0
+    dmax, zf, zcut = _fit_reduce(op, fp, o, r, u, f, hu, hv, eps0)
     scene_depth = float(max(zo, zf))
     if not scene_depth > 0:
         raise SoftShadowsError("method 'occlusion-textures': the scene is entirely behind the light")
@@ -173,8 +183,9 @@ def fit_slicing_view(
     if cop_distance > 0:
         d = float(cop_distance)
     else:
-        dmax = _fit_reduce(op, fp, o, r, u, f, hu, hv, eps)[0]
-        d = fit_cop_distance(dmax, scene_depth, light_size)
+        if not zcut > eps:
+            dmax = _fit_reduce(op, fp, o, r, u, f, hu, hv, eps)[0]
+        d = fit_cop_distance(float(dmax), scene_depth, light_size)
     # window: the light's section (x/(z+d) at z=0), widened if needed to contain the occluders
     l, rr, b, t = -hu / d, hu / d, -hv / d, hv / d
     if len(front_o):
