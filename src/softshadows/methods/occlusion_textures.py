@@ -110,33 +110,40 @@ def _fit_point(px, py, pz, o, r, u, f, hu, hv, eps, dm, zm, zc):
     return dm, zm, zc
 
 
-@kernel(parallel=True)
-def _fit_reduce(pts, pts2, o, r, u, f, hu, hv, eps):
+@kernel(nogil=True)
+def _fit_reduce(tslot, pts, pts2, o, r, u, f, hu, hv, eps, res, nslot=1):
     """Per point of ``pts`` and ``pts2`` in front of the light (z > eps): the largest d keeping it
-    in the frustum (hu z / (|x| - hu) when |x| > hu, likewise in y; inf otherwise); returns their
-    minimum, the max z of ``pts2`` and the least z of a point that gave a bound (the caller checks
-    that a larger eps would have kept the same points). Rows with a NaN (pixels without a surface)
-    count for nothing. Two arrays in one call (the occluders' float64 vertices and the eye
-    G-buffer's float32 positions: one compile). Parallel chunks with private results merged after
-    (min and max: the same result in any order)."""
-    nchunk = 64
+    in the frustum (hu z / (|x| - hu) when |x| > hu, likewise in y; inf otherwise). Slot ``tslot``
+    of ``nslot`` (run by ``run_slots``) takes its share of both arrays and writes to ``res[tslot]``
+    the minimum, the max z of its ``pts2`` rows and the least z of a point that gave a bound (see
+    :func:`_fit_bounds`). Rows with a NaN (pixels without a surface) count for nothing. Two arrays
+    in one call: the occluders' float64 vertices and the eye G-buffer's float32 positions, one
+    compile (a serial kernel: a prange body compiles twice)."""
     n = pts.shape[0]
     n2 = pts2.shape[0]
-    dmin = np.full(nchunk, np.inf)
-    zmax = np.full(nchunk, -np.inf)
-    zcut = np.full(nchunk, np.inf)
-    for c in prange(nchunk):
-        dm = np.inf
-        zm = -np.inf
-        zc = np.inf
-        for i in range(c * n // nchunk, (c + 1) * n // nchunk):
-            dm, _, zc = _fit_point(pts[i, 0], pts[i, 1], pts[i, 2], o, r, u, f, hu, hv, eps, dm, zm, zc)
-        for i in range(c * n2 // nchunk, (c + 1) * n2 // nchunk):
-            dm, zm, zc = _fit_point(pts2[i, 0], pts2[i, 1], pts2[i, 2], o, r, u, f, hu, hv, eps, dm, zm, zc)
-        dmin[c] = dm
-        zmax[c] = zm
-        zcut[c] = zc
-    return dmin.min(), zmax.max(), zcut.min()
+    dm = np.inf
+    zm = -np.inf
+    zc = np.inf
+    for i in range(tslot * n // nslot, (tslot + 1) * n // nslot):
+        dm, _, zc = _fit_point(pts[i, 0], pts[i, 1], pts[i, 2], o, r, u, f, hu, hv, eps, dm, zm, zc)
+    for i in range(tslot * n2 // nslot, (tslot + 1) * n2 // nslot):
+        x = float(pts2[i, 0])
+        y = float(pts2[i, 1])
+        z = float(pts2[i, 2])
+        dm, zm, zc = _fit_point(x, y, z, o, r, u, f, hu, hv, eps, dm, zm, zc)
+    res[tslot, 0] = dm
+    res[tslot, 1] = zm
+    res[tslot, 2] = zc
+
+
+def _fit_bounds(op, fp, o, r, u, f, hu, hv, eps):
+    """:func:`_fit_reduce` on every thread: (the least d bound, the max z of ``fp``, the least z of
+    a point that gave a bound: the caller checks that a larger eps would keep the same points).
+    Min and max: the same result in any order and split."""
+    nslot = numba.get_num_threads()
+    res = np.empty((nslot, 3))
+    run_slots(_fit_reduce, nslot, op, fp, o, r, u, f, float(hu), float(hv), float(eps), res, nslot)
+    return float(res[:, 0].min()), float(res[:, 1].max()), float(res[:, 2].min())
 
 
 def fit_cop_distance(dmax: float, zmax: float, light_size: float) -> float:
@@ -174,7 +181,7 @@ def fit_slicing_view(
     # one pass for the points' depth and the frustum bound with the occluders' eps (the final eps
     # below is at least that); a second only when a point between the two gave a bound
     eps0 = 1e-4 * zo if zo > 0 else 0.0
-    dmax, zf, zcut = _fit_reduce(op, fp, o, r, u, f, hu, hv, eps0)
+    dmax, zf, zcut = _fit_bounds(op, fp, o, r, u, f, hu, hv, eps0)
     scene_depth = float(max(zo, zf))
     if not scene_depth > 0:
         raise SoftShadowsError("method 'occlusion-textures': the scene is entirely behind the light")
@@ -184,8 +191,8 @@ def fit_slicing_view(
         d = float(cop_distance)
     else:
         if not zcut > eps:
-            dmax = _fit_reduce(op, fp, o, r, u, f, hu, hv, eps)[0]
-        d = fit_cop_distance(float(dmax), scene_depth, light_size)
+            dmax = _fit_bounds(op, fp, o, r, u, f, hu, hv, eps)[0]
+        d = fit_cop_distance(dmax, scene_depth, light_size)
     # window: the light's section (x/(z+d) at z=0), widened if needed to contain the occluders
     l, rr, b, t = -hu / d, hu / d, -hv / d, hv / d
     if len(front_o):
@@ -518,7 +525,7 @@ def _mip_support(x0, x1, y0, y1, max_aniso, nl):
     return 1.5 * (1 << lv) + 1e-6
 
 
-@kernel(nrt=False)
+@kernel(inline=True)
 def _nb_box(nb, s, lv, sx, sy):
     """Bilinear lookup of N-Buffer level lv at continuous box origin (sx, sy) (texel (i, j) holds
     the box whose corner is (j, i)); clamp-to-edge."""
@@ -537,7 +544,7 @@ def _nb_box(nb, s, lv, sx, sy):
     )
 
 
-@kernel(nrt=False)
+@kernel(inline=True)
 def _nb_square(nb, s, cx, cy, size):
     """Box response of a size x size square centred at (cx, cy): the two levels bracketing the
     size, interpolated linearly in size."""
@@ -570,8 +577,8 @@ def _nb_square(nb, s, cx, cy, size):
     return (1 - t) * a + t * b
 
 
-@kernel(nrt=False)
-def lookup_nbuffers(nb, s, max_probes, x0, x1, y0, y1):
+@kernel(inline=True)
+def _lookup_nbuffers(nb, s, max_probes, x0, x1, y0, y1):
     """Rectangular kernel from square N-Buffer lookups: ceil(long/short) squares of the short side
     spread along the long side (one for a square light)."""
     wx = x1 - x0
@@ -589,6 +596,12 @@ def lookup_nbuffers(nb, s, max_probes, x0, x1, y0, y1):
         else:
             acc += _nb_square(nb, s, 0.5 * (x0 + x1), y0 + o, side)
     return acc / n
+
+
+@kernel(nrt=False)
+def lookup_nbuffers(nb, s, max_probes, x0, x1, y0, y1):
+    """:func:`_lookup_nbuffers` as a kernel of its own (the eye pass has it inlined)."""
+    return _lookup_nbuffers(nb, s, max_probes, x0, x1, y0, y1)
 
 
 @kernel(nrt=False)
@@ -797,7 +810,7 @@ def eye_pass(
                         continue
                     o = lookup_mipmap(pyr, s, offs, sizes, max_aniso, x0, x1, y0, y1)
                 elif filt == 1:
-                    o = lookup_nbuffers(nb, s, max_aniso, x0, x1, y0, y1)
+                    o = _lookup_nbuffers(nb, s, max_aniso, x0, x1, y0, y1)
                 else:
                     o = lookup_sat(sat, s, x0, x1, y0, y1)
                 o = min(max(o, 0.0), 1.0)
