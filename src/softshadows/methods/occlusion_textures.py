@@ -215,9 +215,11 @@ def fit_slicing_view(
 
 
 @kernel
-def _mark_occlusion_textures(pixel, depth, d, z_planes, leak_fix, tex):
+def _mark_occlusion_textures(pixel, depth, d, z_planes, leak_fix, tex, bounds):
     """Binary occlusion textures: texel of every fragment set in its slice (and in the next one
-    with the leak fix). Serial: a texel may be hit by many fragments."""
+    with the leak fix), and ``bounds[k]`` (x0, x1, y0, y1) grown over the texels set in slice k
+    (what :func:`occupied_bounds` finds, without a pass over the textures). Serial: a texel may be
+    hit by many fragments."""
     n = tex.shape[0]
     hw = tex.shape[1] * tex.shape[2]
     z0 = z_planes[0]
@@ -240,9 +242,12 @@ def _mark_occlusion_textures(pixel, depth, d, z_planes, leak_fix, tex):
             continue
         row = p // tex.shape[2]
         col = p - row * tex.shape[2]
-        tex[k, row, col] = 1
-        if leak_fix and k + 1 < n:
-            tex[k + 1, row, col] = 1
+        for kk in range(k, min(k + 2, n) if leak_fix else k + 1):
+            tex[kk, row, col] = 1
+            bounds[kk, 0] = min(bounds[kk, 0], float(col))
+            bounds[kk, 1] = max(bounds[kk, 1], float(col + 1))
+            bounds[kk, 2] = min(bounds[kk, 2], float(row))
+            bounds[kk, 3] = max(bounds[kk, 3], float(row + 1))
 
 
 def _occluder_vertices(vertices, occ_faces) -> np.ndarray:
@@ -250,15 +255,18 @@ def _occluder_vertices(vertices, occ_faces) -> np.ndarray:
     return vertices[np.unique(occ_faces)] if len(occ_faces) else np.zeros((0, 3))
 
 
-def slice_scene(setup: SlicingSetup, vertices, faces, leak_fix: bool = False):
+def slice_scene(setup: SlicingSetup, vertices, faces, leak_fix: bool = False, bounds=None):
     """One rasterization of the occluders from the COP; returns (textures uint8 (N,S,S), fragments).
 
     Each texel of slice k is 1 when some surface inside the slice projects on it: everything in the
     slice is projected onto its plane farthest from the light (the COP projection maps a texel of
-    one plane onto the same texel of every other plane). ``leak_fix`` also marks slice k+1 (Fig. 6)."""
+    one plane onto the same texel of every other plane). ``leak_fix`` also marks slice k+1 (Fig. 6).
+    ``bounds`` (optional, (N, 4) float64) receives :func:`occupied_bounds` of the textures."""
     v = setup.view
     n = setup.slices
     tex = np.zeros((n, v.height, v.width), np.uint8)
+    bb = np.empty((n, 4)) if bounds is None else bounds
+    bb[:] = (1e30, -1e30, 1e30, -1e30)  # occupied_bounds' empty slice
     if len(faces) == 0:
         return tex, 0
     frags = rasterize_fragments(v, vertices, faces, cull="none")
@@ -269,6 +277,7 @@ def slice_scene(setup: SlicingSetup, vertices, faces, leak_fix: bool = False):
         setup.z_planes,
         bool(leak_fix),
         tex,
+        bb,
     )
     return tex, len(frags)
 
@@ -329,9 +338,11 @@ def prefilter_mipmap(tex: np.ndarray):
 
 
 @kernel(parallel=True)
-def _nbuffer_levels(tex, nb):
+def _nbuffer_levels(tex, nb, bounds):
     """nb[s, l, i, j] = mean of tex[s] over rows [i, i+2^l) x cols [j, j+2^l) (zero outside):
-    level l from four lookups in level l-1 at offsets 0 and 2^(l-1) (Décoret's N-Buffers)."""
+    level l from four lookups in level l-1 at offsets 0 and 2^(l-1) (Décoret's N-Buffers).
+    ``bounds[s]`` (:func:`occupied_bounds`): a row whose boxes miss the set texels' rows is 0
+    without reading level l-1 (the sum would be 0 too; the textures are mostly empty)."""
     n, nl, h, w = nb.shape
     for job in prange(n * h):
         s = job // h
@@ -344,8 +355,12 @@ def _nbuffer_levels(tex, nb):
         for job in prange(n * h):
             s = job // h
             i = job - s * h
-            a = nb[s, lv - 1, i]
             dst = nb[s, lv, i]
+            if i + 2 * o <= bounds[s, 2] or i >= bounds[s, 3]:
+                for j in range(w):
+                    dst[j] = 0.0
+                continue
+            a = nb[s, lv - 1, i]
             if i + o < h:
                 c = nb[s, lv - 1, i + o]
                 for j in range(jm):  # branch-free body (vectorizes)
@@ -359,14 +374,16 @@ def _nbuffer_levels(tex, nb):
                     dst[j] = 0.25 * a[j]
 
 
-def prefilter_nbuffers(tex: np.ndarray, levels: int | None = None) -> np.ndarray:
+def prefilter_nbuffers(tex: np.ndarray, levels: int | None = None, bounds: np.ndarray | None = None) -> np.ndarray:
     """N-Buffers: float32 (N, L+1, S, S); level l holds the 2^l x 2^l box response at each texel.
-    ``levels`` (L) defaults to log2(S), the paper's full set."""
+    ``levels`` (L) defaults to log2(S), the paper's full set; ``bounds`` (optional) is
+    :func:`occupied_bounds` of ``tex`` when the caller has it."""
     n, h, w = tex.shape
     full = int(round(math.log2(max(h, w))))
     nl = full if levels is None else int(min(max(levels, 0), full))
     nb = np.empty((n, nl + 1, h, w), np.float32)
-    _nbuffer_levels(tex, nb)
+    bb = occupied_bounds(tex) if bounds is None else np.ascontiguousarray(bounds, dtype=np.float64)
+    _nbuffer_levels(tex, nb, bb)
     return nb
 
 
@@ -841,8 +858,15 @@ def nbuffer_levels_needed(setup: SlicingSetup, pz_max: float) -> int:
     return int(min(full, math.floor(math.log2(wmax)) + 1))
 
 
-def prefilter(tex_used: np.ndarray, filt: str, setup: SlicingSetup | None = None, pz_max: float | None = None):
-    """Run the selected prefilter on the non-empty textures; returns the lookup arrays and stats."""
+def prefilter(
+    tex_used: np.ndarray,
+    filt: str,
+    setup: SlicingSetup | None = None,
+    pz_max: float | None = None,
+    bounds: np.ndarray | None = None,
+):
+    """Run the selected prefilter on the non-empty textures (``bounds``: their
+    :func:`occupied_bounds`, if known); returns the lookup arrays and stats."""
     e32 = np.zeros((1, 1), np.float32)
     pyr, offs, sizes = e32, np.zeros(1, np.int64), np.ones(1, np.int64)
     nb = np.zeros((1, 1, 1, 1), np.float32)
@@ -853,7 +877,7 @@ def prefilter(tex_used: np.ndarray, filt: str, setup: SlicingSetup | None = None
         st["mip_levels"] = int(len(sizes))
     elif filt == "nbuffers":
         lv = None if setup is None or pz_max is None else nbuffer_levels_needed(setup, pz_max)
-        nb = prefilter_nbuffers(tex_used, lv)
+        nb = prefilter_nbuffers(tex_used, lv, bounds)
         st["nbuffer_levels"] = int(nb.shape[1] - 1)
     else:
         sat = prefilter_sat(tex_used)
@@ -906,16 +930,17 @@ def occlusion_visibility(
         occ_faces = flat.faces_where(flat.occluder)
         occ_pts = flat.cached(("occluder_vertices",), lambda: _occluder_vertices(flat.vertices, occ_faces))
         setup = fit_slicing_view(light, occ_pts, pos, int(texture_size), int(slices), float(cop_distance))
-        tex, nfrag = slice_scene(setup, flat.vertices, occ_faces, bool(leak_fix))
-        nonempty = tex.reshape(tex.shape[0], -1).any(axis=1)
+        bounds = np.empty((setup.slices, 4))
+        tex, nfrag = slice_scene(setup, flat.vertices, occ_faces, bool(leak_fix), bounds)
+        nonempty = bounds[:, 1] > bounds[:, 0]  # a slice with a texel set
         slot = np.full(tex.shape[0], -1, np.int64)
         slot[nonempty] = np.arange(int(nonempty.sum()))
-        tex_used = np.ascontiguousarray(tex[nonempty])
-        bbox = occupied_bounds(tex_used)
+        tex_used = tex if nonempty.all() else np.ascontiguousarray(tex[nonempty])
+        bbox = np.ascontiguousarray(bounds[nonempty])
     # 2. prefiltering
     with phase("prefilter"):
         pz_max = max(float(setup.z_planes[-1]), setup.depth)  # bounds the N-Buffer levels needed
-        arrays, pst = prefilter(tex_used, filter, setup, pz_max)
+        arrays, pst = prefilter(tex_used, filter, setup, pz_max, bbox)
     # 3-6. eye pass
     with phase("eye_pass"):
         vis = np.ones(len(pos), np.float64)
