@@ -292,6 +292,21 @@ def test_no_seam_across_slice_planes(ramp_scene):
     assert np.abs(np.diff(v_skip)).max() > 0.5
 
 
+def test_float32_points_with_nan_rows(ramp_scene):
+    # The method passes the eye G-buffer's float32 positions (NaN where no surface) as they are:
+    # the same V as the float64 points (float32 converts exactly), V = 1 on the NaN rows, which
+    # stay out of the frustum fit.
+    sc = ramp_scene
+    p32 = _ramp_line(-0.75)[::40].astype(np.float32)
+    v64, st64 = ot.occlusion_visibility(sc.light, sc.flat, p32.astype(np.float64))
+    withnan = np.full((2 * len(p32), 3), np.nan, np.float32)
+    withnan[::2] = p32
+    v32, st32 = ot.occlusion_visibility(sc.light, sc.flat, withnan)
+    np.testing.assert_array_equal(v32[::2], v64)
+    assert np.all(v32[1::2] == 1.0) and v64.min() < 0.9
+    assert st32["cop_distance"] == st64["cop_distance"]
+
+
 def test_containing_slice_is_not_used(ramp_scene):
     # A lit planar surface does not shadow itself. Fading the containing slice out keeps the open
     # part of the ramp lit; using it (self_shadow="include", Fig. 7) shadows it by its own projection.
