@@ -127,9 +127,9 @@ def _fit_reduce(tslot, pts, pts2, o, r, u, f, hu, hv, eps, res, nslot=1):
     for i in range(tslot * n // nslot, (tslot + 1) * n // nslot):
         dm, _, zc = _fit_point(pts[i, 0], pts[i, 1], pts[i, 2], o, r, u, f, hu, hv, eps, dm, zm, zc)
     for i in range(tslot * n2 // nslot, (tslot + 1) * n2 // nslot):
-        x = float(pts2[i, 0])
-        y = float(pts2[i, 1])
-        z = float(pts2[i, 2])
+        x = np.float64(pts2[i, 0])  # float() keeps a float32 (a second compile of _fit_point)
+        y = np.float64(pts2[i, 1])
+        z = np.float64(pts2[i, 2])
         dm, zm, zc = _fit_point(x, y, z, o, r, u, f, hu, hv, eps, dm, zm, zc)
     res[tslot, 0] = dm
     res[tslot, 1] = zm
