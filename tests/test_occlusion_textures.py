@@ -140,6 +140,31 @@ def test_slice_scene_and_leak_fix(square):
         assert np.array_equal(tex2[k + 1], tex[k]) and np.array_equal(tex2[k], tex[k])  # Fig. 6
 
 
+def test_slice_scene_bounds_and_sparse_nbuffers(square):
+    # slice_scene's bounds are occupied_bounds of its textures (leak fix too), and the N-Buffers
+    # of a mostly empty texture (rows skipped outside the set texels' rows) match brute force
+    flat = square.flat
+    occ_faces = flat.faces[flat.occluder]
+    occ = flat.vertices[np.unique(occ_faces)]
+    setup = ot.fit_slicing_view(square.light, occ, occ, 64, 8)
+    for leak in (False, True):
+        b = np.empty((8, 4))
+        tex, _ = ot.slice_scene(setup, flat.vertices, occ_faces, leak, b)
+        np.testing.assert_array_equal(b, ot.occupied_bounds(tex))
+    tex = np.zeros((3, 32, 32), np.uint8)
+    tex[0, 12:15, 20:26] = 1
+    tex[1, 31, 0] = 1
+    nb = ot.prefilter_nbuffers(tex)
+    pad = np.zeros((3, 96, 96))
+    pad[:, :32, :32] = tex
+    for lv in range(6):
+        s = 1 << lv
+        want = np.array(
+            [[[pad[k, i : i + s, j : j + s].mean() for j in range(32)] for i in range(32)] for k in range(3)]
+        )
+        np.testing.assert_allclose(nb[:, lv], want, atol=1e-7)
+
+
 def test_prefilters_against_brute_force():
     rng = np.random.default_rng(3)
     tex = (rng.random((2, 32, 32)) < 0.3).astype(np.uint8)
@@ -265,6 +290,21 @@ def test_no_seam_across_slice_planes(ramp_scene):
         assert np.all(np.isfinite(v)) and np.abs(np.diff(v)).max() < 0.05, np.abs(np.diff(v)).max()
     v_skip, _ = ot.occlusion_visibility(sc.light, sc.flat, _ramp_line(-0.75), filter="sat", self_shadow="skip")
     assert np.abs(np.diff(v_skip)).max() > 0.5
+
+
+def test_float32_points_with_nan_rows(ramp_scene):
+    # The method passes the eye G-buffer's float32 positions (NaN where no surface) as they are:
+    # the same V as the float64 points (float32 converts exactly), V = 1 on the NaN rows, which
+    # stay out of the frustum fit.
+    sc = ramp_scene
+    p32 = _ramp_line(-0.75)[::40].astype(np.float32)
+    v64, st64 = ot.occlusion_visibility(sc.light, sc.flat, p32.astype(np.float64))
+    withnan = np.full((2 * len(p32), 3), np.nan, np.float32)
+    withnan[::2] = p32
+    v32, st32 = ot.occlusion_visibility(sc.light, sc.flat, withnan)
+    np.testing.assert_array_equal(v32[::2], v64)
+    assert np.all(v32[1::2] == 1.0) and v64.min() < 0.9
+    assert st32["cop_distance"] == st64["cop_distance"]
 
 
 def test_containing_slice_is_not_used(ramp_scene):

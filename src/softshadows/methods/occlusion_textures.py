@@ -90,37 +90,60 @@ def to_light_frame(points, frame) -> np.ndarray:
     return np.stack([q @ r, q @ u, q @ f], axis=1)
 
 
-@kernel(parallel=True)
-def _fit_reduce(pts, o, r, u, f, hu, hv, eps):
-    """Per point in front of the light (z > eps): the largest d keeping it in the frustum
-    (hu z / (|x| - hu) when |x| > hu, likewise in y; inf otherwise); also max z. Parallel chunks
-    with private results merged after."""
-    nchunk = 64
+@kernel(inline=True)
+def _fit_point(px, py, pz, o, r, u, f, hu, hv, eps, dm, zm, zc):
+    """One point of :func:`_fit_reduce`: the running (dm, zm, zc) updated (a NaN point leaves them)."""
+    qx = px - o[0]
+    qy = py - o[1]
+    qz = pz - o[2]
+    x = abs(qx * r[0] + qy * r[1] + qz * r[2])
+    y = abs(qx * u[0] + qy * u[1] + qz * u[2])
+    z = qx * f[0] + qy * f[1] + qz * f[2]
+    zm = max(zm, z)
+    if z > eps:
+        if x > hu * (1.0 + 1e-9):
+            dm = min(dm, hu * z / (x - hu))
+            zc = min(zc, z)
+        if y > hv * (1.0 + 1e-9):
+            dm = min(dm, hv * z / (y - hv))
+            zc = min(zc, z)
+    return dm, zm, zc
+
+
+@kernel(nogil=True)
+def _fit_reduce(tslot, pts, pts2, o, r, u, f, hu, hv, eps, res, nslot=1):
+    """Per point of ``pts`` and ``pts2`` in front of the light (z > eps): the largest d keeping it
+    in the frustum (hu z / (|x| - hu) when |x| > hu, likewise in y; inf otherwise). Slot ``tslot``
+    of ``nslot`` (run by ``run_slots``) takes its share of both arrays and writes to ``res[tslot]``
+    the minimum, the max z of its ``pts2`` rows and the least z of a point that gave a bound (see
+    :func:`_fit_bounds`). Rows with a NaN (pixels without a surface) count for nothing. Two arrays
+    in one call: the occluders' float64 vertices and the eye G-buffer's float32 positions, one
+    compile (a serial kernel: a prange body compiles twice)."""
     n = pts.shape[0]
-    dmin = np.full(nchunk, np.inf)
-    zmax = np.full(nchunk, -np.inf)
-    for c in prange(nchunk):
-        a = c * n // nchunk
-        b = (c + 1) * n // nchunk
-        dm = np.inf
-        zm = -np.inf
-        for i in range(a, b):
-            qx = pts[i, 0] - o[0]
-            qy = pts[i, 1] - o[1]
-            qz = pts[i, 2] - o[2]
-            x = abs(qx * r[0] + qy * r[1] + qz * r[2])
-            y = abs(qx * u[0] + qy * u[1] + qz * u[2])
-            z = qx * f[0] + qy * f[1] + qz * f[2]
-            zm = max(zm, z)
-            if z <= eps:
-                continue
-            if x > hu * (1.0 + 1e-9):
-                dm = min(dm, hu * z / (x - hu))
-            if y > hv * (1.0 + 1e-9):
-                dm = min(dm, hv * z / (y - hv))
-        dmin[c] = dm
-        zmax[c] = zm
-    return dmin.min(), zmax.max()
+    n2 = pts2.shape[0]
+    dm = np.inf
+    zm = -np.inf
+    zc = np.inf
+    for i in range(tslot * n // nslot, (tslot + 1) * n // nslot):
+        dm, _, zc = _fit_point(pts[i, 0], pts[i, 1], pts[i, 2], o, r, u, f, hu, hv, eps, dm, zm, zc)
+    for i in range(tslot * n2 // nslot, (tslot + 1) * n2 // nslot):
+        x = np.float64(pts2[i, 0])  # float() keeps a float32 (a second compile of _fit_point)
+        y = np.float64(pts2[i, 1])
+        z = np.float64(pts2[i, 2])
+        dm, zm, zc = _fit_point(x, y, z, o, r, u, f, hu, hv, eps, dm, zm, zc)
+    res[tslot, 0] = dm
+    res[tslot, 1] = zm
+    res[tslot, 2] = zc
+
+
+def _fit_bounds(op, fp, o, r, u, f, hu, hv, eps):
+    """:func:`_fit_reduce` on every thread: (the least d bound, the max z of ``fp``, the least z of
+    a point that gave a bound: the caller checks that a larger eps would keep the same points).
+    Min and max: the same result in any order and split."""
+    nslot = numba.get_num_threads()
+    res = np.empty((nslot, 3))
+    run_slots(_fit_reduce, nslot, op, fp, o, r, u, f, float(hu), float(hv), float(eps), res, nslot)
+    return float(res[:, 0].min()), float(res[:, 1].max()), float(res[:, 2].min())
 
 
 def fit_cop_distance(dmax: float, zmax: float, light_size: float) -> float:
@@ -130,6 +153,15 @@ def fit_cop_distance(dmax: float, zmax: float, light_size: float) -> float:
     max(scene depth, light size) and floored at 2% of the light size (see docs/methods/occlusion-textures.md)."""
     d = min(max(zmax, light_size), dmax)
     return max(d * 0.98, 0.02 * light_size)
+
+
+def _points_array(points) -> np.ndarray:
+    """(K,3) C-contiguous points: float32 ones (an eye G-buffer's positions, NaN where no surface)
+    as they are, anything else as float64 (the kernels read either; float32 converts exactly)."""
+    a = np.asarray(points)
+    if a.dtype != np.float32:
+        a = a.astype(np.float64, copy=False)
+    return np.ascontiguousarray(a.reshape(-1, 3))
 
 
 def fit_slicing_view(
@@ -142,10 +174,14 @@ def fit_slicing_view(
     o, r, u, f, hu, hv = light_rect_frame(light)
     frame = (o, r, u, f)
     qo = to_light_frame(occluder_points, frame)
-    fp = np.ascontiguousarray(np.asarray(fit_points, dtype=np.float64).reshape(-1, 3))
+    op = np.ascontiguousarray(np.asarray(occluder_points, dtype=np.float64).reshape(-1, 3))
+    fp = _points_array(fit_points)
     light_size = 2.0 * max(hu, hv)
     zo = float(qo[:, 2].max()) if len(qo) else -np.inf
-    _, zf = _fit_reduce(fp, o, r, u, f, hu, hv, np.inf) if len(fp) else (np.inf, -np.inf)
+    # one pass for the points' depth and the frustum bound with the occluders' eps (the final eps
+    # below is at least that); a second only when a point between the two gave a bound
+    eps0 = 1e-4 * zo if zo > 0 else 0.0
+    dmax, zf, zcut = _fit_bounds(op, fp, o, r, u, f, hu, hv, eps0)
     scene_depth = float(max(zo, zf))
     if not scene_depth > 0:
         raise SoftShadowsError("method 'occlusion-textures': the scene is entirely behind the light")
@@ -154,10 +190,8 @@ def fit_slicing_view(
     if cop_distance > 0:
         d = float(cop_distance)
     else:
-        dmax = np.inf
-        for pts in (np.ascontiguousarray(occluder_points, dtype=np.float64).reshape(-1, 3), fp):
-            if len(pts):
-                dmax = min(dmax, _fit_reduce(pts, o, r, u, f, hu, hv, eps)[0])
+        if not zcut > eps:
+            dmax = _fit_bounds(op, fp, o, r, u, f, hu, hv, eps)[0]
         d = fit_cop_distance(dmax, scene_depth, light_size)
     # window: the light's section (x/(z+d) at z=0), widened if needed to contain the occluders
     l, rr, b, t = -hu / d, hu / d, -hv / d, hv / d
@@ -181,9 +215,11 @@ def fit_slicing_view(
 
 
 @kernel
-def _mark_occlusion_textures(pixel, depth, d, z_planes, leak_fix, tex):
+def _mark_occlusion_textures(pixel, depth, d, z_planes, leak_fix, tex, bounds):
     """Binary occlusion textures: texel of every fragment set in its slice (and in the next one
-    with the leak fix). Serial: a texel may be hit by many fragments."""
+    with the leak fix), and ``bounds[k]`` (x0, x1, y0, y1) grown over the texels set in slice k
+    (what :func:`occupied_bounds` finds, without a pass over the textures). Serial: a texel may be
+    hit by many fragments."""
     n = tex.shape[0]
     hw = tex.shape[1] * tex.shape[2]
     z0 = z_planes[0]
@@ -206,9 +242,12 @@ def _mark_occlusion_textures(pixel, depth, d, z_planes, leak_fix, tex):
             continue
         row = p // tex.shape[2]
         col = p - row * tex.shape[2]
-        tex[k, row, col] = 1
-        if leak_fix and k + 1 < n:
-            tex[k + 1, row, col] = 1
+        for kk in range(k, min(k + 2, n) if leak_fix else k + 1):
+            tex[kk, row, col] = 1
+            bounds[kk, 0] = min(bounds[kk, 0], float(col))
+            bounds[kk, 1] = max(bounds[kk, 1], float(col + 1))
+            bounds[kk, 2] = min(bounds[kk, 2], float(row))
+            bounds[kk, 3] = max(bounds[kk, 3], float(row + 1))
 
 
 def _occluder_vertices(vertices, occ_faces) -> np.ndarray:
@@ -216,15 +255,18 @@ def _occluder_vertices(vertices, occ_faces) -> np.ndarray:
     return vertices[np.unique(occ_faces)] if len(occ_faces) else np.zeros((0, 3))
 
 
-def slice_scene(setup: SlicingSetup, vertices, faces, leak_fix: bool = False):
+def slice_scene(setup: SlicingSetup, vertices, faces, leak_fix: bool = False, bounds=None):
     """One rasterization of the occluders from the COP; returns (textures uint8 (N,S,S), fragments).
 
     Each texel of slice k is 1 when some surface inside the slice projects on it: everything in the
     slice is projected onto its plane farthest from the light (the COP projection maps a texel of
-    one plane onto the same texel of every other plane). ``leak_fix`` also marks slice k+1 (Fig. 6)."""
+    one plane onto the same texel of every other plane). ``leak_fix`` also marks slice k+1 (Fig. 6).
+    ``bounds`` (optional, (N, 4) float64) receives :func:`occupied_bounds` of the textures."""
     v = setup.view
     n = setup.slices
     tex = np.zeros((n, v.height, v.width), np.uint8)
+    bb = np.empty((n, 4)) if bounds is None else bounds
+    bb[:] = (1e30, -1e30, 1e30, -1e30)  # occupied_bounds' empty slice
     if len(faces) == 0:
         return tex, 0
     frags = rasterize_fragments(v, vertices, faces, cull="none")
@@ -235,6 +277,7 @@ def slice_scene(setup: SlicingSetup, vertices, faces, leak_fix: bool = False):
         setup.z_planes,
         bool(leak_fix),
         tex,
+        bb,
     )
     return tex, len(frags)
 
@@ -295,9 +338,11 @@ def prefilter_mipmap(tex: np.ndarray):
 
 
 @kernel(parallel=True)
-def _nbuffer_levels(tex, nb):
+def _nbuffer_levels(tex, nb, bounds):
     """nb[s, l, i, j] = mean of tex[s] over rows [i, i+2^l) x cols [j, j+2^l) (zero outside):
-    level l from four lookups in level l-1 at offsets 0 and 2^(l-1) (Décoret's N-Buffers)."""
+    level l from four lookups in level l-1 at offsets 0 and 2^(l-1) (Décoret's N-Buffers).
+    ``bounds[s]`` (:func:`occupied_bounds`): a row whose boxes miss the set texels' rows is 0
+    without reading level l-1 (the sum would be 0 too; the textures are mostly empty)."""
     n, nl, h, w = nb.shape
     for job in prange(n * h):
         s = job // h
@@ -310,8 +355,12 @@ def _nbuffer_levels(tex, nb):
         for job in prange(n * h):
             s = job // h
             i = job - s * h
-            a = nb[s, lv - 1, i]
             dst = nb[s, lv, i]
+            if i + 2 * o <= bounds[s, 2] or i >= bounds[s, 3]:
+                for j in range(w):
+                    dst[j] = 0.0
+                continue
+            a = nb[s, lv - 1, i]
             if i + o < h:
                 c = nb[s, lv - 1, i + o]
                 for j in range(jm):  # branch-free body (vectorizes)
@@ -325,14 +374,16 @@ def _nbuffer_levels(tex, nb):
                     dst[j] = 0.25 * a[j]
 
 
-def prefilter_nbuffers(tex: np.ndarray, levels: int | None = None) -> np.ndarray:
+def prefilter_nbuffers(tex: np.ndarray, levels: int | None = None, bounds: np.ndarray | None = None) -> np.ndarray:
     """N-Buffers: float32 (N, L+1, S, S); level l holds the 2^l x 2^l box response at each texel.
-    ``levels`` (L) defaults to log2(S), the paper's full set."""
+    ``levels`` (L) defaults to log2(S), the paper's full set; ``bounds`` (optional) is
+    :func:`occupied_bounds` of ``tex`` when the caller has it."""
     n, h, w = tex.shape
     full = int(round(math.log2(max(h, w))))
     nl = full if levels is None else int(min(max(levels, 0), full))
     nb = np.empty((n, nl + 1, h, w), np.float32)
-    _nbuffer_levels(tex, nb)
+    bb = occupied_bounds(tex) if bounds is None else np.ascontiguousarray(bounds, dtype=np.float64)
+    _nbuffer_levels(tex, nb, bb)
     return nb
 
 
@@ -491,7 +542,7 @@ def _mip_support(x0, x1, y0, y1, max_aniso, nl):
     return 1.5 * (1 << lv) + 1e-6
 
 
-@kernel(nrt=False)
+@kernel(inline=True)
 def _nb_box(nb, s, lv, sx, sy):
     """Bilinear lookup of N-Buffer level lv at continuous box origin (sx, sy) (texel (i, j) holds
     the box whose corner is (j, i)); clamp-to-edge."""
@@ -510,27 +561,41 @@ def _nb_box(nb, s, lv, sx, sy):
     )
 
 
-@kernel(nrt=False)
+@kernel(inline=True)
 def _nb_square(nb, s, cx, cy, size):
     """Box response of a size x size square centred at (cx, cy): the two levels bracketing the
     size, interpolated linearly in size."""
     lmax = nb.shape[1] - 1
     if size <= 1.0:
         return _nb_box(nb, s, np.int64(0), cx - 0.5, cy - 0.5)  # not a literal: one specialisation
-    lf = math.log2(size)
-    l0 = int(math.floor(lf))
+    # floor(log2(size)) from the exponent bits (size > 1 here), exact; math.log2 only within 2^-40
+    # below a power of two, where its rounding might reach the next level (same l0 as before)
+    bits = np.float64(size).view(np.int64)
+    l0 = (bits >> 52) - 1023
+    if (bits & 0xFFFFFFFFFFFFF) > 0xFFFFFFFFFF000:
+        l0 = int(math.floor(math.log2(size)))
     if l0 >= lmax:
         h = 0.5 * (1 << lmax)
         return _nb_box(nb, s, lmax, cx - h, cy - h)
     s0 = float(1 << l0)
     t = size / s0 - 1.0
+    bx = cx - s0
+    by = cy - s0
+    if l0 + 2 <= lmax:
+        # every texel the eight taps below read (levels l0 and l0 + 1, after clamping) lies in the
+        # 2^(l0+2) box of level l0 + 2 at the first tap of level l0 + 1: when that box is empty
+        # (exactly 0: sums of non-negative dyadic means) both boxes are 0 and so is the result
+        ja = min(max(int(math.floor(bx)), 0), nb.shape[3] - 1)
+        ia = min(max(int(math.floor(by)), 0), nb.shape[2] - 1)
+        if nb[s, l0 + 2, ia, ja] == 0.0:
+            return 0.0
     a = _nb_box(nb, s, l0, cx - 0.5 * s0, cy - 0.5 * s0)
-    b = _nb_box(nb, s, l0 + 1, cx - s0, cy - s0)
+    b = _nb_box(nb, s, l0 + 1, bx, by)
     return (1 - t) * a + t * b
 
 
-@kernel(nrt=False)
-def lookup_nbuffers(nb, s, max_probes, x0, x1, y0, y1):
+@kernel(inline=True)
+def _lookup_nbuffers(nb, s, max_probes, x0, x1, y0, y1):
     """Rectangular kernel from square N-Buffer lookups: ceil(long/short) squares of the short side
     spread along the long side (one for a square light)."""
     wx = x1 - x0
@@ -548,6 +613,12 @@ def lookup_nbuffers(nb, s, max_probes, x0, x1, y0, y1):
         else:
             acc += _nb_square(nb, s, 0.5 * (x0 + x1), y0 + o, side)
     return acc / n
+
+
+@kernel(nrt=False)
+def lookup_nbuffers(nb, s, max_probes, x0, x1, y0, y1):
+    """:func:`_lookup_nbuffers` as a kernel of its own (the eye pass has it inlined)."""
+    return _lookup_nbuffers(nb, s, max_probes, x0, x1, y0, y1)
 
 
 @kernel(nrt=False)
@@ -632,7 +703,12 @@ def eye_pass(
     arrays, -1 for an empty slice (skipped: its occlusion is 0). ``bbox[slot]`` = (x0, x1, y0, y1)
     texel bounds of the slice's occupied texels: a kernel whose filter support (the rectangle,
     widened by what the N-Buffer boxes or the mipmap probes read beyond it) misses them has
-    occlusion 0 and is skipped, so the result is unchanged. Run by ``run_slots``, one slot per thread."""
+    occlusion 0 and is skipped, so the result is unchanged. Run by ``run_slots``, one slot per thread.
+
+    Points go in blocks of 64 (consecutive eye pixels: neighbouring kernels), dealt round-robin to
+    the slots, and each block visits the slices in the outer loop: one slice's texels stay in cache
+    over the block and the culling branch follows the image's coherence. Every point still
+    combines its slices in order (the same products, the same V)."""
     n = z_planes.shape[0] - 1
     thick = (z_planes[n] - z_planes[0]) / n
     # per slice plane, the constants of kernel_rect's map to texels (no division per point)
@@ -644,49 +720,123 @@ def eye_pass(
         ky[k] = sp[20] / ((sp[18] - sp[17]) * D)
     ox = sp[15] * sp[19] / (sp[16] - sp[15])
     oy = sp[18] * sp[20] / (sp[18] - sp[17])
-    nblock = (pts.shape[0] + 63) // 64  # blocks of 64 dealt round-robin to one slot per thread
+    # per point of the block: light-frame position, 1 / pz, running combination, slices left
+    bx = np.empty(64)
+    by = np.empty(64)
+    bz = np.empty(64)
+    bi = np.empty(64)
+    bacc = np.empty(64)
+    live = np.empty(64, np.bool_)
+    # per point of the block on the current slice: kernel rectangle, weight, whether to look up
+    rx0 = np.empty(64)
+    rx1 = np.empty(64)
+    ry0 = np.empty(64)
+    ry1 = np.empty(64)
+    rw = np.empty(64)
+    hit = np.empty(64, np.bool_)
+    acc0 = 1.0 if combine == 0 else 0.0
+    npts = pts.shape[0]
+    nblock = (npts + 63) // 64  # blocks of 64 dealt round-robin to one slot per thread
     for blk in range(tslot, nblock, nslot):
-        for i in range(blk * 64, min(pts.shape[0], blk * 64 + 64)):
+        i0 = blk * 64
+        m = min(npts, i0 + 64) - i0
+        # bounds over the block's points in front of the light: px / pz, py / pz, 1 / pz, pz
+        zmax = 0.0
+        umin = np.inf
+        umax = -np.inf
+        vmin = np.inf
+        vmax = -np.inf
+        imin = np.inf
+        imax = 0.0
+        for c in range(m):
+            i = i0 + c
             qx = pts[i, 0] - sp[0]
             qy = pts[i, 1] - sp[1]
             qz = pts[i, 2] - sp[2]
             px = qx * sp[3] + qy * sp[4] + qz * sp[5]
             py = qx * sp[6] + qy * sp[7] + qz * sp[8]
             pz = qx * sp[9] + qy * sp[10] + qz * sp[11]
-            if not (pz > 0.0):
-                out[i] = 1.0  # at or behind the light plane: nothing lies between P and the light
+            bx[c] = px
+            by[c] = py
+            bz[c] = pz
+            bacc[c] = acc0
+            # at or behind the light plane: nothing lies between P and the light (V = 1)
+            live[c] = pz > 0.0
+            bi[c] = 1.0 / pz if pz > 0.0 else 0.0
+            if pz > 0.0:
+                ip = bi[c]
+                umin = min(umin, px * ip)
+                umax = max(umax, px * ip)
+                vmin = min(vmin, py * ip)
+                vmax = max(vmax, py * ip)
+                imin = min(imin, ip)
+                imax = max(imax, ip)
+                zmax = max(zmax, pz)
+        for k in range(n):
+            if z_planes[k] >= zmax:
+                break  # this slice and all later ones are below every point of the block
+            s = slot[k]
+            if s < 0:
                 continue
-            acc = 1.0 if combine == 0 else 0.0
-            ipz = 1.0 / pz
-            for k in range(n):
-                if z_planes[k] >= pz:
-                    break  # this slice and all later ones are below P
-                w = slice_weight(pz, z_planes[k], z_planes[k + 1], thick, self_mode)
-                s = slot[k]
-                if w <= 0.0 or s < 0:
+            zt = z_planes[k]
+            zl = z_planes[k + 1]
+            b0 = bbox[s, 0]
+            b1 = bbox[s, 1]
+            b2 = bbox[s, 2]
+            b3 = bbox[s, 3]
+            if filt != 0:
+                # the whole block at once: every point's rectangle (centre (px, py) zl / pz, half sizes
+                # (hu, hv) |1 - zl / pz|, mapped by kx, ky) widened by the margin below (at most half
+                # its side + 1.5) lies in these bounds, pushed out by far more than rounding; when they
+                # miss the occupied texels so does every point's test below (same lookups, same V)
+                am = max(abs(1.0 - zl * imin), abs(1.0 - zl * imax))
+                ex = 2.0 * sp[12] * am * kx[k] + 1.5
+                ey = 2.0 * sp[13] * am * ky[k] + 1.5
+                cxa = umin * zl * kx[k] - ox
+                cxb = umax * zl * kx[k] - ox
+                cya = oy - vmax * zl * ky[k]
+                cyb = oy - vmin * zl * ky[k]
+                tol = 1e-3 + 1e-9 * (abs(cxa) + abs(cxb) + abs(cya) + abs(cyb) + ex + ey + abs(ox) + abs(oy))
+                if cxb + ex + tol < b0 or cxa - ex - tol > b1 or cyb + ey + tol < b2 or cya - ey - tol > b3:
                     continue
-                x0, x1, y0, y1 = _kernel_rect_fast(
-                    px, py, pz, ipz, z_planes[k + 1], sp[12], sp[13], kx[k], ky[k], ox, oy
-                )
+            # the kernels of the block's points on this slice and their culling, branch-free (vectorizes)
+            for c in range(m):
+                pz = bz[c]
+                w = slice_weight(pz, zt, zl, thick, self_mode)
+                x0, x1, y0, y1 = _kernel_rect_fast(bx[c], by[c], pz, bi[c], zl, sp[12], sp[13], kx[k], ky[k], ox, oy)
+                # the larger N-Buffer box is at most twice the short side, +1 bilinear; the exact box 1;
+                # the mipmap probes' reach is tested below
+                mg = 0.5 * min(x1 - x0, y1 - y0) + 1.5 if filt == 1 else 1.0
+                miss = (x1 + mg < b0) | (x0 - mg > b1) | (y1 + mg < b2) | (y0 - mg > b3)
+                rx0[c] = x0
+                rx1[c] = x1
+                ry0[c] = y0
+                ry1[c] = y1
+                rw[c] = w
+                hit[c] = live[c] & (zt < pz) & (w > 0.0) & ((filt == 0) | ~miss)
+            for c in range(m):
+                if not hit[c]:
+                    continue
+                x0 = rx0[c]
+                x1 = rx1[c]
+                y0 = ry0[c]
+                y1 = ry1[c]
                 if filt == 0:  # probes inside the rectangle read +-1.5 texels of their upper level
-                    m = _mip_support(x0, x1, y0, y1, max_aniso, offs.shape[0])
-                elif filt == 1:  # the larger N-Buffer box is at most twice the short side, +1 bilinear
-                    m = 0.5 * min(x1 - x0, y1 - y0) + 1.5
-                else:  # exact box
-                    m = 1.0
-                if x1 + m < bbox[s, 0] or x0 - m > bbox[s, 1] or y1 + m < bbox[s, 2] or y0 - m > bbox[s, 3]:
-                    continue
-                if filt == 0:
+                    mg = _mip_support(x0, x1, y0, y1, max_aniso, offs.shape[0])
+                    if x1 + mg < b0 or x0 - mg > b1 or y1 + mg < b2 or y0 - mg > b3:
+                        continue
                     o = lookup_mipmap(pyr, s, offs, sizes, max_aniso, x0, x1, y0, y1)
                 elif filt == 1:
-                    o = lookup_nbuffers(nb, s, max_aniso, x0, x1, y0, y1)
+                    o = _lookup_nbuffers(nb, s, max_aniso, x0, x1, y0, y1)
                 else:
                     o = lookup_sat(sat, s, x0, x1, y0, y1)
                 o = min(max(o, 0.0), 1.0)
-                acc = combine_occlusion(acc, w * o, combine)
-                if combine == 0 and acc <= 0.0:
-                    break  # product already 0
-            out[i] = finish_visibility(acc, combine)
+                a = combine_occlusion(bacc[c], rw[c] * o, combine)
+                bacc[c] = a
+                if combine == 0 and a <= 0.0:
+                    live[c] = False  # product already 0
+        for c in range(m):
+            out[i0 + c] = finish_visibility(bacc[c], combine) if bz[c] > 0.0 else 1.0
 
 
 def nbuffer_levels_needed(setup: SlicingSetup, pz_max: float) -> int:
@@ -708,8 +858,15 @@ def nbuffer_levels_needed(setup: SlicingSetup, pz_max: float) -> int:
     return int(min(full, math.floor(math.log2(wmax)) + 1))
 
 
-def prefilter(tex_used: np.ndarray, filt: str, setup: SlicingSetup | None = None, pz_max: float | None = None):
-    """Run the selected prefilter on the non-empty textures; returns the lookup arrays and stats."""
+def prefilter(
+    tex_used: np.ndarray,
+    filt: str,
+    setup: SlicingSetup | None = None,
+    pz_max: float | None = None,
+    bounds: np.ndarray | None = None,
+):
+    """Run the selected prefilter on the non-empty textures (``bounds``: their
+    :func:`occupied_bounds`, if known); returns the lookup arrays and stats."""
     e32 = np.zeros((1, 1), np.float32)
     pyr, offs, sizes = e32, np.zeros(1, np.int64), np.ones(1, np.int64)
     nb = np.zeros((1, 1, 1, 1), np.float32)
@@ -720,7 +877,7 @@ def prefilter(tex_used: np.ndarray, filt: str, setup: SlicingSetup | None = None
         st["mip_levels"] = int(len(sizes))
     elif filt == "nbuffers":
         lv = None if setup is None or pz_max is None else nbuffer_levels_needed(setup, pz_max)
-        nb = prefilter_nbuffers(tex_used, lv)
+        nb = prefilter_nbuffers(tex_used, lv, bounds)
         st["nbuffer_levels"] = int(nb.shape[1] - 1)
     else:
         sat = prefilter_sat(tex_used)
@@ -744,8 +901,9 @@ def occlusion_visibility(
 ):
     """The whole method on arbitrary points: V (K,) float64 and stats. ``flat`` is the scene's
     FlatGeometry (occluders = faces of role both|occluder); ``points`` (K,3) world points to shade
-    (they also enter the frustum fit). ``timer`` (optional) gets the phases slicing / prefilter /
-    eye_pass."""
+    (they also enter the frustum fit): float64, or float32 as an eye G-buffer's positions are, read
+    as they are (a point with a NaN, a pixel without a surface, gets V = 1 and leaves the fit).
+    ``timer`` (optional) gets the phases slicing / prefilter / eye_pass."""
     from contextlib import contextmanager, nullcontext
 
     own: dict = {}
@@ -764,7 +922,7 @@ def occlusion_visibility(
         lo, hi = scene_bounds if scene_bounds is not None else (flat.vertices.min(0), flat.vertices.max(0))
         light = sphere_to_rect(light, direction=(np.asarray(lo) + np.asarray(hi)) / 2 - light.center)
         stats["light_approximation"] = "sphere as equal-area square"
-    pos = np.ascontiguousarray(np.asarray(points, dtype=np.float64).reshape(-1, 3))
+    pos = _points_array(points)
 
     # 1. slicing
     with phase("slicing"):
@@ -772,16 +930,17 @@ def occlusion_visibility(
         occ_faces = flat.faces_where(flat.occluder)
         occ_pts = flat.cached(("occluder_vertices",), lambda: _occluder_vertices(flat.vertices, occ_faces))
         setup = fit_slicing_view(light, occ_pts, pos, int(texture_size), int(slices), float(cop_distance))
-        tex, nfrag = slice_scene(setup, flat.vertices, occ_faces, bool(leak_fix))
-        nonempty = tex.reshape(tex.shape[0], -1).any(axis=1)
+        bounds = np.empty((setup.slices, 4))
+        tex, nfrag = slice_scene(setup, flat.vertices, occ_faces, bool(leak_fix), bounds)
+        nonempty = bounds[:, 1] > bounds[:, 0]  # a slice with a texel set
         slot = np.full(tex.shape[0], -1, np.int64)
         slot[nonempty] = np.arange(int(nonempty.sum()))
-        tex_used = np.ascontiguousarray(tex[nonempty])
-        bbox = occupied_bounds(tex_used)
+        tex_used = tex if nonempty.all() else np.ascontiguousarray(tex[nonempty])
+        bbox = np.ascontiguousarray(bounds[nonempty])
     # 2. prefiltering
     with phase("prefilter"):
         pz_max = max(float(setup.z_planes[-1]), setup.depth)  # bounds the N-Buffer levels needed
-        arrays, pst = prefilter(tex_used, filter, setup, pz_max)
+        arrays, pst = prefilter(tex_used, filter, setup, pz_max, bbox)
     # 3-6. eye pass
     with phase("eye_pass"):
         vis = np.ones(len(pos), np.float64)
@@ -893,11 +1052,12 @@ class OcclusionTextures(Method):
         anisotropy=16,
         self_shadow="fade",
     ) -> MethodOutput:
-        pos, _nrm, idx = ctx.points()
+        # straight over the eye G-buffer (NaN where no surface: V = 1 there, as ctx.scatter fills)
+        g = ctx.eye
         vis, stats = occlusion_visibility(
             ctx.light,
             ctx.flat,
-            pos,
+            g.position.reshape(-1, 3),
             slices,
             texture_size,
             filter,
@@ -909,4 +1069,4 @@ class OcclusionTextures(Method):
             timer=ctx.timer,
             scene_bounds=ctx.scene.bounds(),
         )
-        return MethodOutput(visibility=ctx.scatter(vis.astype(np.float32), idx), stats=stats)
+        return MethodOutput(visibility=vis.astype(np.float32).reshape(g.mask.shape), stats=stats)
