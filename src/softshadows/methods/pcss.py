@@ -374,8 +374,10 @@ def blocker_search_kernel(
     slot,
     vp,
     depth_map,
-    pts,
-    nrm,
+    position,
+    normal,
+    mask,
+    offs,
     bias,
     slope_bias,
     half_light,
@@ -395,17 +397,31 @@ def blocker_search_kernel(
     """Step 1. Per point: receiver depth (minus bias), average blocker depth and blocker count
     over the search region (point-sampled taps). ``half_light`` = (half size x, half size y) of
     the light in world units, along the map's right/up axes. ``sat``: :func:`occupancy_grid`'s
-    table (a region over empty cells has no blocker: its taps are not taken). Run by ``run_slots``, one slot per thread."""
-    n = pts.shape[0]
+    table (a region over empty cells has no blocker: its taps are not taken). The points are the
+    eye G-buffer's surface pixels (``position``, ``normal``: (h, w, 3), ``mask``: (h, w)), read
+    straight from the image: point k, the k-th surface pixel in row-major order (``offs[i]``: the
+    surface pixels above row i), is written at k. The normal's sign does not matter (every use of
+    it is odd in it or takes its absolute value, and negation is exact). Run by ``run_slots``, one
+    slot per thread, which takes every ``nslot``-th image row."""
+    h, w = mask.shape
     H, W = depth_map.shape
     S = pattern.shape[0]
     texel1 = (vp[VP_R] - vp[VP_L]) / vp[VP_W]  # texel size at depth 1 (perspective)
     iw = _exact_inverse(vp[VP_W])
     ih = _exact_inverse(vp[VP_H])
-    nblock = (n + 63) // 64  # blocks of 64 dealt round-robin to one slot per thread
-    for blk in range(slot, nblock, nslot):
-        for k in range(blk * 64, min(n, blk * 64 + 64)):
-            sx, sy, z = view_project(vp, pts[k, 0], pts[k, 1], pts[k, 2])
+    for i in range(slot, h, nslot):  # rows dealt round-robin to one slot per thread
+        k = offs[i] - 1
+        for j in range(w):
+            if not mask[i, j]:
+                continue
+            k += 1
+            px = np.float64(position[i, j, 0])
+            py = np.float64(position[i, j, 1])
+            pz = np.float64(position[i, j, 2])
+            nx = np.float64(normal[i, j, 0])
+            ny = np.float64(normal[i, j, 1])
+            nz = np.float64(normal[i, j, 2])
+            sx, sy, z = view_project(vp, px, py, pz)
             if not (z > z_near):
                 zr_out[k] = z
                 avg_out[k] = 0.0
@@ -422,19 +438,13 @@ def blocker_search_kernel(
                 avg_out[k] = 0.0
                 nblk_out[k] = 0
                 continue
-            off = receiver_offset(
-                vp, pts[k, 0], pts[k, 1], pts[k, 2], nrm[k, 0], nrm[k, 1], nrm[k, 2], z, bias, slope_bias
-            )
+            off = receiver_offset(vp, px, py, pz, nx, ny, nz, z, bias, slope_bias)
             zt = z - off
             zr_out[k] = zt
-            nr, nu, nf = _view_normal(vp, nrm[k, 0], nrm[k, 1], nrm[k, 2])
+            nr, nu, nf = _view_normal(vp, nx, ny, nz)
             npo = nr * 0.0
             if plane:  # n.(p - o) in view coordinates: receiver plane through p
-                npo = (
-                    nrm[k, 0] * (pts[k, 0] - vp[VP_ORIGIN])
-                    + nrm[k, 1] * (pts[k, 1] - vp[VP_ORIGIN + 1])
-                    + nrm[k, 2] * (pts[k, 2] - vp[VP_ORIGIN + 2])
-                )
+                npo = nx * (px - vp[VP_ORIGIN]) + ny * (py - vp[VP_ORIGIN + 1]) + nz * (pz - vp[VP_ORIGIN + 2])
             lo = zt
             hi = zt
             if plane:  # bounds of the taps' plane depths (see _plane_range)
@@ -453,8 +463,8 @@ def blocker_search_kernel(
                 shy = 2.0 * _hash01(k + 0x5BD1E995, seed)
             total = 0.0
             cnt = 0
-            for i in range(S):
-                ox, oy = _tap_offset(pattern, i, disk, rotate, c, s, shx, shy)
+            for t in range(S):
+                ox, oy = _tap_offset(pattern, t, disk, rotate, c, s, shx, shy)
                 tx = sx + ox * rx
                 ty = sy - oy * ry
                 col = int(np.floor(tx))
@@ -492,8 +502,10 @@ def filtering_kernel(
     slot,
     vp,
     depth_map,
-    pts,
-    nrm,
+    position,
+    normal,
+    mask,
+    offs,
     zr,
     avg,
     nblk,
@@ -512,18 +524,24 @@ def filtering_kernel(
     nslot=1,
 ):
     """Steps 2 and 3 per point: penumbra estimation, then percentage-closer filtering with a
-    kernel of radius w / 2 (per light axis) in texels at the receiver's depth. Run by ``run_slots``, one slot per thread."""
-    n = pts.shape[0]
+    kernel of radius w / 2 (per light axis) in texels at the receiver's depth. The points, their
+    indices and the slots as in :func:`blocker_search_kernel`; V goes to ``out`` (h, w) at the
+    point's pixel, 1 where no surface."""
+    h, w = mask.shape
     H, W = depth_map.shape
     S = pattern.shape[0]
     texel1 = (vp[VP_R] - vp[VP_L]) / vp[VP_W]  # texel size at depth 1 (perspective map)
     iw = _exact_inverse(vp[VP_W])
     ih = _exact_inverse(vp[VP_H])
-    nblock = (n + 63) // 64  # blocks of 64 dealt round-robin to one slot per thread
-    for blk in range(slot, nblock, nslot):
-        for k in range(blk * 64, min(n, blk * 64 + 64)):
+    for i in range(slot, h, nslot):  # rows dealt round-robin to one slot per thread
+        k = offs[i] - 1
+        for j in range(w):
+            if not mask[i, j]:
+                out[i, j] = 1.0
+                continue
+            k += 1
             if nblk[k] == 0:  # early out of the blocker search: fully lit, no filtering
-                out[k] = 1.0
+                out[i, j] = 1.0
                 wp_out[k] = 0.0
                 radius_out[k] = 0.0
                 continue
@@ -533,15 +551,17 @@ def filtering_kernel(
             ry = 0.5 * wy / (texel1 * zr[k])
             wp_out[k] = max(wx, wy)
             radius_out[k] = max(rx, ry)
-            sx, sy, z = view_project(vp, pts[k, 0], pts[k, 1], pts[k, 2])
+            px = np.float64(position[i, j, 0])
+            py = np.float64(position[i, j, 1])
+            pz = np.float64(position[i, j, 2])
+            nx = np.float64(normal[i, j, 0])
+            ny = np.float64(normal[i, j, 1])
+            nz = np.float64(normal[i, j, 2])
+            sx, sy, z = view_project(vp, px, py, pz)
             zt = zr[k]
             off = z - zt
-            nr, nu, nf = _view_normal(vp, nrm[k, 0], nrm[k, 1], nrm[k, 2])
-            npo = (
-                nrm[k, 0] * (pts[k, 0] - vp[VP_ORIGIN])
-                + nrm[k, 1] * (pts[k, 1] - vp[VP_ORIGIN + 1])
-                + nrm[k, 2] * (pts[k, 2] - vp[VP_ORIGIN + 2])
-            )
+            nr, nu, nf = _view_normal(vp, nx, ny, nz)
+            npo = nx * (px - vp[VP_ORIGIN]) + ny * (py - vp[VP_ORIGIN + 1]) + nz * (pz - vp[VP_ORIGIN + 2])
             ex = rx * (1.0 + 1e-6) + 2.0
             ey = ry * (1.0 + 1e-6) + 2.0
             lo = zt
@@ -550,10 +570,10 @@ def filtering_kernel(
                 lo, hi = _plane_range(vp, nr, nu, nf, npo, sx, sy, ex, ey, z, off, iw, ih)
             lit, dark = _region_decided(cmin, cmax, OCC_CELL, H, W, sx, sy, ex, ey, lo, hi)
             if lit:  # every texel read is lit: every tap adds its whole weight, V = 1
-                out[k] = 1.0
+                out[i, j] = 1.0
                 continue
             if dark:  # every texel read is a blocker: no tap adds anything, V = 0
-                out[k] = 0.0
+                out[i, j] = 0.0
                 continue
             c = 1.0
             s = 0.0
@@ -566,8 +586,8 @@ def filtering_kernel(
                 shx = 2.0 * a
                 shy = 2.0 * _hash01(k + 0x68E31DA4, seed)
             acc = 0.0
-            for i in range(S):
-                ox, oy = _tap_offset(pattern, i, disk, rotate, c, s, shx, shy)
+            for t in range(S):
+                ox, oy = _tap_offset(pattern, t, disk, rotate, c, s, shx, shy)
                 tx = sx + ox * rx
                 ty = sy - oy * ry
                 if plane and bilinear:  # the plane only where the 2x2 texels need it
@@ -581,7 +601,7 @@ def filtering_kernel(
                 else:
                     acc += _cmp_nearest(depth_map, tx, ty, zc)
             v = acc / S
-            out[k] = min(max(v, 0.0), 1.0)
+            out[i, j] = min(max(v, 0.0), 1.0)
 
 
 # ---- the paper's steps (orchestration) ---------------------------------------------------------
@@ -592,12 +612,21 @@ def light_extent(light) -> np.ndarray:
     return np.array([2.0 * light.radius, 2.0 * light.radius], np.float64)
 
 
-def blocker_search(smap, pts, nrm, light, bias, slope_bias, pattern, disk, rotate, seed, plane, grid=None):
-    """Step 1 over all points -> (z_receiver, avg blocker depth, blocker count, search radius).
-    z_receiver is the biased depth where blockers were searched for, the plain depth where the
-    search was skipped (no blocker: the filter does not read it). ``grid``: the map's
-    :func:`occupancy_grid` (computed here if not given)."""
-    n = len(pts)
+def surface_offsets(mask: np.ndarray) -> np.ndarray:
+    """(h + 1,) int64: the number of surface pixels (``mask`` (h, w) True) above each row, and in all:
+    the index of a row's first point among the surface pixels in row-major order."""
+    offs = np.zeros(mask.shape[0] + 1, np.int64)
+    np.cumsum(np.count_nonzero(mask, axis=1), out=offs[1:])
+    return offs
+
+
+def blocker_search(smap, eye, offs, light, bias, slope_bias, pattern, disk, rotate, seed, plane, grid=None):
+    """Step 1 over the surface pixels of the eye G-buffer ``eye`` (``offs``: :func:`surface_offsets`
+    of its mask) -> per point, in row-major order: (z_receiver, avg blocker depth, blocker count,
+    search radius). z_receiver is the biased depth where blockers were searched for, the plain
+    depth where the search was skipped (no blocker: the filter does not read it). ``grid``: the
+    map's :func:`occupancy_grid` (computed here if not given)."""
+    n = int(offs[-1])
     zr = np.empty(n, np.float64)
     avg = np.empty(n, np.float64)
     nblk = np.empty(n, np.int32)
@@ -613,8 +642,10 @@ def blocker_search(smap, pts, nrm, light, bias, slope_bias, pattern, disk, rotat
         nslot,
         smap.vp,
         smap.depth,
-        pts,
-        nrm,
+        eye.position,
+        eye.normal,
+        eye.mask,
+        offs,
         float(bias),
         float(slope_bias),
         0.5 * light_extent(light),
@@ -634,13 +665,14 @@ def blocker_search(smap, pts, nrm, light, bias, slope_bias, pattern, disk, rotat
     return zr, avg, nblk, search
 
 
-def filtering(smap, pts, nrm, zr, avg, nblk, light, pattern, disk, rotate, seed, bilinear, plane, grid=None):
-    """Steps 2 + 3 over all points -> (V, penumbra width (world, max over axes), filter radius
+def filtering(smap, eye, offs, zr, avg, nblk, light, pattern, disk, rotate, seed, bilinear, plane, grid=None):
+    """Steps 2 + 3 over the surface pixels of ``eye`` (as :func:`blocker_search`) -> (V (h, w)
+    float32, 1 where no surface; per point: penumbra width (world, max over axes), filter radius
     (texels, max over axes)). ``grid``: the map's :func:`occupancy_grid` (computed here if not
     given)."""
     cmin, cmax = (occupancy_grid(smap.depth) if grid is None else grid)[2:]
-    n = len(pts)
-    out = np.empty(n, np.float32)
+    n = int(offs[-1])
+    out = np.empty(eye.mask.shape, np.float32)
     wp = np.empty(n, np.float64)
     radius = np.empty(n, np.float64)
     nslot = numba.get_num_threads()
@@ -649,8 +681,10 @@ def filtering(smap, pts, nrm, zr, avg, nblk, light, pattern, disk, rotate, seed,
         nslot,
         smap.vp,
         smap.depth,
-        pts,
-        nrm,
+        eye.position,
+        eye.normal,
+        eye.mask,
+        offs,
         zr,
         avg,
         nblk,
@@ -702,9 +736,7 @@ class PCSS(Method):
     ):
         light = ctx.light
         disk = light.shape != "rect"
-        pts, nrm, idx = ctx.points()
-        pts = np.ascontiguousarray(pts)
-        nrm = np.ascontiguousarray(nrm)
+        offs = surface_offsets(ctx.eye.mask)  # the points: the G-buffer's surface pixels, read in place
         search_pat = sample_pattern(search_samples, pattern, disk)
         filter_pat = sample_pattern(filter_samples, pattern, disk)
         with ctx.timer.phase("shadow_map"):
@@ -713,18 +745,30 @@ class PCSS(Method):
         with ctx.timer.phase("blocker_search"):
             grid = occupancy_grid(smap.depth)
             zr, avg, nblk, search = blocker_search(
-                smap, pts, nrm, light, bias, slope_bias, search_pat, disk, rotate, ctx.seed, receiver_plane, grid
+                smap, ctx.eye, offs, light, bias, slope_bias, search_pat, disk, rotate, ctx.seed, receiver_plane, grid
             )
         with ctx.timer.phase("filter"):  # penumbra estimation + filtering, one pass over the points
-            v, wp, radius = filtering(
-                smap, pts, nrm, zr, avg, nblk, light, filter_pat, disk, rotate, ctx.seed, bilinear, receiver_plane, grid
+            out, wp, radius = filtering(
+                smap,
+                ctx.eye,
+                offs,
+                zr,
+                avg,
+                nblk,
+                light,
+                filter_pat,
+                disk,
+                rotate,
+                ctx.seed,
+                bilinear,
+                receiver_plane,
+                grid,
             )
-            out = ctx.scatter(v, idx)
-        n = max(len(pts), 1)
+        n = max(int(offs[-1]), 1)
         has = nblk > 0
         stats = {
             "map_size": map_size,
-            "map_coverage": float((smap.tri_id >= 0).mean()),
+            "map_coverage": np.count_nonzero(smap.tri_id >= 0) / smap.tri_id.size,  # (a count: no float copy)
             "search_taps": int(len(search_pat)),
             "filter_taps": int(len(filter_pat)),
             "light_size": [float(x) for x in light_extent(light)],
