@@ -275,47 +275,70 @@ OCC_CELL = 16
 
 
 @kernel(parallel=True)
-def _occupancy_rows(depth, cell, counts, row_min, cmin, cmax):
-    """Per grid cell (``cell`` x ``cell`` texels) the number of finite texels, into ``counts``
-    (ny + 1, nx + 1) at [cy + 1, cx + 1], and the smallest and largest depth (+inf for an empty
-    texel), into ``cmin`` and ``cmax`` (ny, nx); per grid row the smallest depth, into ``row_min``."""
-    H, W = depth.shape
+def _occupancy_rows(bits, cell, counts, row_min, cmin, cmax):
+    """Per grid cell (``cell`` x ``cell`` texels) of a float32 map given as its bits (``bits``: the
+    map viewed as int32) the number of finite texels, into ``counts`` (ny + 1, nx + 1) at
+    [cy + 1, cx + 1], and the smallest and largest depth (+inf for an empty texel), into ``cmin``
+    and ``cmax`` (ny, nx) float32; per grid row the smallest depth, into ``row_min``.
+
+    Per grid row, every map column's count, smallest and largest depth over the row's ``cell``
+    texel rows first, then the cells from their columns. The column pass compares integer keys
+    that order as the floats do (the sign bit flips the other bits; a map holds no NaN): a loop
+    of integer selects that vectorizes, which float selects without fast-math did not (1.1 ->
+    0.43 ms a 1024^2 map on one thread). Minima and maxima are values of the map: no rounding."""
+    H, W = bits.shape
     ny = row_min.shape[0]
     nx = counts.shape[1] - 1
     for cy in prange(ny):
+        col_n = np.zeros(W, np.int32)
+        col_lo = np.full(W, np.int32(0x7FFFFFFF), np.int32)
+        col_hi = np.full(W, np.int32(-0x80000000), np.int32)
+        for r in range(cy * cell, min(H, cy * cell + cell)):
+            for c in range(W):
+                b = bits[r, c]
+                key = b ^ ((b >> 31) & np.int32(0x7FFFFFFF))
+                col_n[c] += np.int32(1) if key < np.int32(0x7F800000) else np.int32(0)  # below +inf
+                lo = col_lo[c]
+                col_lo[c] = key if key < lo else lo
+                hi = col_hi[c]
+                col_hi[c] = key if key > hi else hi
+        for c in range(W):  # keys back to float bits (the map's rows and columns are not empty)
+            lo = col_lo[c]
+            col_lo[c] = lo ^ ((lo >> 31) & np.int32(0x7FFFFFFF))
+            hi = col_hi[c]
+            col_hi[c] = hi ^ ((hi >> 31) & np.int32(0x7FFFFFFF))
+        lo_f = col_lo.view(np.float32)
+        hi_f = col_hi.view(np.float32)
         m = np.inf
         for cx in range(nx):
-            cmin[cy, cx] = np.inf
-            cmax[cy, cx] = -np.inf
-        for r in range(cy * cell, min(H, cy * cell + cell)):
-            for cx in range(nx):
-                n = 0
-                lo = cmin[cy, cx]
-                hi = cmax[cy, cx]
-                for c in range(cx * cell, min(W, cx * cell + cell)):
-                    d = depth[r, c]
-                    n += d < np.inf
-                    lo = min(lo, d)
-                    hi = max(hi, d)
-                counts[cy + 1, cx + 1] += n
-                cmin[cy, cx] = lo
-                cmax[cy, cx] = hi
-                m = min(m, lo)
+            n = 0
+            lo = lo_f[cx * cell]
+            hi = hi_f[cx * cell]
+            for c in range(cx * cell, min(W, cx * cell + cell)):
+                n += col_n[c]
+                lo = min(lo, lo_f[c])
+                hi = max(hi, hi_f[c])
+            counts[cy + 1, cx + 1] += n
+            cmin[cy, cx] = lo
+            cmax[cy, cx] = hi
+            m = min(m, lo)
         row_min[cy] = m
 
 
 def occupancy_grid(depth: np.ndarray) -> tuple[np.ndarray, float, np.ndarray, np.ndarray]:
     """(summed-area table (ny + 1, nx + 1) int64 of the finite texels per ``OCC_CELL``-texel cell,
     the smallest depth of the map: +inf where it holds no occluder, the smallest and the largest
-    depth per cell (ny, nx) float32: +inf for an empty texel), in one pass over the map."""
+    depth per cell (ny, nx) float32: +inf for an empty texel), in one pass over the float32 map."""
+    if depth.dtype != np.float32:
+        raise TypeError(f"occupancy_grid: a float32 depth map, got {depth.dtype}")
     H, W = depth.shape
     ny = (H + OCC_CELL - 1) // OCC_CELL
     nx = (W + OCC_CELL - 1) // OCC_CELL
     counts = np.zeros((ny + 1, nx + 1), np.int64)
     row_min = np.empty(ny, np.float64)
-    cmin = np.empty((ny, nx), depth.dtype)
-    cmax = np.empty((ny, nx), depth.dtype)
-    _occupancy_rows(depth, OCC_CELL, counts, row_min, cmin, cmax)
+    cmin = np.empty((ny, nx), np.float32)
+    cmax = np.empty((ny, nx), np.float32)
+    _occupancy_rows(np.ascontiguousarray(depth).view(np.int32), OCC_CELL, counts, row_min, cmin, cmax)
     np.cumsum(counts, axis=0, out=counts)
     np.cumsum(counts, axis=1, out=counts)
     return counts, float(row_min.min()) if ny else np.inf, cmin, cmax
