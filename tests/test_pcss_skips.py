@@ -14,10 +14,11 @@ pcss = importlib.import_module("softshadows.methods.pcss")
 def test_occupancy_grid_counts_and_nearest_depth():
     """The summed-area table counts the finite texels of every rectangle of cells, and the second
     value is the map's smallest depth: against numpy's counts on a map with holes and ragged
-    edges (sizes that are not multiples of the cell)."""
+    edges (sizes that are not multiples of the cell), with negative depths too (the grid compares
+    integer keys of the floats' bits, whose order flips below zero)."""
     rng = np.random.default_rng(3)
     H, W = 70, 53
-    d = rng.uniform(0.5, 4.0, (H, W)).astype(np.float32)
+    d = rng.uniform(-2.0, 4.0, (H, W)).astype(np.float32)
     d[rng.random((H, W)) < 0.6] = np.inf
     d[:20, :30] = np.inf  # whole empty cells
     sat, zmin, cmin, cmax = pcss.occupancy_grid(d)
