@@ -98,7 +98,7 @@ def slice_of(d, sb):
     s = 0
     step = (sb.shape[0] - 1) >> 1
     while step > 0:
-        s = s + step if sb[s + step] <= d else s
+        s += step & -np.int64(sb[s + step] <= d)  # a mask, not a select (LLVM made the select a branch)
         step >>= 1
     return s
 
