@@ -98,7 +98,7 @@ def slice_of(d, sb):
     s = 0
     step = (sb.shape[0] - 1) >> 1
     while step > 0:
-        s = s + step if sb[s + step] <= d else s
+        s += step & -np.int64(sb[s + step] <= d)  # a mask, not a select (LLVM made the select a branch)
         step >>= 1
     return s
 
@@ -2074,19 +2074,21 @@ def accumulate_penumbrae(
 # composition
 # ---------------------------------------------------------------------------------------------
 @kernel(parallel=True)
-def _compose(order, umbra, pen, n_all, out):
-    for k in prange(n_all):
+def _compose(order, dest, umbra, pen, out):
+    for k in prange(out.shape[0]):
         out[k] = 1.0
     for j in prange(order.shape[0]):
         x = 1.0 - (umbra[j] + pen[j])
-        out[order[j]] = min(max(x, 0.0), 1.0)
+        out[dest[order[j]]] = min(max(x, 0.0), 1.0)
 
 
-def compose_visibility(grid: SampleGrid, umbra, pen, n_all: int) -> np.ndarray:
+def compose_visibility(grid: SampleGrid, umbra, pen, n_all: int, pixels=None) -> np.ndarray:
     """Eq. 4 with C = 0: V = 1 - (umbral count + summed signed penumbral occlusion), clamped to
-    [0, 1]; samples outside the grid (behind the light's view) are lit."""
+    [0, 1]; samples outside the grid (behind the light's view) are lit. V of the n_all input
+    samples, or with ``pixels`` (each input sample's flat pixel index) an image of n_all pixels,
+    1 where no sample lies (``FrameContext.scatter``'s, without the per-sample array)."""
     out = np.empty(n_all, np.float32)
-    _compose(grid.order, umbra, pen, n_all, out)
+    _compose(grid.order, np.arange(n_all) if pixels is None else pixels, umbra, pen, out)
     return out
 
 
@@ -2172,12 +2174,15 @@ def irregular_visibility(
     overdraw_stats=False,
     timer=None,
     raw=False,
+    pixels=None,
+    n_pixels=0,
 ):
     """V at eye samples (K,) float32 and stats; the steps of Figure 2 in order. Each sample is
     moved along its normal by ``origin_bound`` (per sample, scene units: the ray-origin error bound
     of :func:`ground_truth.hit_points`; none when None) plus ``offset`` x the scene diagonal. With
     ``raw``, also (umbral count, penumbral sum) per input sample (NaN for samples outside the
-    grid)."""
+    grid). With ``pixels`` (the samples' flat pixel indices), V is an image of ``n_pixels`` pixels
+    instead (1 where no sample lies)."""
     import contextlib
 
     def phase(name):
@@ -2202,7 +2207,7 @@ def irregular_visibility(
         qd = build_penumbra_quads(g, edges, light, bound_r)
         bl = bin_penumbra_quads(g, qd, bound_r, per_bin)
         pen, st_p = accumulate_penumbrae(g, edges, qd, bl, light, per_bin, wedge)
-        v = compose_visibility(g, umbra, pen, len(pts))
+        v = compose_visibility(g, umbra, pen, len(pts) if pixels is None else n_pixels, pixels)
     stats.update(
         samples=int(len(pts)),
         grid_samples=int(len(g.order)),
@@ -2321,6 +2326,8 @@ class Irregular(Method):
             offset=offset,
             overdraw_stats=overdraw_stats,
             timer=ctx.timer,
+            pixels=idx,
+            n_pixels=ctx.eye.mask.size,
         )
         stats.update(extra)
-        return MethodOutput(ctx.scatter(v, idx), stats)
+        return MethodOutput(v.reshape(ctx.eye.mask.shape), stats)
