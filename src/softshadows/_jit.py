@@ -52,10 +52,19 @@ INLINE = os.environ.get("SOFTSHADOWS_INLINE", "")  # "" (as declared), "ir", "ll
 KERNELS: list = []  # every dispatcher made by @kernel, in import order
 
 
-def kernel(fn=None, *, parallel: bool = False, inline: bool | str = False, nogil: bool = False, nrt: bool = True):
+def kernel(
+    fn=None,
+    *,
+    parallel: bool = False,
+    inline: bool | str = False,
+    nogil: bool = False,
+    nrt: bool = True,
+    noalias: bool = False,
+):
     """``njit`` with the project's flags (see the module docstring). ``nrt=False``: no reference
     counting of arrays (the function must not allocate); for serial work functions called from a
-    parallel kernel's body (see the module docstring)."""
+    parallel kernel's body (see the module docstring). ``noalias=True``: the function's array
+    arguments are declared not to overlap (LLVM ``noalias``; see the module docstring)."""
     if inline not in (False, True, "ir"):
         raise ValueError(f"kernel: inline={inline!r} (expected False, True or 'ir')")
     o = dict(FLAGS)
@@ -70,6 +79,8 @@ def kernel(fn=None, *, parallel: bool = False, inline: bool | str = False, nogil
         o["nogil"] = True
     if not nrt:
         o["_nrt"] = False
+    if noalias:
+        o["_noalias"] = True
     how = INLINE or ("ir" if inline == "ir" else "llvm")
     if inline and how == "ir":
         o["inline"] = "always"
@@ -193,6 +204,18 @@ def _link_only_helpers() -> bool:
     lib_cls._softshadows_patched = True
     return True
 
+
+def _noalias_option() -> None:
+    """Numba compiles with its ``noalias`` flag (LLVM ``noalias`` on every pointer argument) only
+    for parallel gufuncs and offers no decorator option for it: ``_noalias`` maps it."""
+    from numba.core.cpu import CPUTargetOptions
+    from numba.core.options import TargetOptions
+
+    if not hasattr(CPUTargetOptions, "_noalias"):
+        CPUTargetOptions._noalias = TargetOptions.Mapping("noalias")
+
+
+_noalias_option()
 
 _LINK_ONLY_NUMBA = {(0, 68)}  # Numba versions whose code generation _link_only_helpers was checked on
 LINK_ONLY = _link_only_helpers()  # whether helpers and gufuncs are compiled without machine code
