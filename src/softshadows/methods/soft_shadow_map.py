@@ -400,18 +400,28 @@ def _rect_max(vals, off, ws, i0, i1, j0, j1):
 
 
 @kernel(parallel=True)
-def refine_extents_sphere(patches, ext, rho, pyr_vals, pyr_off, pyr_ws, svp, rounds):
+def refine_extents_sphere(patches, ext, rho, pyr_vals, pyr_off, pyr_ws, svp, rounds, z_plane=0.0):
     """Narrow :func:`penumbra_extents_sphere`'s ranges in place, ``rounds`` times: a texel p that the
     patch shadows lies in its current range R, so (1) its receiver depth is at most the largest one
     in R (:func:`_rect_max`, instead of the deepest receiver of the whole map) and (2) its facing
     disk's light points l satisfy |l_z| <= rho sin(theta), theta the largest angle from the light's
     axis of a texel of R (l is orthogonal to p, |l| <= rho), instead of |l_z| <= rho. The range
     recomputed with both (:func:`_sphere_extent`), intersected with R, still contains p. A range
-    without receivers deeper than the patch becomes empty."""
+    without receivers deeper than the patch becomes empty. ``z_plane`` > 0: ``ext``'s rows are
+    first set to :func:`penumbra_extents_sphere`'s ranges for receivers up to that depth (the same
+    arithmetic, in this parallel loop instead of a serial pass of its own)."""
     l, r, b, t = svp[VP_L], svp[VP_R], svp[VP_B], svp[VP_T]
     dxs = (r - l) / svp[VP_W]
     dys = (t - b) / svp[VP_H]
     for k in prange(patches.shape[0]):
+        if z_plane > 0.0:
+            fi0, fi1, fj0, fj1 = _sphere_extent(
+                patches[k, 0], patches[k, 1], patches[k, 2], patches[k, 3], patches[k, 4], rho, rho, z_plane, svp
+            )
+            if fj0 > fj1 or fi0 > fi1:
+                ext[k, 0], ext[k, 1], ext[k, 2], ext[k, 3] = 1, 0, 1, 0
+            else:
+                ext[k, 0], ext[k, 1], ext[k, 2], ext[k, 3] = int(fi0), int(fi1), int(fj0), int(fj1)
         for _ in range(rounds):
             i0, i1, j0, j1 = ext[k, 0], ext[k, 1], ext[k, 2], ext[k, 3]
             if i0 > i1 or j0 > j1:
@@ -1589,10 +1599,13 @@ def compute_soft_shadow_map(
         with timer.phase("penumbra_extents"):
             patches, pmesh = discretize_occluders(omaps[s][0], omaps[s][1], ovp)
             if sphere:
-                ext = penumbra_extents_sphere(patches, hx, z_plane, svp)
                 if pyr is None:
                     pyr = max_pyramid(rdepth0)
-                ext = refine_extents_sphere(patches, ext, hx, pyr[0], pyr[1], pyr[3], svp, REFINE_ROUNDS)
+                # penumbra_extents_sphere's ranges, then narrowed, in one parallel pass
+                ext = np.empty((patches.shape[0], 4), np.int32)
+                ext = refine_extents_sphere(
+                    patches, ext, hx, pyr[0], pyr[1], pyr[3], svp, REFINE_ROUNDS, max(z_plane, 1e-300)
+                )
             else:
                 ext = penumbra_extents(patches, hx, hy, z_plane, svp)
             ptr, idx = bin_patches_by_band(ext, n_bands, BAND_ROWS)
