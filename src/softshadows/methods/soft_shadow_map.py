@@ -802,7 +802,21 @@ def _clamp_rows(ssm, r0, r1):
             ssm[i, j] = 0.0 if not (v > 0.0) else (1.0 if v > 1.0 else v)
 
 
-ROW_LANES = 16  # rect light, float32 sums: the row pass covers whole vectors of this many texels
+def _host_lanes() -> int:
+    """float32 lanes of the host's vectors as LLVM targets them: 16 with AVX-512, else 8. The row
+    passes (both lights) cover whole vectors of this many texels (a row that is not a whole number
+    of vectors ends in a scalar remainder loop; rounding up to 16 on an 8-lane host ran 15% more
+    vectors on `bunny`'s sphere rows). Only the speed depends on it: the extra texels add exactly 0
+    (and are not flagged)."""
+    try:
+        from llvmlite import binding
+
+        return 16 if binding.get_host_cpu_features().get("avx512f", False) else 8
+    except Exception:  # pragma: no cover - no feature query: the wider vectors are always whole
+        return 16
+
+
+ROW_LANES = _host_lanes()  # float32 sums: the row passes cover whole vectors of this many texels
 
 
 @kernel(inline=True, nrt=False)
@@ -1013,20 +1027,6 @@ def accumulate_soft_shadow_map(
     return touched
 
 
-def _host_lanes() -> int:
-    """float32 lanes of the host's vectors as LLVM targets them: 16 with AVX-512, else 8. The sphere
-    row pass covers whole vectors of this many texels (a row that is not a whole number of vectors
-    ends in a scalar remainder loop; rounding up to 16 on an 8-lane host ran 15% more vectors on
-    `bunny`). Only the speed depends on it: the extra texels add exactly 0 and are not flagged."""
-    try:
-        from llvmlite import binding
-
-        return 16 if binding.get_host_cpu_features().get("avx512f", False) else 8
-    except Exception:  # pragma: no cover - no feature query: the wider vectors are always whole
-        return 16
-
-
-DISK_ROW_LANES = _host_lanes()  # sphere light, float32 sums: the row pass's whole vectors
 _HM32 = np.float32(1.0 - 2.0**-20)  # float32 row pass: corners this close to |p| go to the exact path
 _ROUND32 = 4e-6  # float32 row pass: margin (relative to |q|^2) of the inside / outside tests
 
@@ -1034,7 +1034,7 @@ _ROUND32 = 4e-6  # float32 row pass: margin (relative to |q|^2) of the inside / 
 @kernel(inline=True, noalias=True)
 def _disk_row_pass(F, recv_depth, recv_mesh, ssm, flags, ramp, i, base, nl, j0, j1, pm, check_mesh, pk, p):
     """One SSM row of one micro-patch for :func:`accumulate_soft_shadow_map_sphere`, branch-free, in
-    float32 arithmetic (16 vector lanes) and without projecting the corners (no per-corner division).
+    float32 arithmetic (8 or 16 vector lanes) and without projecting the corners (no per-corner division).
     ``F``: :func:`disk_frames32` of the texels. With h_c the corners' heights w.q (as in
     :func:`_corner_heights`) and d_c = |p| - h_c, a corner q projects inside the facing disk iff its
     distance from the axis of the cone from p onto the disk is at most kappa d_c:
@@ -1048,10 +1048,14 @@ def _disk_row_pass(F, recv_depth, recv_mesh, ssm, flags, ramp, i, base, nl, j0, 
     when it is so in exact arithmetic too. Every other texel (the patch near or across the cone's
     surface, or not wholly between p and the disk's plane, tested as w.c -+ s(1 + 2^-10) in
     (0, |p|): the corners' heights are within s of the center's) is flagged in ``flags[j - base]``
-    for the exact float64 path. The loop runs over the ``nl`` texels from ``base`` (``[base, base + nl)``
-    contains the patch's range ``[j0, j1)``; the caller makes ``nl`` a multiple of 16, so the row is
-    whole vectors, no scalar remainder); texels outside ``[j0, j1)`` add 0 and are not flagged. ``pk``: per patch (float32) |q_c|^2 + margin (4), |c|^2 - margin, s,
-    A / (2 pi), x0, x1, y0, y1, z_O, and s (1 + 2^-10)."""
+    for the exact float64 path; returns whether any texel is. The loop runs over the ``nl`` texels
+    from ``base`` (``[base, base + nl)`` contains the patch's range ``[j0, j1)``; the caller makes
+    ``nl`` a multiple of :data:`ROW_LANES`, so the row is whole vectors, no scalar remainder);
+    texels outside ``[j0, j1)`` add 0 and are not flagged. ``pk[p]``: patch ``p``'s constants
+    (:func:`_patch_constants`, float32): |q_c|^2 + margin (4), |c|^2 - margin, s, A / (2 pi), x0,
+    x1, y0, y1, z_O, and s (1 + 2^-10). ``noalias``: the arrays do not overlap, so LLVM vectorizes
+    the loop without checking their overlap at run time (those checks, 2 stored x 9 read arrays,
+    were made at every row: ~10% of the accumulation on `bunny`)."""
     ii = np.uint64(i)
     lo = np.int32(j0 - base)
     hi = np.int32(j1 - base)
@@ -1327,8 +1331,8 @@ def accumulate_soft_shadow_map_sphere_slot(
             i1 = min(ext[p, 1], r1)
             j0 = ext[p, 2]
             j1 = ext[p, 3] + 1
-            # the row pass runs over whole vectors of DISK_ROW_LANES texels from ``base``
-            nl = DISK_ROW_LANES * ((j1 - j0 + DISK_ROW_LANES - 1) // DISK_ROW_LANES)
+            # the row pass runs over whole vectors of ROW_LANES texels from ``base``
+            nl = ROW_LANES * ((j1 - j0 + ROW_LANES - 1) // ROW_LANES)
             if nl <= W:
                 base = min(j0, W - nl)
             else:
