@@ -1032,8 +1032,9 @@ _ROUND32 = 4e-6  # float32 row pass: margin (relative to |q|^2) of the inside / 
 
 
 @kernel(inline=True, noalias=True)
-def _disk_row_pass(F, recv_depth, recv_mesh, ssm, flags, ramp, i, base, nl, j0, j1, pm, check_mesh, pk, p):
-    """One SSM row of one micro-patch for :func:`accumulate_soft_shadow_map_sphere`, branch-free, in
+def _disk_row_pass(F, recv_depth, recv_mesh, ssm, flags, ramp, ia, ib, fw, base, nl, j0, j1, pm, check_mesh, pk, p):
+    """SSM rows ``ia..ib`` of one micro-patch for :func:`accumulate_soft_shadow_map_sphere`, each
+    row one branch-free loop, in
     float32 arithmetic (8 or 16 vector lanes) and without projecting the corners (no per-corner division).
     ``F``: :func:`disk_frames32` of the texels. With h_c the corners' heights w.q (as in
     :func:`_corner_heights`) and d_c = |p| - h_c, a corner q projects inside the facing disk iff its
@@ -1047,8 +1048,10 @@ def _disk_row_pass(F, recv_depth, recv_mesh, ssm, flags, ramp, i, base, nl, j0, 
     (many times float32's rounding of |q|^2 - h^2), so a texel is only taken as inside or missed
     when it is so in exact arithmetic too. Every other texel (the patch near or across the cone's
     surface, or not wholly between p and the disk's plane, tested as w.c -+ s(1 + 2^-10) in
-    (0, |p|): the corners' heights are within s of the center's) is flagged in ``flags[j - base]``
-    for the exact float64 path; returns whether any texel is. The loop runs over the ``nl`` texels
+    (0, |p|): the corners' heights are within s of the center's) is flagged in
+    ``flags[(i - ia) fw + j - base]`` for the exact float64 path; returns a bit mask of the rows
+    where any texel is (bit i - ia). Several rows in one call: the per-patch set-up (constants,
+    masks) is made once for them. The loop runs over the ``nl`` texels
     from ``base`` (``[base, base + nl)`` contains the patch's range ``[j0, j1)``; the caller makes
     ``nl`` a multiple of :data:`ROW_LANES`, so the row is whole vectors, no scalar remainder);
     texels outside ``[j0, j1)`` add 0 and are not flagged. ``pk[p]``: patch ``p``'s constants
@@ -1056,7 +1059,6 @@ def _disk_row_pass(F, recv_depth, recv_mesh, ssm, flags, ramp, i, base, nl, j0, 
     x1, y0, y1, z_O, and s (1 + 2^-10). ``noalias``: the arrays do not overlap, so LLVM vectorizes
     the loop without checking their overlap at run time (those checks, 2 stored x 9 read arrays,
     were made at every row: ~10% of the accumulation on `bunny`)."""
-    ii = np.uint64(i)
     lo = np.int32(j0 - base)
     hi = np.int32(j1 - base)
     pm32 = np.int32(pm)
@@ -1064,60 +1066,67 @@ def _disk_row_pass(F, recv_depth, recv_mesh, ssm, flags, ramp, i, base, nl, j0, 
     not_check = not check_mesh
     qq0, qq1, qq2, qq3, cc, sr, ak = pk[p, 0], pk[p, 1], pk[p, 2], pk[p, 3], pk[p, 4], pk[p, 5], pk[p, 6]
     x0, x1, y0, y1, zo, se = pk[p, 7], pk[p, 8], pk[p, 9], pk[p, 10], pk[p, 11], pk[p, 12]
-    anyf = False
-    for jj in range(nl):
-        ju = np.uint64(jj)
-        jx = ub + ju
-        zr = recv_depth[ii, jx]
-        # no short-circuit: it vectorizes; the column mask from an int32 ramp (16 lanes per compare)
-        rj = ramp[ju]
-        ok = (zr > zo) & (not_check | (recv_mesh[ii, jx] != pm32)) & (rj >= lo) & (rj < hi)
-        wx = F[0, ii, jx]
-        wy = F[1, ii, jx]
-        hz = F[2, ii, jx] * zo
-        hp = F[3, ii, jx]
-        kap = F[4, ii, jx]
-        hmax = hp * _HM32
-        h0 = wx * x0 + wy * y0 + hz
-        h1 = wx * x1 + wy * y0 + hz
-        h2 = wx * x1 + wy * y1 + hz
-        h3 = wx * x0 + wy * y1 + hz
-        # every corner strictly between the disk's plane and p: |h_c - h(center)| <= s |w| = s, so
-        # the center's height +- the half diagonal (times 1 + 2^-10, far above float32's rounding)
-        hc = _FH * (h0 + h2)
-        inr = (hc > se) & (hc + se < hmax)
-        d0 = hp - h0
-        d1 = hp - h1
-        d2 = hp - h2
-        d3 = hp - h3
-        k2 = kap * kap
-        ins = (
-            (qq0 - h0 * h0 <= k2 * d0 * d0)
-            & (qq1 - h1 * h1 <= k2 * d1 * d1)
-            & (qq2 - h2 * h2 <= k2 * d2 * d2)
-            & (qq3 - h3 * h3 <= k2 * d3 * d3)
-        )
-        rc = kap * (hp - hc) + sr * F[5, ii, jx]
-        miss = cc - hc * hc > rc * rc
-        area = ak * (zr - zo) * (d1 + d3) / (k2 * (d0 * d1) * (d2 * d3))
-        add = area if (ok & inr & ins) else _F0
-        ssm[ii, jx] += add
-        fl = ok & ~(inr & (miss | ins))
-        flags[jj] = fl
-        anyf |= fl
-    return anyf
+    mask = 0
+    for r in range(ib - ia + 1):
+        ii = np.uint64(ia + r)
+        fo = np.uint64(r * fw)
+        anyf = False
+        for jj in range(nl):
+            ju = np.uint64(jj)
+            jx = ub + ju
+            zr = recv_depth[ii, jx]
+            # no short-circuit: it vectorizes; the column mask from an int32 ramp (16 lanes per compare)
+            rj = ramp[ju]
+            ok = (zr > zo) & (not_check | (recv_mesh[ii, jx] != pm32)) & (rj >= lo) & (rj < hi)
+            wx = F[0, ii, jx]
+            wy = F[1, ii, jx]
+            hz = F[2, ii, jx] * zo
+            hp = F[3, ii, jx]
+            kap = F[4, ii, jx]
+            hmax = hp * _HM32
+            h0 = wx * x0 + wy * y0 + hz
+            h1 = wx * x1 + wy * y0 + hz
+            h2 = wx * x1 + wy * y1 + hz
+            h3 = wx * x0 + wy * y1 + hz
+            # every corner strictly between the disk's plane and p: |h_c - h(center)| <= s |w| = s, so
+            # the center's height +- the half diagonal (times 1 + 2^-10, far above float32's rounding)
+            hc = _FH * (h0 + h2)
+            inr = (hc > se) & (hc + se < hmax)
+            d0 = hp - h0
+            d1 = hp - h1
+            d2 = hp - h2
+            d3 = hp - h3
+            k2 = kap * kap
+            ins = (
+                (qq0 - h0 * h0 <= k2 * d0 * d0)
+                & (qq1 - h1 * h1 <= k2 * d1 * d1)
+                & (qq2 - h2 * h2 <= k2 * d2 * d2)
+                & (qq3 - h3 * h3 <= k2 * d3 * d3)
+            )
+            rc = kap * (hp - hc) + sr * F[5, ii, jx]
+            miss = cc - hc * hc > rc * rc
+            area = ak * (zr - zo) * (d1 + d3) / (k2 * (d0 * d1) * (d2 * d3))
+            add = area if (ok & inr & ins) else _F0
+            ssm[ii, jx] += add
+            fl = ok & ~(inr & (miss | ins))
+            flags[fo + ju] = fl
+            anyf |= fl
+        if anyf:
+            mask |= 1 << r
+    return mask
 
 
 @kernel(inline=True)
-def _queue_crossings(recv_depth, flags, flags64, i, base, nl, x0, x1, y0, y1, zo, Q, rows, cols, m):
+def _queue_crossings(recv_depth, flags64, fo64, i, base, nl, x0, x1, y0, y1, zo, Q, rows, cols, m):
     """Append the texels of row ``i`` that :func:`_disk_row_pass` flagged (patch across the cone's
     surface) to the queue at position ``m``: the texel to ``rows``, ``cols``, the patch and the
     texel's receiver depth to ``Q`` (6, n) (contiguous: the batch's vector loop needs no gathers;
     the batch recomputes the texel's frame, cheaper than copying its 11 planes). ``flags64``:
-    ``flags`` viewed as uint64: the flagged bytes of each 8 are found by their lowest set bit.
+    the flags viewed as uint64, the row's from ``fo64``: the flagged bytes of each 8 are found by
+    their lowest set bit.
     Returns the new length."""
     for blk in range((nl + 7) // 8):
-        x = flags64[blk]
+        x = flags64[fo64 + blk]
         rest = nl - 8 * blk
         if rest < 8:  # bytes past nl: stale flags of a longer row
             x &= (np.uint64(1) << np.uint64(8 * rest)) - np.uint64(1)
@@ -1300,7 +1309,8 @@ def accumulate_soft_shadow_map_sphere_slot(
     ty = np.empty(8)
     tz = np.empty(8)
     th = np.empty(8)
-    flags = np.zeros(8 * ((W + 7) // 8), np.bool_)
+    fw = 8 * ((W + 7) // 8)  # the flags of one row (a whole number of uint64 words)
+    flags = np.zeros(band_rows * fw, np.bool_)
     flags64 = flags.view(np.uint64)
     cap = max(CROSSING_BATCH, 2 * W)
     rows = np.zeros(cap, np.int64)
@@ -1338,9 +1348,9 @@ def accumulate_soft_shadow_map_sphere_slot(
             else:
                 base = j0
                 nl = j1 - j0
-            for i in range(i0, i1 + 1):
-                cnt += j1 - j0
-                if fp16:
+            if fp16:
+                for i in range(i0, i1 + 1):
+                    cnt += j1 - j0
                     for j in range(j0, j1):
                         zr = np.float64(recv_depth[i, j])
                         if not (zr > zo) or (check_mesh and recv_mesh[i, j] == pm):
@@ -1348,39 +1358,34 @@ def accumulate_soft_shadow_map_sphere_slot(
                         c = occlusion_percentage_disk(frames, i, j, x0, x1, y0, y1, zo, sx, sy, sz, sh, tx, ty, tz, th)
                         if c > 0.0:
                             ssm[i, j] = np.float32(round_half(np.float64(ssm[i, j]) + round_half(c, rtz), rtz))
-                    continue
-                # float32 sums: a branch-free pass over the row (vectorizes) adds the patch's
-                # area where it projects inside the disk, nothing where it misses the cone, and
-                # flags the other texels (a few per row), which are queued and computed in
-                # batches (vectorized), added after the band's other contributions
+                continue
+            cnt += max(i1 - i0 + 1, 0) * (j1 - j0)
+            # float32 sums: a branch-free pass over each row (vectorizes) adds the patch's area
+            # where it projects inside the disk, nothing where it misses the cone, and flags the
+            # other texels (a few per row), which are queued and computed in batches (vectorized),
+            # added after the band's other contributions. The patch's rows of the band in one
+            # call when no flush of the queue can fall between them (a row queues at most
+            # j1 - j0 pairs), else one row per call: the same order of additions either way.
+            fused = m + max(i1 - i0 + 1, 0) * (j1 - j0) <= cap
+            ia = i0
+            while ia <= i1:
+                ib = i1 if fused else ia
                 # one instance per value of check_mesh: without it the mesh test folds away
                 if check_mesh:
-                    flagged = _disk_row_pass(
-                        frames32,
-                        recv_depth,
-                        recv_mesh,
-                        ssm,
-                        flags,
-                        ramp,
-                        i,
-                        base,
-                        nl,
-                        j0,
-                        j1,
-                        pm,
-                        True,
-                        pk,
-                        p,
+                    fmask = _disk_row_pass(
+                        frames32, recv_depth, recv_mesh, ssm, flags, ramp, ia, ib, fw, base, nl, j0, j1, pm, True, pk, p
                     )
                 else:
-                    flagged = _disk_row_pass(
+                    fmask = _disk_row_pass(
                         frames32,
                         recv_depth,
                         recv_mesh,
                         ssm,
                         flags,
                         ramp,
-                        i,
+                        ia,
+                        ib,
+                        fw,
                         base,
                         nl,
                         j0,
@@ -1390,7 +1395,9 @@ def accumulate_soft_shadow_map_sphere_slot(
                         pk,
                         p,
                     )
-                if flagged:
+                for i in range(ia, ib + 1):
+                    if not (fmask >> (i - ia)) & 1:
+                        continue
                     if m + (j1 - j0) > cap:
                         _flush_crossings(
                             F1,
@@ -1418,7 +1425,10 @@ def accumulate_soft_shadow_map_sphere_slot(
                             th,
                         )
                         m = 0
-                    m = _queue_crossings(recv_depth, flags, flags64, i, base, nl, x0, x1, y0, y1, zo, Q, rows, cols, m)
+                    m = _queue_crossings(
+                        recv_depth, flags64, (i - ia) * (fw // 8), i, base, nl, x0, x1, y0, y1, zo, Q, rows, cols, m
+                    )
+                ia = ib + 1
         if m:
             _flush_crossings(
                 F1, f12, Q, rows, cols, vals, bad, UV, m, ssm, l, t, dxs, dys, rho, sx, sy, sz, sh, tx, ty, tz, th
