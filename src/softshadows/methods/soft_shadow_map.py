@@ -33,7 +33,7 @@ from ..raster.view import VP_B, VP_H, VP_L, VP_R, VP_T, VP_W, light_view
 from ..scene.types import light_key
 from .base import Method, MethodOutput, Param, register
 
-BAND_ROWS = 2  # SSM rows per accumulation band (one thread sums one band)
+BAND_ROWS = 4  # SSM rows per accumulation band (one thread sums one band; 2 until 2026-12-02)
 FP16_MAX = 65504.0
 CROSSING_BATCH = 4096  # sphere light: texel x patch pairs computed per vectorized batch
 REFINE_ROUNDS = 2  # sphere light: narrowing passes of the penumbra extents (refine_extents_sphere)
