@@ -595,22 +595,25 @@ def test_sphere_extent_divides_once_with_the_same_bounds():
 
 def test_queue_crossings_takes_the_flagged_texels_in_order():
     """The queue walks each 8-texel block's flagged bytes by their lowest set bit: it must take
-    exactly the flagged texels of ``[0, nl)``, in column order, and ignore stale flags past ``nl``
-    (left by a longer row)."""
+    exactly the flagged texels of ``[0, nl)`` of its row's flags (here the second row of a band's
+    flag buffer), in column order, and ignore stale flags past ``nl`` (left by a longer row) and
+    the other row's flags."""
     from numba import njit
 
     W = 64
     rd = np.arange(2 * W, dtype=np.float32).reshape(2, W) + 1.0
-    flags = np.zeros(W, np.bool_)
+    buf = np.zeros(2 * W, np.bool_)
+    flags = buf[W:]
     rng = np.random.default_rng(3)
     queue = njit(lambda f, nl, base, Q, rows, cols: ssm._queue_crossings(
-        rd, f, f.view(np.uint64), 1, base, nl, 0.1, 0.2, 0.3, 0.4, 0.5, Q, rows, cols, 2
+        rd, f.view(np.uint64), W // 8, 1, base, nl, 0.1, 0.2, 0.3, 0.4, 0.5, Q, rows, cols, 2
     ))  # fmt: skip
     for nl, base in ((64, 0), (37, 5), (8, 40), (3, 0), (16, 48)):
+        buf[:W] = True  # the other row's
         flags[:] = rng.random(W) < 0.3
         flags[nl:] = True  # stale
         Q, rows, cols = np.zeros((6, 80)), np.full(80, -1), np.full(80, -1)
-        m = queue(flags, nl, base, Q, rows, cols)
+        m = queue(buf, nl, base, Q, rows, cols)
         want = base + np.flatnonzero(flags[:nl])
         assert m == 2 + len(want)
         assert np.array_equal(cols[2:m], want) and np.all(rows[2:m] == 1)

@@ -33,7 +33,7 @@ from ..raster.view import VP_B, VP_H, VP_L, VP_R, VP_T, VP_W, light_view
 from ..scene.types import light_key
 from .base import Method, MethodOutput, Param, register
 
-BAND_ROWS = 2  # SSM rows per accumulation band (one thread sums one band)
+BAND_ROWS = 4  # SSM rows per accumulation band (one thread sums one band; 2 until 2026-12-02)
 FP16_MAX = 65504.0
 CROSSING_BATCH = 4096  # sphere light: texel x patch pairs computed per vectorized batch
 REFINE_ROUNDS = 2  # sphere light: narrowing passes of the penumbra extents (refine_extents_sphere)
@@ -400,18 +400,28 @@ def _rect_max(vals, off, ws, i0, i1, j0, j1):
 
 
 @kernel(parallel=True)
-def refine_extents_sphere(patches, ext, rho, pyr_vals, pyr_off, pyr_ws, svp, rounds):
+def refine_extents_sphere(patches, ext, rho, pyr_vals, pyr_off, pyr_ws, svp, rounds, z_plane=0.0):
     """Narrow :func:`penumbra_extents_sphere`'s ranges in place, ``rounds`` times: a texel p that the
     patch shadows lies in its current range R, so (1) its receiver depth is at most the largest one
     in R (:func:`_rect_max`, instead of the deepest receiver of the whole map) and (2) its facing
     disk's light points l satisfy |l_z| <= rho sin(theta), theta the largest angle from the light's
     axis of a texel of R (l is orthogonal to p, |l| <= rho), instead of |l_z| <= rho. The range
     recomputed with both (:func:`_sphere_extent`), intersected with R, still contains p. A range
-    without receivers deeper than the patch becomes empty."""
+    without receivers deeper than the patch becomes empty. ``z_plane`` > 0: ``ext``'s rows are
+    first set to :func:`penumbra_extents_sphere`'s ranges for receivers up to that depth (the same
+    arithmetic, in this parallel loop instead of a serial pass of its own)."""
     l, r, b, t = svp[VP_L], svp[VP_R], svp[VP_B], svp[VP_T]
     dxs = (r - l) / svp[VP_W]
     dys = (t - b) / svp[VP_H]
     for k in prange(patches.shape[0]):
+        if z_plane > 0.0:
+            fi0, fi1, fj0, fj1 = _sphere_extent(
+                patches[k, 0], patches[k, 1], patches[k, 2], patches[k, 3], patches[k, 4], rho, rho, z_plane, svp
+            )
+            if fj0 > fj1 or fi0 > fi1:
+                ext[k, 0], ext[k, 1], ext[k, 2], ext[k, 3] = 1, 0, 1, 0
+            else:
+                ext[k, 0], ext[k, 1], ext[k, 2], ext[k, 3] = int(fi0), int(fi1), int(fj0), int(fj1)
         for _ in range(rounds):
             i0, i1, j0, j1 = ext[k, 0], ext[k, 1], ext[k, 2], ext[k, 3]
             if i0 > i1 or j0 > j1:
@@ -792,7 +802,21 @@ def _clamp_rows(ssm, r0, r1):
             ssm[i, j] = 0.0 if not (v > 0.0) else (1.0 if v > 1.0 else v)
 
 
-ROW_LANES = 16  # rect light, float32 sums: the row pass covers whole vectors of this many texels
+def _host_lanes() -> int:
+    """float32 lanes of the host's vectors as LLVM targets them: 16 with AVX-512, else 8. The row
+    passes (both lights) cover whole vectors of this many texels (a row that is not a whole number
+    of vectors ends in a scalar remainder loop; rounding up to 16 on an 8-lane host ran 15% more
+    vectors on `bunny`'s sphere rows). Only the speed depends on it: the extra texels add exactly 0
+    (and are not flagged)."""
+    try:
+        from llvmlite import binding
+
+        return 16 if binding.get_host_cpu_features().get("avx512f", False) else 8
+    except Exception:  # pragma: no cover - no feature query: the wider vectors are always whole
+        return 16
+
+
+ROW_LANES = _host_lanes()  # float32 sums: the row passes cover whole vectors of this many texels
 
 
 @kernel(inline=True, nrt=False)
@@ -1007,12 +1031,11 @@ _HM32 = np.float32(1.0 - 2.0**-20)  # float32 row pass: corners this close to |p
 _ROUND32 = 4e-6  # float32 row pass: margin (relative to |q|^2) of the inside / outside tests
 
 
-@kernel(inline=True)
-def _disk_row_pass(
-    F, recv_depth, recv_mesh, ssm, flags, ramp, i, base, nl, j0, j1, x0, x1, y0, y1, zo, pm, check_mesh, pk
-):
-    """One SSM row of one micro-patch for :func:`accumulate_soft_shadow_map_sphere`, branch-free, in
-    float32 arithmetic (16 vector lanes) and without projecting the corners (no per-corner division).
+@kernel(inline=True, noalias=True)
+def _disk_row_pass(F, recv_depth, recv_mesh, ssm, flags, ramp, ia, ib, fw, base, nl, j0, j1, pm, check_mesh, pk, p):
+    """SSM rows ``ia..ib`` of one micro-patch for :func:`accumulate_soft_shadow_map_sphere`, each
+    row one branch-free loop, in
+    float32 arithmetic (8 or 16 vector lanes) and without projecting the corners (no per-corner division).
     ``F``: :func:`disk_frames32` of the texels. With h_c the corners' heights w.q (as in
     :func:`_corner_heights`) and d_c = |p| - h_c, a corner q projects inside the facing disk iff its
     distance from the axis of the cone from p onto the disk is at most kappa d_c:
@@ -1025,69 +1048,85 @@ def _disk_row_pass(
     (many times float32's rounding of |q|^2 - h^2), so a texel is only taken as inside or missed
     when it is so in exact arithmetic too. Every other texel (the patch near or across the cone's
     surface, or not wholly between p and the disk's plane, tested as w.c -+ s(1 + 2^-10) in
-    (0, |p|): the corners' heights are within s of the center's) is flagged in ``flags[j - base]``
-    for the exact float64 path. The loop runs over the ``nl`` texels from ``base`` (``[base, base + nl)``
-    contains the patch's range ``[j0, j1)``; the caller makes ``nl`` a multiple of 16, so the row is
-    whole vectors, no scalar remainder); texels outside ``[j0, j1)`` add 0 and are not flagged. ``pk``: per patch (float32) |q_c|^2 + margin (4), |c|^2 - margin, s,
-    A / (2 pi), x0, x1, y0, y1, z_O, and s (1 + 2^-10)."""
-    ii = np.uint64(i)
+    (0, |p|): the corners' heights are within s of the center's) is flagged in
+    ``flags[(i - ia) fw + j - base]`` for the exact float64 path; returns a bit mask of the rows
+    where any texel is (bit i - ia). Several rows in one call: the per-patch set-up (constants,
+    masks) is made once for them. The loop runs over the ``nl`` texels
+    from ``base`` (``[base, base + nl)`` contains the patch's range ``[j0, j1)``; the caller makes
+    ``nl`` a multiple of :data:`ROW_LANES`, so the row is whole vectors, no scalar remainder);
+    texels outside ``[j0, j1)`` add 0 and are not flagged. ``pk[p]``: patch ``p``'s constants
+    (:func:`_patch_constants`, float32): |q_c|^2 + margin (4), |c|^2 - margin, s, A / (2 pi), x0,
+    x1, y0, y1, z_O, and s (1 + 2^-10). ``noalias``: the arrays do not overlap, so LLVM vectorizes
+    the loop without checking their overlap at run time (those checks, 2 stored x 9 read arrays,
+    were made at every row: ~10% of the accumulation on `bunny`)."""
     lo = np.int32(j0 - base)
     hi = np.int32(j1 - base)
     pm32 = np.int32(pm)
     ub = np.uint64(base)
     not_check = not check_mesh
-    qq0, qq1, qq2, qq3, cc, sr, ak = pk[0], pk[1], pk[2], pk[3], pk[4], pk[5], pk[6]
-    x0, x1, y0, y1, zo, se = pk[7], pk[8], pk[9], pk[10], pk[11], pk[12]
-    for jj in range(nl):
-        ju = np.uint64(jj)
-        jx = ub + ju
-        zr = recv_depth[ii, jx]
-        # no short-circuit: it vectorizes; the column mask from an int32 ramp (16 lanes per compare)
-        rj = ramp[ju]
-        ok = (zr > zo) & (not_check | (recv_mesh[ii, jx] != pm32)) & (rj >= lo) & (rj < hi)
-        wx = F[0, ii, jx]
-        wy = F[1, ii, jx]
-        hz = F[2, ii, jx] * zo
-        hp = F[3, ii, jx]
-        kap = F[4, ii, jx]
-        hmax = hp * _HM32
-        h0 = wx * x0 + wy * y0 + hz
-        h1 = wx * x1 + wy * y0 + hz
-        h2 = wx * x1 + wy * y1 + hz
-        h3 = wx * x0 + wy * y1 + hz
-        # every corner strictly between the disk's plane and p: |h_c - h(center)| <= s |w| = s, so
-        # the center's height +- the half diagonal (times 1 + 2^-10, far above float32's rounding)
-        hc = _FH * (h0 + h2)
-        inr = (hc > se) & (hc + se < hmax)
-        d0 = hp - h0
-        d1 = hp - h1
-        d2 = hp - h2
-        d3 = hp - h3
-        k2 = kap * kap
-        ins = (
-            (qq0 - h0 * h0 <= k2 * d0 * d0)
-            & (qq1 - h1 * h1 <= k2 * d1 * d1)
-            & (qq2 - h2 * h2 <= k2 * d2 * d2)
-            & (qq3 - h3 * h3 <= k2 * d3 * d3)
-        )
-        rc = kap * (hp - hc) + sr * F[5, ii, jx]
-        miss = cc - hc * hc > rc * rc
-        area = ak * (zr - zo) * (d1 + d3) / (k2 * (d0 * d1) * (d2 * d3))
-        add = area if (ok & inr & ins) else _F0
-        ssm[ii, jx] += add
-        flags[jj] = ok & ~(inr & (miss | ins))
+    qq0, qq1, qq2, qq3, cc, sr, ak = pk[p, 0], pk[p, 1], pk[p, 2], pk[p, 3], pk[p, 4], pk[p, 5], pk[p, 6]
+    x0, x1, y0, y1, zo, se = pk[p, 7], pk[p, 8], pk[p, 9], pk[p, 10], pk[p, 11], pk[p, 12]
+    mask = 0
+    for r in range(ib - ia + 1):
+        ii = np.uint64(ia + r)
+        fo = np.uint64(r * fw)
+        anyf = False
+        for jj in range(nl):
+            ju = np.uint64(jj)
+            jx = ub + ju
+            zr = recv_depth[ii, jx]
+            # no short-circuit: it vectorizes; the column mask from an int32 ramp (16 lanes per compare)
+            rj = ramp[ju]
+            ok = (zr > zo) & (not_check | (recv_mesh[ii, jx] != pm32)) & (rj >= lo) & (rj < hi)
+            wx = F[0, ii, jx]
+            wy = F[1, ii, jx]
+            hz = F[2, ii, jx] * zo
+            hp = F[3, ii, jx]
+            kap = F[4, ii, jx]
+            hmax = hp * _HM32
+            h0 = wx * x0 + wy * y0 + hz
+            h1 = wx * x1 + wy * y0 + hz
+            h2 = wx * x1 + wy * y1 + hz
+            h3 = wx * x0 + wy * y1 + hz
+            # every corner strictly between the disk's plane and p: |h_c - h(center)| <= s |w| = s, so
+            # the center's height +- the half diagonal (times 1 + 2^-10, far above float32's rounding)
+            hc = _FH * (h0 + h2)
+            inr = (hc > se) & (hc + se < hmax)
+            d0 = hp - h0
+            d1 = hp - h1
+            d2 = hp - h2
+            d3 = hp - h3
+            k2 = kap * kap
+            ins = (
+                (qq0 - h0 * h0 <= k2 * d0 * d0)
+                & (qq1 - h1 * h1 <= k2 * d1 * d1)
+                & (qq2 - h2 * h2 <= k2 * d2 * d2)
+                & (qq3 - h3 * h3 <= k2 * d3 * d3)
+            )
+            rc = kap * (hp - hc) + sr * F[5, ii, jx]
+            miss = cc - hc * hc > rc * rc
+            area = ak * (zr - zo) * (d1 + d3) / (k2 * (d0 * d1) * (d2 * d3))
+            add = area if (ok & inr & ins) else _F0
+            ssm[ii, jx] += add
+            fl = ok & ~(inr & (miss | ins))
+            flags[fo + ju] = fl
+            anyf |= fl
+        if anyf:
+            mask |= 1 << r
+    return mask
 
 
 @kernel(inline=True)
-def _queue_crossings(recv_depth, flags, flags64, i, base, nl, x0, x1, y0, y1, zo, Q, rows, cols, m):
+def _queue_crossings(recv_depth, flags64, fo64, i, base, nl, x0, x1, y0, y1, zo, Q, rows, cols, m):
     """Append the texels of row ``i`` that :func:`_disk_row_pass` flagged (patch across the cone's
     surface) to the queue at position ``m``: the texel to ``rows``, ``cols``, the patch and the
     texel's receiver depth to ``Q`` (6, n) (contiguous: the batch's vector loop needs no gathers;
     the batch recomputes the texel's frame, cheaper than copying its 11 planes). ``flags64``:
-    ``flags`` viewed as uint64: the flagged bytes of each 8 are found by their lowest set bit.
+    the flags viewed as uint64, the row's from ``fo64``: the flagged bytes of each 8 are found by
+    their lowest set bit.
     Returns the new length."""
     for blk in range((nl + 7) // 8):
-        x = flags64[blk]
+        x = flags64[fo64 + blk]
         rest = nl - 8 * blk
         if rest < 8:  # bytes past nl: stale flags of a longer row
             x &= (np.uint64(1) << np.uint64(8 * rest)) - np.uint64(1)
@@ -1178,8 +1217,8 @@ def _flush_crossings(F1, f, Q, rows, cols, vals, bad, UV, m, ssm, l, t, dxs, dys
 
 
 @kernel(inline=True)
-def _patch_constants(x0, x1, y0, y1, zo, pk):
-    """Per micro-patch constants of :func:`_disk_row_pass` into ``pk`` (float32): |q_c|^2 of the 4
+def _patch_constants(x0, x1, y0, y1, zo, pk, p):
+    """Per micro-patch constants of :func:`_disk_row_pass` into ``pk[p]`` (float32): |q_c|^2 of the 4
     corners plus the margin, |c|^2 of the center minus it, the half diagonal s, A / (2 pi), the
     patch x0, x1, y0, y1, z_O, and s (1 + 2^-10) (the bound of the corners' heights about the
     center's)."""
@@ -1192,19 +1231,19 @@ def _patch_constants(x0, x1, y0, y1, zo, pk):
     cy = 0.5 * (y0 + y1)
     cc = cx * cx + cy * cy + z2
     mg = _ROUND32 * max(max(q0, q1), max(max(q2, q3), cc))
-    pk[0] = q0 + mg
-    pk[1] = q1 + mg
-    pk[2] = q2 + mg
-    pk[3] = q3 + mg
-    pk[4] = cc - mg
-    pk[5] = 0.5 * math.sqrt((x1 - x0) * (x1 - x0) + (y1 - y0) * (y1 - y0))
-    pk[6] = (x1 - x0) * (y1 - y0) / (2.0 * math.pi)
-    pk[7] = x0
-    pk[8] = x1
-    pk[9] = y0
-    pk[10] = y1
-    pk[11] = zo
-    pk[12] = pk[5] * (1.0 + 2.0**-10)
+    pk[p, 0] = q0 + mg
+    pk[p, 1] = q1 + mg
+    pk[p, 2] = q2 + mg
+    pk[p, 3] = q3 + mg
+    pk[p, 4] = cc - mg
+    pk[p, 5] = 0.5 * math.sqrt((x1 - x0) * (x1 - x0) + (y1 - y0) * (y1 - y0))
+    pk[p, 6] = (x1 - x0) * (y1 - y0) / (2.0 * math.pi)
+    pk[p, 7] = x0
+    pk[p, 8] = x1
+    pk[p, 9] = y0
+    pk[p, 10] = y1
+    pk[p, 11] = zo
+    pk[p, 12] = pk[p, 5] * (1.0 + 2.0**-10)
 
 
 @kernel(parallel=True)
@@ -1270,7 +1309,8 @@ def accumulate_soft_shadow_map_sphere_slot(
     ty = np.empty(8)
     tz = np.empty(8)
     th = np.empty(8)
-    flags = np.zeros(8 * ((W + 7) // 8), np.bool_)
+    fw = 8 * ((W + 7) // 8)  # the flags of one row (a whole number of uint64 words)
+    flags = np.zeros(band_rows * fw, np.bool_)
     flags64 = flags.view(np.uint64)
     cap = max(CROSSING_BATCH, 2 * W)
     rows = np.zeros(cap, np.int64)
@@ -1279,7 +1319,10 @@ def accumulate_soft_shadow_map_sphere_slot(
     UV = np.empty((8, cap + 24), np.float32)  # the crossing pairs' projected corners
     bad = np.zeros(cap, np.bool_)
     Q = np.empty((6, cap + 24))  # row stride not a multiple of 4 KiB: no cache-set conflicts
-    pk = np.empty(13, np.float32)
+    # the row pass's per-patch constants, once per patch (not once per band it meets)
+    pk = np.empty((0 if fp16 else patches.shape[0], 16), np.float32)
+    for p in range(pk.shape[0]):
+        _patch_constants(patches[p, 0], patches[p, 1], patches[p, 2], patches[p, 3], patches[p, 4], pk, p)
     F1 = np.empty((12, 1, 1))
     f12 = np.empty(12)
     ramp = np.empty(W, np.int32)  # 0, 1, 2, ...: the row pass's column mask
@@ -1298,18 +1341,16 @@ def accumulate_soft_shadow_map_sphere_slot(
             i1 = min(ext[p, 1], r1)
             j0 = ext[p, 2]
             j1 = ext[p, 3] + 1
-            # the row pass runs over whole vectors of 16 texels from ``base``
-            nl = 16 * ((j1 - j0 + 15) // 16)
+            # the row pass runs over whole vectors of ROW_LANES texels from ``base``
+            nl = ROW_LANES * ((j1 - j0 + ROW_LANES - 1) // ROW_LANES)
             if nl <= W:
                 base = min(j0, W - nl)
             else:
                 base = j0
                 nl = j1 - j0
-            if not fp16:
-                _patch_constants(x0, x1, y0, y1, zo, pk)
-            for i in range(i0, i1 + 1):
-                cnt += j1 - j0
-                if fp16:
+            if fp16:
+                for i in range(i0, i1 + 1):
+                    cnt += j1 - j0
                     for j in range(j0, j1):
                         zr = np.float64(recv_depth[i, j])
                         if not (zr > zo) or (check_mesh and recv_mesh[i, j] == pm):
@@ -1317,60 +1358,46 @@ def accumulate_soft_shadow_map_sphere_slot(
                         c = occlusion_percentage_disk(frames, i, j, x0, x1, y0, y1, zo, sx, sy, sz, sh, tx, ty, tz, th)
                         if c > 0.0:
                             ssm[i, j] = np.float32(round_half(np.float64(ssm[i, j]) + round_half(c, rtz), rtz))
-                    continue
-                # float32 sums: a branch-free pass over the row (vectorizes) adds the patch's
-                # area where it projects inside the disk, nothing where it misses the cone, and
-                # flags the other texels (a few per row), which are queued and computed in
-                # batches (vectorized), added after the band's other contributions
+                continue
+            cnt += max(i1 - i0 + 1, 0) * (j1 - j0)
+            # float32 sums: a branch-free pass over each row (vectorizes) adds the patch's area
+            # where it projects inside the disk, nothing where it misses the cone, and flags the
+            # other texels (a few per row), which are queued and computed in batches (vectorized),
+            # added after the band's other contributions. The patch's rows of the band in one
+            # call when no flush of the queue can fall between them (a row queues at most
+            # j1 - j0 pairs), else one row per call: the same order of additions either way.
+            fused = m + max(i1 - i0 + 1, 0) * (j1 - j0) <= cap
+            ia = i0
+            while ia <= i1:
+                ib = i1 if fused else ia
                 # one instance per value of check_mesh: without it the mesh test folds away
                 if check_mesh:
-                    _disk_row_pass(
-                        frames32,
-                        recv_depth,
-                        recv_mesh,
-                        ssm,
-                        flags,
-                        ramp,
-                        i,
-                        base,
-                        nl,
-                        j0,
-                        j1,
-                        x0,
-                        x1,
-                        y0,
-                        y1,
-                        zo,
-                        pm,
-                        True,
-                        pk,
+                    fmask = _disk_row_pass(
+                        frames32, recv_depth, recv_mesh, ssm, flags, ramp, ia, ib, fw, base, nl, j0, j1, pm, True, pk, p
                     )
                 else:
-                    _disk_row_pass(
+                    fmask = _disk_row_pass(
                         frames32,
                         recv_depth,
                         recv_mesh,
                         ssm,
                         flags,
                         ramp,
-                        i,
+                        ia,
+                        ib,
+                        fw,
                         base,
                         nl,
                         j0,
                         j1,
-                        x0,
-                        x1,
-                        y0,
-                        y1,
-                        zo,
                         pm,
                         False,
                         pk,
+                        p,
                     )
-                flagged = np.uint64(0)
-                for blk in range((nl + 7) // 8):
-                    flagged |= flags64[blk]
-                if flagged:
+                for i in range(ia, ib + 1):
+                    if not (fmask >> (i - ia)) & 1:
+                        continue
                     if m + (j1 - j0) > cap:
                         _flush_crossings(
                             F1,
@@ -1398,7 +1425,10 @@ def accumulate_soft_shadow_map_sphere_slot(
                             th,
                         )
                         m = 0
-                    m = _queue_crossings(recv_depth, flags, flags64, i, base, nl, x0, x1, y0, y1, zo, Q, rows, cols, m)
+                    m = _queue_crossings(
+                        recv_depth, flags64, (i - ia) * (fw // 8), i, base, nl, x0, x1, y0, y1, zo, Q, rows, cols, m
+                    )
+                ia = ib + 1
         if m:
             _flush_crossings(
                 F1, f12, Q, rows, cols, vals, bad, UV, m, ssm, l, t, dxs, dys, rho, sx, sy, sz, sh, tx, ty, tz, th
@@ -1583,10 +1613,13 @@ def compute_soft_shadow_map(
         with timer.phase("penumbra_extents"):
             patches, pmesh = discretize_occluders(omaps[s][0], omaps[s][1], ovp)
             if sphere:
-                ext = penumbra_extents_sphere(patches, hx, z_plane, svp)
                 if pyr is None:
                     pyr = max_pyramid(rdepth0)
-                ext = refine_extents_sphere(patches, ext, hx, pyr[0], pyr[1], pyr[3], svp, REFINE_ROUNDS)
+                # penumbra_extents_sphere's ranges, then narrowed, in one parallel pass
+                ext = np.empty((patches.shape[0], 4), np.int32)
+                ext = refine_extents_sphere(
+                    patches, ext, hx, pyr[0], pyr[1], pyr[3], svp, REFINE_ROUNDS, max(z_plane, 1e-300)
+                )
             else:
                 ext = penumbra_extents(patches, hx, hy, z_plane, svp)
             ptr, idx = bin_patches_by_band(ext, n_bands, BAND_ROWS)
