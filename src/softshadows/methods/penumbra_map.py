@@ -29,6 +29,7 @@ from .._jit import kernel, run_slots
 from ..geometry.silhouette import Silhouette, cached_adjacency, silhouette_adjacency, silhouette_brute
 from ..raster import View, rasterize_depth, rasterize_min_blend
 from ..raster.programs import PROGRAM_PENUMBRA, penumbra_intensity, smoothstep_bernstein  # noqa: F401
+from ..raster.rasterizer import prefetch
 from ..scene.types import light_key
 from .base import Method, MethodOutput, Param, register
 from .shadowmap import biased_light_row, fit_light_view
@@ -539,25 +540,32 @@ def _max_down_row(src, s0, sw, sh, dst, d0, dw, i):
 
 
 @kernel(parallel=True)
-def _pyramid_level1(zp_flat, H, W, data, w2, occ_flat, h, w, pt, pl):
-    """Level 1 (2x2 max of ``Z_P``) straight from the map, rows in parallel. With an occluder map
+def _pyramid_level1(zp_flat, H, W, data, offs, ws, hs, occ_flat, h, w, pt, pl):
+    """Levels 1 and 2 (2x2 max of ``Z_P``, then of level 1) straight from the map, in parallel by
+    level-2 rows (each reduces the two level-1 rows it reads, just made). With an occluder map
     ``occ_flat`` (h, w) placed at row ``pt``, column ``pl`` (h > 0), each pair of rows first takes
-    the minimum with it in place (as ``np.minimum``: NaN wins), then reduces."""
-    for i in prange((H + 1) // 2):
-        for rr in range(2 * i, min(2 * i + 2, H)):
-            ro = rr - pt
-            if 0 <= ro < h:
-                for c in range(w):
-                    a = zp_flat[rr * W + pl + c]
-                    b = occ_flat[ro * w + c]
-                    zp_flat[rr * W + pl + c] = a if (a < b or a != a) else b
-        _max_down_row(zp_flat, 0, W, H, data, 0, w2, i)
+    the minimum with it in place (as ``np.minimum``: NaN wins), then reduces. Level 2 only where
+    the pyramid has it (more than two levels)."""
+    H1 = hs[1]
+    step = 1 + int(len(offs) > 2)  # level-1 rows per iteration: 2 where level 2 exists
+    for k in prange((H1 + step - 1) // step):
+        for i in range(step * k, min(step * k + step, H1)):
+            for rr in range(2 * i, min(2 * i + 2, H)):
+                ro = rr - pt
+                if 0 <= ro < h:
+                    for c in range(w):
+                        a = zp_flat[rr * W + pl + c]
+                        b = occ_flat[ro * w + c]
+                        zp_flat[rr * W + pl + c] = a if (a < b or a != a) else b
+            _max_down_row(zp_flat, 0, W, H, data, 0, ws[1], i)
+        if step == 2:
+            _max_down_row(data, offs[1], ws[1], H1, data, offs[2], ws[2], k)
 
 
 @kernel
 def _pyramid_coarser(data, offs, ws, hs):
-    """Levels 2.. (small: one serial pass)."""
-    for L in range(2, len(offs)):
+    """Levels 3.. (small: one serial pass)."""
+    for L in range(3, len(offs)):
         for i in range(hs[L]):
             _max_down_row(data, offs[L - 1], ws[L - 1], hs[L - 1], data, offs[L], ws[L], i)
 
@@ -595,7 +603,7 @@ def build_zmax_pyramid(
     offs, ws, hs = np.array(offs, np.int64), np.array(ws, np.int64), np.array(hs, np.int64)
     if len(offs) > 1:
         zf = zp.reshape(-1) if occluder_depth is not None else np.ascontiguousarray(zp, dtype=np.float32).reshape(-1)
-        _pyramid_level1(zf, h, w, data, ws[1], occ.reshape(-1), oh, ow, r0, c0)
+        _pyramid_level1(zf, h, w, data, offs, ws, hs, occ.reshape(-1), oh, ow, r0, c0)
         _pyramid_coarser(data, offs, ws, hs)
     return data, offs, ws, hs
 
@@ -1028,6 +1036,8 @@ def render_penumbra_map(
 #: outside the map) and V = 0 (umbra); a code >= 0 is the flat index of the texel read
 LOOKUP_NONE = -1
 LOOKUP_UMBRA = -2
+#: the eye pass prefetches the texels of the pixel this many pixels on in its row
+_PREFETCH_AHEAD = 32
 
 
 @kernel(nogil=True, nrt=False)
@@ -1049,6 +1059,16 @@ def _eye_lookup_slot(
     for i in range(slot, H, nslot):
         biased_light_row(vp, position, normal, mask, i, bias, slope_bias, sc[slot])
         for j in range(W):
+            # the texel _PREFETCH_AHEAD pixels on to the cache meanwhile (the map reads and the
+            # marks are scattered: mostly cache misses)
+            ja = j + _PREFETCH_AHEAD
+            if ja < W and sc[slot, 9, ja] != 0.0:
+                pfx = math.floor(sc[slot, 6, ja])
+                pfy = math.floor(sc[slot, 7, ja])
+                if 0.0 <= pfx < Wm and 0.0 <= pfy < Hm:
+                    prefetch(d_occ, (int(pfy), int(pfx)))
+                    if mark:
+                        prefetch(needed, (int(pfy) + pad_t, int(pfx) + pad_l))
             c = LOOKUP_NONE
             fx = math.floor(sc[slot, 6, j])
             fy = math.floor(sc[slot, 7, j])
@@ -1076,6 +1096,10 @@ def _eye_gather_slot(slot, code, pm_flat, v_out, counts, nslot):
     n_pen = 0
     for i in range(slot, H, nslot):
         for j in range(W):
+            if j + _PREFETCH_AHEAD < W:  # the texel read _PREFETCH_AHEAD pixels on, to the cache
+                ta = code[i, j + _PREFETCH_AHEAD]
+                if ta >= 0:
+                    prefetch(pm_flat, ta)
             t = code[i, j]
             v = pm_flat[max(t, 0)]
             v = v if t >= 0 else (np.float32(0.0) if t == LOOKUP_UMBRA else np.float32(1.0))

@@ -1474,16 +1474,23 @@ def _texel_list(prog, pparams, blend, img, rect, vw, SP, TL):
 
 
 @intrinsic
-def _prefetch(typingctx, arr, i, j):
-    """A hint to load the cache line of ``arr[i, j]`` (2-D array, indices in range): LLVM's
-    ``llvm.prefetch`` (read, high locality), no effect on values. Numba has none."""
-    if not (isinstance(arr, types.Array) and arr.ndim == 2):
+def prefetch(typingctx, arr, idx):
+    """A hint to load the cache line of ``arr[idx]`` (``idx``: an integer for a 1-D array, a tuple
+    of ``arr.ndim`` integers; in range, unchecked): LLVM's ``llvm.prefetch`` (read, high locality),
+    no effect on values. Numba has none."""
+    if not isinstance(arr, types.Array):
+        return None
+    if isinstance(idx, types.Integer):
+        if arr.ndim != 1:
+            return None
+    elif not (isinstance(idx, types.UniTuple) and isinstance(idx.dtype, types.Integer) and idx.count == arr.ndim):
         return None
 
     def codegen(context, builder, sig, args):
-        aryty = sig.args[0]
+        aryty, idxty = sig.args
         ary = context.make_array(aryty)(context, builder, args[0])
-        ptr = cgutils.get_item_pointer(context, builder, aryty, ary, [args[1], args[2]], wraparound=False)
+        inds = [args[1]] if isinstance(idxty, types.Integer) else cgutils.unpack_tuple(builder, args[1])
+        ptr = cgutils.get_item_pointer(context, builder, aryty, ary, inds, wraparound=False)
         i8p = ir.IntType(8).as_pointer()
         i32 = ir.IntType(32)
         fn = cgutils.get_or_insert_function(
@@ -1492,7 +1499,7 @@ def _prefetch(typingctx, arr, i, j):
         builder.call(fn, [builder.bitcast(ptr, i8p), ir.Constant(i32, 0), ir.Constant(i32, 3), ir.Constant(i32, 1)])
         return context.get_dummy_value()
 
-    return types.void(arr, i, j), codegen
+    return types.void(arr, idx), codegen
 
 
 @kernel(inline=True)
@@ -1505,10 +1512,10 @@ def _prefetch_tile(blend, img, rowbits, tile, ntx, T, W, H):
     y0, y1, x0, x1 = _tile_rect(ty, tile - ty * ntx, T, W, H)
     for li in range(y1 - y0 + 1):
         if rowbits[tile, li] != 0:
-            _prefetch(blend, y0 + li, x0)
-            _prefetch(blend, y0 + li, x1)
-            _prefetch(img, y0 + li, x0)
-            _prefetch(img, y0 + li, x1)
+            prefetch(blend, (y0 + li, x0))
+            prefetch(blend, (y0 + li, x1))
+            prefetch(img, (y0 + li, x0))
+            prefetch(img, (y0 + li, x1))
 
 
 @kernel(inline=True)
