@@ -29,6 +29,7 @@ from .._jit import kernel, run_slots
 from ..geometry.silhouette import Silhouette, cached_adjacency, silhouette_adjacency, silhouette_brute
 from ..raster import View, rasterize_depth, rasterize_min_blend
 from ..raster.programs import PROGRAM_PENUMBRA, penumbra_intensity, smoothstep_bernstein  # noqa: F401
+from ..raster.rasterizer import prefetch
 from ..scene.types import light_key
 from .base import Method, MethodOutput, Param, register
 from .shadowmap import biased_light_row, fit_light_view
@@ -539,25 +540,32 @@ def _max_down_row(src, s0, sw, sh, dst, d0, dw, i):
 
 
 @kernel(parallel=True)
-def _pyramid_level1(zp_flat, H, W, data, w2, occ_flat, h, w, pt, pl):
-    """Level 1 (2x2 max of ``Z_P``) straight from the map, rows in parallel. With an occluder map
+def _pyramid_level1(zp_flat, H, W, data, offs, ws, hs, occ_flat, h, w, pt, pl):
+    """Levels 1 and 2 (2x2 max of ``Z_P``, then of level 1) straight from the map, in parallel by
+    level-2 rows (each reduces the two level-1 rows it reads, just made). With an occluder map
     ``occ_flat`` (h, w) placed at row ``pt``, column ``pl`` (h > 0), each pair of rows first takes
-    the minimum with it in place (as ``np.minimum``: NaN wins), then reduces."""
-    for i in prange((H + 1) // 2):
-        for rr in range(2 * i, min(2 * i + 2, H)):
-            ro = rr - pt
-            if 0 <= ro < h:
-                for c in range(w):
-                    a = zp_flat[rr * W + pl + c]
-                    b = occ_flat[ro * w + c]
-                    zp_flat[rr * W + pl + c] = a if (a < b or a != a) else b
-        _max_down_row(zp_flat, 0, W, H, data, 0, w2, i)
+    the minimum with it in place (as ``np.minimum``: NaN wins), then reduces. Level 2 only where
+    the pyramid has it (more than two levels)."""
+    H1 = hs[1]
+    step = 1 + int(len(offs) > 2)  # level-1 rows per iteration: 2 where level 2 exists
+    for k in prange((H1 + step - 1) // step):
+        for i in range(step * k, min(step * k + step, H1)):
+            for rr in range(2 * i, min(2 * i + 2, H)):
+                ro = rr - pt
+                if 0 <= ro < h:
+                    for c in range(w):
+                        a = zp_flat[rr * W + pl + c]
+                        b = occ_flat[ro * w + c]
+                        zp_flat[rr * W + pl + c] = a if (a < b or a != a) else b
+            _max_down_row(zp_flat, 0, W, H, data, 0, ws[1], i)
+        if step == 2:
+            _max_down_row(data, offs[1], ws[1], H1, data, offs[2], ws[2], k)
 
 
 @kernel
 def _pyramid_coarser(data, offs, ws, hs):
-    """Levels 2.. (small: one serial pass)."""
-    for L in range(2, len(offs)):
+    """Levels 3.. (small: one serial pass)."""
+    for L in range(3, len(offs)):
         for i in range(hs[L]):
             _max_down_row(data, offs[L - 1], ws[L - 1], hs[L - 1], data, offs[L], ws[L], i)
 
@@ -595,7 +603,7 @@ def build_zmax_pyramid(
     offs, ws, hs = np.array(offs, np.int64), np.array(ws, np.int64), np.array(hs, np.int64)
     if len(offs) > 1:
         zf = zp.reshape(-1) if occluder_depth is not None else np.ascontiguousarray(zp, dtype=np.float32).reshape(-1)
-        _pyramid_level1(zf, h, w, data, ws[1], occ.reshape(-1), oh, ow, r0, c0)
+        _pyramid_level1(zf, h, w, data, offs, ws, hs, occ.reshape(-1), oh, ow, r0, c0)
         _pyramid_coarser(data, offs, ws, hs)
     return data, offs, ws, hs
 
@@ -904,14 +912,22 @@ def penumbra_fragment_program(
     }
 
 
-@kernel
-def _count_below(a, v):
-    """Texels of ``a`` below ``v`` (serial: a short pass, cheaper than a parallel region)."""
+@kernel(nogil=True, nrt=False)
+def _count_below_slot(slot, a, v, counts, nslot):
+    """counts[slot] = texels of ``a`` below ``v`` in rows slot, slot + nslot, ... (``run_slots``)."""
     n = 0
-    for i in range(a.shape[0]):
+    for i in range(slot, a.shape[0], nslot):
         for j in range(a.shape[1]):
             n += a[i, j] < v
-    return n
+    counts[slot] = n
+
+
+def _count_below(a: np.ndarray, v: float) -> int:
+    """Texels of ``a`` (H,W) below ``v``, rows dealt to the threads (~0.3 ms serial for the map)."""
+    nslot = min(numba.get_num_threads(), max(a.shape[0], 1))
+    counts = np.zeros(nslot, np.int64)
+    run_slots(_count_below_slot, nslot, a, float(v), counts, nslot)
+    return int(counts.sum())
 
 
 @dataclass
@@ -1020,6 +1036,8 @@ def render_penumbra_map(
 #: outside the map) and V = 0 (umbra); a code >= 0 is the flat index of the texel read
 LOOKUP_NONE = -1
 LOOKUP_UMBRA = -2
+#: the eye pass prefetches the texels of the pixel this many pixels on in its row
+_PREFETCH_AHEAD = 32
 
 
 @kernel(nogil=True, nrt=False)
@@ -1041,6 +1059,16 @@ def _eye_lookup_slot(
     for i in range(slot, H, nslot):
         biased_light_row(vp, position, normal, mask, i, bias, slope_bias, sc[slot])
         for j in range(W):
+            # the texel _PREFETCH_AHEAD pixels on to the cache meanwhile (the map reads and the
+            # marks are scattered: mostly cache misses)
+            ja = j + _PREFETCH_AHEAD
+            if ja < W and sc[slot, 9, ja] != 0.0:
+                pfx = math.floor(sc[slot, 6, ja])
+                pfy = math.floor(sc[slot, 7, ja])
+                if 0.0 <= pfx < Wm and 0.0 <= pfy < Hm:
+                    prefetch(d_occ, (int(pfy), int(pfx)))
+                    if mark:
+                        prefetch(needed, (int(pfy) + pad_t, int(pfx) + pad_l))
             c = LOOKUP_NONE
             fx = math.floor(sc[slot, 6, j])
             fy = math.floor(sc[slot, 7, j])
@@ -1058,23 +1086,28 @@ def _eye_lookup_slot(
             code[i, j] = c
 
 
-@kernel
-def _eye_gather_kernel(code, pm_flat, v_out):
-    """V per pixel from its lookup code: 0 (umbra), 1 (none) or the penumbra-map texel read.
-    Returns (umbra pixels, pixels with 0 < V < 1). Serial: a short pass (a parallel region
-    costs compile time and, under load, waits for its slowest thread)."""
+@kernel(nogil=True, nrt=False)
+def _eye_gather_slot(slot, code, pm_flat, v_out, counts, nslot):
+    """V per pixel from its lookup code: 0 (umbra), 1 (none) or the penumbra-map texel read, rows
+    slot, slot + nslot, ...; counts[slot] = (umbra pixels, pixels with 0 < V < 1) of those rows.
+    A slot kernel run by ``run_slots`` (~1 ms serial at 512^2, on the frame's critical path)."""
     H, W = code.shape
     n_umbra = 0
     n_pen = 0
-    for i in range(H):
+    for i in range(slot, H, nslot):
         for j in range(W):
+            if j + _PREFETCH_AHEAD < W:  # the texel read _PREFETCH_AHEAD pixels on, to the cache
+                ta = code[i, j + _PREFETCH_AHEAD]
+                if ta >= 0:
+                    prefetch(pm_flat, ta)
             t = code[i, j]
             v = pm_flat[max(t, 0)]
             v = v if t >= 0 else (np.float32(0.0) if t == LOOKUP_UMBRA else np.float32(1.0))
             v_out[i, j] = v
             n_umbra += t == LOOKUP_UMBRA
             n_pen += (v > 0.0) & (v < 1.0)
-    return n_umbra, n_pen
+    counts[slot, 0] = n_umbra
+    counts[slot, 1] = n_pen
 
 
 @dataclass
@@ -1152,7 +1185,10 @@ def eye_gather(pmap: PenumbraMap, lookups: EyeLookups) -> tuple[np.ndarray, int,
     """Pass 3b: (V float32 of the shape of ``lookups.code``, umbra pixels, pixels with 0 < V < 1)."""
     code = lookups.code.reshape(len(lookups.code), -1) if lookups.code.ndim == 1 else lookups.code
     v = np.empty(code.shape, np.float32)
-    n_umbra, n_pen = _eye_gather_kernel(code, pmap.intensity.reshape(-1), v)
+    nslot = min(numba.get_num_threads(), max(len(code), 1))
+    counts = np.zeros((nslot, 2), np.int64)
+    run_slots(_eye_gather_slot, nslot, code, pmap.intensity.reshape(-1), v, counts, nslot)
+    n_umbra, n_pen = counts.sum(axis=0)
     return v.reshape(lookups.code.shape), int(n_umbra), int(n_pen)
 
 
