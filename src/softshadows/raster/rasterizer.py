@@ -18,6 +18,7 @@ from typing import NamedTuple
 
 import numba
 import numpy as np
+from llvmlite import binding as llvm
 from llvmlite import ir
 from numba import prange, types
 from numba.core import cgutils
@@ -1473,6 +1474,10 @@ def _texel_list(prog, pparams, blend, img, rect, vw, SP, TL):
     return n, tthr, smax, cmax
 
 
+# the intrinsic's name mangles its pointer type: typed pointers (LLVM < 15) spell it out
+_PREFETCH_NAME = "llvm.prefetch.p0" if llvm.llvm_version_info[0] >= 15 else "llvm.prefetch.p0i8"
+
+
 @intrinsic
 def prefetch(typingctx, arr, idx):
     """A hint to load the cache line of ``arr[idx]`` (``idx``: an integer for a 1-D array, a tuple
@@ -1494,7 +1499,7 @@ def prefetch(typingctx, arr, idx):
         i8p = ir.IntType(8).as_pointer()
         i32 = ir.IntType(32)
         fn = cgutils.get_or_insert_function(
-            builder.module, ir.FunctionType(ir.VoidType(), [i8p, i32, i32, i32]), "llvm.prefetch.p0"
+            builder.module, ir.FunctionType(ir.VoidType(), [i8p, i32, i32, i32]), _PREFETCH_NAME
         )
         builder.call(fn, [builder.bitcast(ptr, i8p), ir.Constant(i32, 0), ir.Constant(i32, 3), ir.Constant(i32, 1)])
         return context.get_dummy_value()
