@@ -1502,12 +1502,18 @@ def project_soft_shadow_map(position, tri_id, receiver, svp, ssm):
     receivers read the SSM (bilinear) at their projection from the light; V = 1 - occlusion.
     Outside the SSM, behind the light, on occluder-only geometry or without a surface: V = 1.
     Per row, the projections first (one float64 array per coordinate, no branch: LLVM vectorizes
-    it), then the lookups. Returns (V, the number of receiver pixels)."""
+    it), then the lookups. Returns (V, the number of receiver pixels).
+
+    The rows are visited interleaved (r -> 2r, then the odd rows): a ``prange`` gives each thread a
+    contiguous run of r, and in row order the upper half of an eye image is often sky (no surface,
+    nothing to look up), which left one thread idle for most of the pass."""
     H, W = tri_id.shape
     Hs, Ws = ssm.shape
     out = np.empty((H, W), np.float32)
     n_row = np.zeros(H, np.int64)
-    for i in prange(H):
+    half = (H + 1) // 2
+    for r in prange(H):
+        i = 2 * r if r < half else 2 * (r - half) + 1
         sc = np.empty((3, W))
         for j in range(W):
             sx, sy, z = view_project(
