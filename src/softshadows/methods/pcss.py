@@ -112,6 +112,19 @@ def _tap_offset(pattern, i, disk, rot, c, s, shx, shy):
 
 
 @kernel(inline=True)
+def _pixel_point(position, normal, i, j):
+    """The G-buffer's point and normal at pixel (i, j), in float64."""
+    return (
+        np.float64(position[i, j, 0]),
+        np.float64(position[i, j, 1]),
+        np.float64(position[i, j, 2]),
+        np.float64(normal[i, j, 0]),
+        np.float64(normal[i, j, 1]),
+        np.float64(normal[i, j, 2]),
+    )
+
+
+@kernel(inline=True)
 def _view_normal(vp, nx, ny, nz):
     """The normal in light-view coordinates (right, up, forward components)."""
     return (
@@ -438,12 +451,7 @@ def blocker_search_kernel(
             if not mask[i, j]:
                 continue
             k += 1
-            px = np.float64(position[i, j, 0])
-            py = np.float64(position[i, j, 1])
-            pz = np.float64(position[i, j, 2])
-            nx = np.float64(normal[i, j, 0])
-            ny = np.float64(normal[i, j, 1])
-            nz = np.float64(normal[i, j, 2])
+            px, py, pz, nx, ny, nz = _pixel_point(position, normal, i, j)
             sx, sy, z = view_project(vp, px, py, pz)
             if not (z > z_near):
                 zr_out[k] = z
@@ -574,12 +582,7 @@ def filtering_kernel(
             ry = 0.5 * wy / (texel1 * zr[k])
             wp_out[k] = max(wx, wy)
             radius_out[k] = max(rx, ry)
-            px = np.float64(position[i, j, 0])
-            py = np.float64(position[i, j, 1])
-            pz = np.float64(position[i, j, 2])
-            nx = np.float64(normal[i, j, 0])
-            ny = np.float64(normal[i, j, 1])
-            nz = np.float64(normal[i, j, 2])
+            px, py, pz, nx, ny, nz = _pixel_point(position, normal, i, j)
             sx, sy, z = view_project(vp, px, py, pz)
             zt = zr[k]
             off = z - zt
