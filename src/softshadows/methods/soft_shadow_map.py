@@ -333,14 +333,20 @@ def penumbra_extents_sphere(patches, rho, z_plane, svp):
     n = patches.shape[0]
     out = np.empty((n, 4), np.int32)
     for k in range(n):
-        fi0, fi1, fj0, fj1 = _sphere_extent(
-            patches[k, 0], patches[k, 1], patches[k, 2], patches[k, 3], patches[k, 4], rho, rho, z_plane, svp
-        )
-        if fj0 > fj1 or fi0 > fi1:
-            out[k, 0], out[k, 1], out[k, 2], out[k, 3] = 1, 0, 1, 0
-        else:
-            out[k, 0], out[k, 1], out[k, 2], out[k, 3] = int(fi0), int(fi1), int(fj0), int(fj1)
+        _patch_sphere_extent(patches, k, rho, z_plane, svp, out)
     return out
+
+
+@kernel(inline=True)
+def _patch_sphere_extent(patches, k, rho, z_plane, svp, out):
+    """Patch k's :func:`_sphere_extent` into ``out[k]`` (rows i0, i1, columns j0, j1; empty: 1, 0, 1, 0)."""
+    fi0, fi1, fj0, fj1 = _sphere_extent(
+        patches[k, 0], patches[k, 1], patches[k, 2], patches[k, 3], patches[k, 4], rho, rho, z_plane, svp
+    )
+    if fj0 > fj1 or fi0 > fi1:
+        out[k, 0], out[k, 1], out[k, 2], out[k, 3] = 1, 0, 1, 0
+    else:
+        out[k, 0], out[k, 1], out[k, 2], out[k, 3] = int(fi0), int(fi1), int(fj0), int(fj1)
 
 
 @kernel
@@ -415,13 +421,7 @@ def refine_extents_sphere(patches, ext, rho, pyr_vals, pyr_off, pyr_ws, svp, rou
     dys = (t - b) / svp[VP_H]
     for k in prange(patches.shape[0]):
         if z_plane > 0.0:
-            fi0, fi1, fj0, fj1 = _sphere_extent(
-                patches[k, 0], patches[k, 1], patches[k, 2], patches[k, 3], patches[k, 4], rho, rho, z_plane, svp
-            )
-            if fj0 > fj1 or fi0 > fi1:
-                ext[k, 0], ext[k, 1], ext[k, 2], ext[k, 3] = 1, 0, 1, 0
-            else:
-                ext[k, 0], ext[k, 1], ext[k, 2], ext[k, 3] = int(fi0), int(fi1), int(fj0), int(fj1)
+            _patch_sphere_extent(patches, k, rho, z_plane, svp, ext)
         for _ in range(rounds):
             i0, i1, j0, j1 = ext[k, 0], ext[k, 1], ext[k, 2], ext[k, 3]
             if i0 > i1 or j0 > j1:
