@@ -157,16 +157,82 @@ def counting_sort(key, n_keys):
     return cnt, order
 
 
-@kernel(parallel=True)
-def _gather_sorted(order, rec, sx, sy, sp, sd):
-    for j in prange(order.shape[0]):
-        k = order[j]
-        sx[j] = rec[k, 0]
-        sy[j] = rec[k, 1]
-        sd[j] = rec[k, 2]
-        sp[j, 0] = rec[k, 3]
-        sp[j, 1] = rec[k, 4]
-        sp[j, 2] = rec[k, 5]
+@kernel(nogil=True, nrt=False)
+def _sort_slot(w, phase, key, rec, hist, tot, start, order, sx, sy, sp, sd):
+    """One slot of :func:`sort_samples` (``run_slots``; C = ``hist.shape[0]`` slots), one phase per
+    launch: 0, slot w counts the keys of its chunk of the input into ``hist[w]``; 1, the samples of
+    its range of keys, all chunks, into ``tot[w + 1]``; 2, from ``tot[w]`` on, each key's first
+    place (``start``) and each chunk's next place for it, key-major and chunk-minor (``hist``); 3,
+    its chunk's samples scattered to their places in input order (``order``); 4, its range of the
+    sorted samples gathered (their records' rows)."""
+    C = hist.shape[0]
+    n = key.shape[0]
+    nk = hist.shape[1]
+    if phase == 0:
+        for c in range(nk):
+            hist[w, c] = 0
+        v = 0
+        for k in range(w * n // C, (w + 1) * n // C):
+            c = key[k]
+            if c >= 0:
+                hist[w, np.uint64(c)] += 1  # unsigned: no wrap-around code
+                v += 1
+        tot[C + 1 + w] = v  # the chunk's samples in front of the view
+    elif phase == 1:
+        t = 0
+        for c in range(w * nk // C, (w + 1) * nk // C):
+            for q in range(C):
+                t += hist[q, c]
+        tot[w + 1] = t
+    elif phase == 2:
+        t = tot[w]
+        for c in range(w * nk // C, (w + 1) * nk // C):
+            start[c] = t
+            for q in range(C):
+                h = hist[q, c]
+                hist[q, c] = t
+                t += h
+    elif phase == 3:
+        for k in range(w * n // C, (w + 1) * n // C):
+            c = key[k]
+            if c >= 0:
+                i = hist[w, np.uint64(c)]
+                hist[w, np.uint64(c)] = i + 1
+                order[np.uint64(i)] = k
+    else:
+        m = order.shape[0]
+        for j in range(w * m // C, (w + 1) * m // C):
+            k = np.uint64(order[j])
+            sx[j] = rec[k, 0]
+            sy[j] = rec[k, 1]
+            sd[j] = rec[k, 2]
+            sp[j, 0] = rec[k, 3]
+            sp[j, 1] = rec[k, 4]
+            sp[j, 2] = rec[k, 5]
+
+
+def sort_samples(key, rec, n_keys: int):
+    """(start (n_keys + 1), order, sx, sy, sp, sd): :func:`counting_sort` of the grid keys (the same
+    ``start`` and ``order``: stable, negative keys dropped) and the sorted samples' records gathered,
+    by the threads together (``_sort_slot``, its five phases): the serial sort's scatter was the
+    longest serial step of the frame. The places are key-major, chunk-minor, so the order is the
+    serial sort's whatever the number of threads."""
+    C = max(1, min(numba.get_num_threads(), len(key)))
+    hist = np.empty((C, n_keys), np.int32)  # (a count of samples fits)
+    tot = np.zeros(2 * C + 1, np.int64)  # the key ranges' first places, then the chunks' samples
+    start = np.empty(n_keys + 1, np.int64)
+    e0, e1, e2 = np.empty(0, np.int64), np.empty(0), np.empty((0, 3))  # (the outputs, not yet made)
+    for phase in (0, 1) if C > 1 else (0,):  # (one range: it starts at 0)
+        run_slots(_sort_slot, C, phase, key, rec, hist, tot, start, e0, e1, e1, e2, e1)
+    np.cumsum(tot[: C + 1], out=tot[: C + 1])
+    m = int(tot[C + 1 :].sum())
+    start[n_keys] = m
+    order = np.empty(m, np.int64)
+    sx, sy, sd = np.empty(m), np.empty(m), np.empty(m)
+    sp = np.empty((m, 3))
+    for phase in (2, 3, 4):
+        run_slots(_sort_slot, C, phase, key, rec, hist, tot, start, order, sx, sy, sp, sd)
+    return start, order, sx, sy, sp, sd
 
 
 @kernel(parallel=True)
@@ -312,12 +378,8 @@ def build_sample_grid(light, pts: np.ndarray, grid: int, bins: int, slices: int)
     sb = slice_bounds(dlo, dhi, slices)
     rx, ry = cell_numbers(grid, grid, bins, nbx)
     _sample_keys(pts, vp, grid, grid, rx, ry, slices, sb, near, rec, key)
-    n_keys = nbx * nby * bins * bins * slices
-    start, order = counting_sort(key, n_keys)
+    start, order, sx, sy, sp, sd = sort_samples(key, rec, nbx * nby * bins * bins * slices)
     m = len(order)
-    sx, sy, sd = np.empty(m), np.empty(m), np.empty(m)
-    sp = np.empty((m, 3))
-    _gather_sorted(order, rec, sx, sy, sp, sd)
     cbox, cmax, occ = _column_boxes(start, sp, sd, slices)
     bmax = cmax.reshape(nbx * nby, bins * bins).max(axis=1)
     return SampleGrid(
