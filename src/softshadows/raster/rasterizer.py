@@ -1956,10 +1956,7 @@ def _make_min_blend_slot(prog):
             if use_mask and list_max >= 0:
                 nlist = 0
                 for li in range(y1 - y0 + 1):
-                    rb = SP[_SP_RN, li]
-                    while rb != 0:
-                        rb &= rb - 1
-                        nlist += 1
+                    nlist += _bit_count(SP[_SP_RN, li])
             if nlist <= list_max:
                 _list_tile(prog, pparams, blend, img, rect, vw, near, tile, SP, TL, fe, mb)
                 continue
