@@ -483,3 +483,30 @@ def test_visibility_finite_in_unit_interval(name, shape):
     v = r.visibility[r.mask]
     assert np.isfinite(v).all() and v.min() >= 0.0 and v.max() <= 1.0
     assert (v < 0.5).any()  # every built-in scene has a shadow in view
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_sort_samples_is_the_serial_counting_sort_whatever_the_threads(threads):
+    """``sort_samples`` (the grid's counting sort and gather by the threads together) gives the
+    serial ``counting_sort``'s start and order (stable, negative keys dropped) and the records in
+    that order, with one thread or two; keys repeat, some bins stay empty."""
+    import numba
+
+    from softshadows.methods.irregular import counting_sort, sort_samples
+
+    rng = np.random.default_rng(7)
+    n, n_keys = 5003, 97
+    key = rng.integers(-5, n_keys, size=n).astype(np.int64)
+    key[key == 13] = 14  # an empty bin
+    rec = rng.standard_normal((n, 6))
+    old = numba.get_num_threads()
+    numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
+    try:
+        start, order, sx, sy, sp, sd = sort_samples(key, rec, n_keys)
+    finally:
+        numba.set_num_threads(old)
+    s_ref, o_ref = counting_sort(key, n_keys)
+    np.testing.assert_array_equal(start, s_ref)
+    np.testing.assert_array_equal(order, o_ref)
+    np.testing.assert_array_equal(np.stack([sx, sy, sd], 1), rec[o_ref][:, :3])
+    np.testing.assert_array_equal(sp, rec[o_ref][:, 3:])
