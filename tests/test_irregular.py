@@ -447,6 +447,88 @@ def test_rect_bound_keeps_every_nonzero_term(case):
     assert rejected_zeros > 0.5 * zeros
 
 
+@pytest.mark.parametrize("scale", [1e-3, 1.0, 1e3])
+def test_disk_bound_keeps_every_nonzero_term(scale):
+    """The sphere light's per-sample test (``disk_reach``: the angle at the light centre between the
+    sample and the edge's arc, against r / dmin) is conservative: every (edge, point) whose term
+    (``sample_edge_term``, the scalar path) is nonzero passes it, for edges with dmin > r (the pass
+    uses it only for those); and it rejects most of the zeros (it is not vacuous). Random edges
+    around a light, points below them, on the edges' lines, next to their ends and just past
+    them (where the terms start), at three scene scales."""
+    from numba import njit
+
+    from softshadows.methods.irregular import (
+        _QCOLS,
+        _QN,
+        _REACH_EPS,
+        _REACH_SLACK,
+        _ROW,
+        _arc_setup,
+        disk_reach,
+        sample_edge_term,
+        sample_row,
+    )
+
+    @njit
+    def terms(pts, center, radius, ea, eb, tv_start, tv):
+        n = pts.shape[0]
+        out = np.empty((ea.shape[0], n))
+        rw = np.empty((_ROW, n))
+        z = np.zeros(3)
+        buf = np.zeros((4, 8))
+        for j in range(n):
+            sample_row(1, center, z, pts, j, rw, j)
+        for e in range(ea.shape[0]):
+            for j in range(n):
+                out[e, j] = sample_edge_term(1, rw, j, z, z, radius, 0.0, 0.0, e, ea, eb, tv_start, tv, buf)
+        return out
+
+    rng = np.random.default_rng(11)
+    ne = 80
+    center = np.array([0.1, 2.5, -0.2]) * scale
+    radius = 0.45 * scale
+    ea = rng.uniform(-1, 1, (ne, 3)) * scale
+    eb = ea + rng.uniform(-0.3, 0.3, (ne, 3)) * scale
+    ntri = rng.integers(1, 3, ne)
+    tv_start = np.concatenate([[0], np.cumsum(ntri)])
+    tv = rng.uniform(-1, 1, (tv_start[-1], 3)) * scale
+    below = rng.uniform(-2, 2, (300, 3)) * [1.0, 0.5, 1.0] * scale - [0.0, 1.0 * scale, 0.0]
+    # points on the lines from the light through the edges' points, past them, slightly off
+    e_i = rng.integers(0, ne, 300)
+    t = rng.uniform(-0.2, 1.2, 300)[:, None]
+    x = ea[e_i] + t * (eb[e_i] - ea[e_i])
+    along = center + (x - center) * rng.uniform(1.0, 2.0, 300)[:, None]
+    along += rng.normal(0, 1e-3, (300, 3)) * scale
+    pts = np.concatenate([below, along])
+    got = terms(pts, center, radius, ea, eb, tv_start, tv)
+    reach = py_callable(disk_reach)
+    arc_setup = py_callable(_arc_setup)
+    qd = np.zeros((ne, _QCOLS))
+    d = pts - center
+    D = np.sqrt((d * d).sum(1))
+    kept = nonzero = rejected_zeros = zeros = 0
+    for e in range(ne):
+        u = eb[e] - ea[e]
+        tt = np.clip((center - ea[e]) @ u / (u @ u), 0.0, 1.0)
+        dmin = float(np.linalg.norm(ea[e] + tt * u - center))
+        if not dmin > radius:
+            continue
+        arc_setup(ea, eb, e, center, dmin, qd)
+        arc = np.ascontiguousarray(qd[e, _QN : _QN + 15])
+        rdm = radius / dmin * (1.0 + _REACH_SLACK) + _REACH_EPS
+        for j in range(len(pts)):
+            iD = 1.0 / D[j]
+            ok = reach(d[j, 0] * iD, d[j, 1] * iD, d[j, 2] * iD, iD, radius, rdm, arc)
+            if got[e, j] != 0.0:
+                nonzero += 1
+                kept += bool(ok)
+            else:
+                zeros += 1
+                rejected_zeros += not ok
+    assert nonzero > 300 and kept == nonzero
+    assert rejected_zeros > 0.5 * zeros
+
+
 def test_rect_halfplanes_area_against_exact_cases():
     """``rect_halfplanes_area`` (twice the area) on regions of [-1, 1] x [-0.5, 0.5] whose area is
     known exactly, including first lines that coincide with a side (facing the same way: counted
