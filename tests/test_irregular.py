@@ -529,6 +529,100 @@ def test_disk_bound_keeps_every_nonzero_term(scale):
     assert rejected_zeros > 0.5 * zeros
 
 
+def test_disk_cell_bound_keeps_every_nonzero_term():
+    """The sphere's cell-column test (``disk_cell_reach``: the arc's angle to the cell's centre
+    direction less the cell's half diagonal, against r / dmin at the farthest receivers) covers
+    every sample of the cell whose term is nonzero, and its wedge entry lies at or before that
+    sample's distance, as the penumbra pass uses it (the first slice tested is the entry's). Random
+    edges around a light, a view from the light centre, cells of three sizes, samples on rays
+    through random points of each cell at random distances; and it rejects most cells holding only
+    zeros (it is not vacuous)."""
+    from numba import njit
+
+    from softshadows.methods.irregular import (
+        _QCOLS,
+        _QN,
+        _REACH_EPS,
+        _REACH_SLACK,
+        _ROW,
+        _SLACK,
+        _arc_setup,
+        cell_direction,
+        disk_cell_reach,
+        sample_edge_term,
+        sample_row,
+    )
+    from softshadows.raster.view import VP_FORWARD, VP_RIGHT, VP_SIZE, VP_UP
+
+    @njit
+    def terms(pts, center, radius, ea, eb, tv_start, tv):
+        n = pts.shape[0]
+        out = np.empty((ea.shape[0], n))
+        rw = np.empty((_ROW, n))
+        z = np.zeros(3)
+        buf = np.zeros((4, 8))
+        for j in range(n):
+            sample_row(1, center, z, pts, j, rw, j)
+        for e in range(ea.shape[0]):
+            for j in range(n):
+                out[e, j] = sample_edge_term(1, rw, j, z, z, radius, 0.0, 0.0, e, ea, eb, tv_start, tv, buf)
+        return out
+
+    rng = np.random.default_rng(12)
+    center, radius = np.array([0.1, 2.5, -0.2]), 0.45
+    f = np.array([0.1, -1.0, 0.05])
+    f /= np.linalg.norm(f)
+    r = np.cross(f, [0.0, 0.0, 1.0])
+    r /= np.linalg.norm(r)
+    u = np.cross(r, f)
+    vp = np.zeros(VP_SIZE)
+    vp[VP_RIGHT : VP_RIGHT + 3], vp[VP_UP : VP_UP + 3], vp[VP_FORWARD : VP_FORWARD + 3] = r, u, f
+    ne = 60
+    ea = rng.uniform(-1, 1, (ne, 3)) * [1.0, 0.4, 1.0] + [0.0, 0.8, 0.0]
+    eb = ea + rng.uniform(-0.3, 0.3, (ne, 3))
+    ntri = rng.integers(1, 3, ne)
+    tv_start = np.concatenate([[0], np.cumsum(ntri)])
+    tv = rng.uniform(-1, 1, (tv_start[-1], 3))
+    qd = np.zeros((ne, _QCOLS))
+    reach = py_callable(disk_cell_reach)
+    cdir = py_callable(cell_direction)
+    arc_setup = py_callable(_arc_setup)
+    covered = nonzero = empty_cells = rejected = 0
+    for half in (0.005, 0.02, 0.06):  # half the cell's side (image-plane units)
+        cells = rng.uniform(-0.8, 0.8, (150, 2))
+        hd = np.hypot(half, half) * (1.0 + 1e-12)
+        chd, shd = np.cos(hd), np.sin(hd) * (1.0 + 1e-12)
+        # 12 samples per cell: random image points of the cell, random distances in [2, 6]
+        img = cells[:, None, :] + rng.uniform(-half, half, (150, 12, 2))
+        dirs = img[..., :1] * r + img[..., 1:] * u + f
+        dirs /= np.linalg.norm(dirs, axis=-1, keepdims=True)
+        pts = (center + dirs * rng.uniform(2.0, 6.0, (150, 12, 1))).reshape(-1, 3)
+        D = np.linalg.norm(pts - center, axis=1).reshape(150, 12)
+        got = terms(pts, center, radius, ea, eb, tv_start, tv).reshape(ne, 150, 12)
+        for e in range(ne):
+            w = eb[e] - ea[e]
+            tt = np.clip((center - ea[e]) @ w / (w @ w), 0.0, 1.0)
+            dmin = float(np.linalg.norm(ea[e] + tt * w - center))
+            if not dmin > radius:
+                continue
+            arc_setup(ea, eb, e, center, dmin, qd)
+            arc = np.ascontiguousarray(qd[e, _QN : _QN + 15])
+            rdm = radius / dmin * (1.0 + _REACH_SLACK) + _REACH_EPS
+            for c in range(150):
+                mx, my, mz = cdir(cells[c, 0], cells[c, 1], vp)
+                ok, entry = reach(mx, my, mz, chd, shd, arc, rdm, radius, 1.0 / D[c].max())
+                nz = got[e, c] != 0.0
+                if nz.any():
+                    nonzero += int(nz.sum())
+                    hit = (not ok) or (entry >= 0.0 and np.all(entry * (1.0 - _SLACK) <= D[c][nz]))
+                    covered += int(nz.sum()) if hit else 0
+                else:
+                    empty_cells += 1
+                    rejected += ok and entry < 0.0
+    assert nonzero > 300 and covered == nonzero
+    assert rejected > 0.5 * empty_cells
+
+
 def test_rect_halfplanes_area_against_exact_cases():
     """``rect_halfplanes_area`` (twice the area) on regions of [-1, 1] x [-0.5, 0.5] whose area is
     known exactly, including first lines that coincide with a side (facing the same way: counted

@@ -1856,6 +1856,48 @@ def disk_reach(ux, uy, uz, iD, radius, rdm, arc):
     return near | np.int8(not ((ca > 0.0) & (cb > 0.0)))
 
 
+@kernel(inline=True, nrt=False)
+def cell_direction(xm, ym, vp):
+    """The unit direction from the light centre through image-plane point (xm, ym)."""
+    iw = 1.0 / np.sqrt(xm * xm + ym * ym + 1.0)
+    return (
+        (xm * vp[VP_RIGHT] + ym * vp[VP_UP] + vp[VP_FORWARD]) * iw,
+        (xm * vp[VP_RIGHT + 1] + ym * vp[VP_UP + 1] + vp[VP_FORWARD + 1]) * iw,
+        (xm * vp[VP_RIGHT + 2] + ym * vp[VP_UP + 2] + vp[VP_FORWARD + 2]) * iw,
+    )
+
+
+@kernel(inline=True, nrt=False)
+def disk_cell_reach(mx, my, mz, chd, shd, arc, rdm, radius, iDb):
+    """:func:`disk_reach` for a whole cell column (m: the unit direction through its image-plane
+    centre, :func:`cell_direction`; hd its half diagonal, ``chd``, ``shd`` = its cosine and sine,
+    rounded up) up to distance 1 / ``iDb``: (applies, entry). Every sample direction of the cell
+    lies within the angle hd of m (the image plane's stretch is >= 1), so its angle to the edge's
+    arc is at least a_lb = a_m - hd; the test's left side sin a + (r/D) cos a grows with a (while
+    < 1) and falls with D, so lower bounds of sin a_lb and cos a_lb bound it for every sample
+    (in the arc, 1 - sin^2 a_m <= cos a_m <= 1: no square root). ``applies`` is False when an end of the edge may lie 90 deg or more from a sample of the
+    cell (the caller then uses the quad); else ``entry`` is the distance from which a sample of the
+    cell can pass, r cos a_lb / (r/dmin - sin a_lb) (the wedge's entry), or -1 when none up to
+    1 / iDb can."""
+    sn = mx * arc[0] + my * arc[1] + mz * arc[2]
+    ta = mx * arc[3] + my * arc[4] + mz * arc[5]
+    tb = mx * arc[6] + my * arc[7] + mz * arc[8]
+    ca = mx * arc[9] + my * arc[10] + mz * arc[11]
+    cb = mx * arc[12] + my * arc[13] + mz * arc[14]
+    if not ((ca > shd) and (cb > shd)):
+        return False, -1.0
+    inarc = (ta > 0.0) and (tb > 0.0)
+    cm = ca if ca > cb else cb
+    s_lo = abs(sn) if inarc else np.sqrt(max(1.0 - cm * cm, 0.0))
+    c_lo = 1.0 - sn * sn if inarc else cm
+    c_hi = 1.0 if inarc else cm
+    s1 = max(s_lo * chd - c_hi * shd, 0.0)
+    c1 = c_lo * chd + s_lo * shd
+    if not (s1 + radius * iDb * c1 <= rdm):
+        return True, -1.0
+    return True, radius * c1 / (rdm - s1)
+
+
 @kernel(nogil=True)
 def _penumbra_kernel(
     _worker,
@@ -1909,6 +1951,7 @@ def _penumbra_kernel(
     cw = (r - l) / gx
     ch = (t - b) / gy
     hd = 0.5 * np.sqrt(cw * cw + ch * ch) * (1.0 + 1e-12)  # a cell's half diagonal (rounded up)
+    chd, shd = np.cos(hd), np.sin(hd) * (1.0 + 1e-12)  # (disk_cell_reach) the angle it bounds
     buf = np.zeros((4, 8))  # scratch, once per worker
     cand = np.empty(max_bin, np.int64)
     cval = np.empty(max_bin)
@@ -1920,6 +1963,7 @@ def _penumbra_kernel(
     sinv = np.empty(max_bin)
     sdir = np.empty((3, max_bin))  # the bin's samples' unit directions from the light centre (sphere)
     arc = np.empty(15)  # the current edge's arc (disk_reach)
+    mdir = np.empty((3, B * B))  # the current bin's cells' directions (disk_cell_reach)
     c0, c1, c2 = center[0], center[1], center[2]
     while True:
         q = next_item(counter)
@@ -1944,6 +1988,14 @@ def _penumbra_kernel(
                     sdir[1, j - jb] = (spos[j, 1] - c1) * iD
                     sdir[2, j - jb] = (spos[j, 2] - c2) * iD
         bx0, bx1, by0, by1 = _bin_box(vp, gx, gy, B, bx, by)
+        if shape == 1:  # the directions through the bin's cells' centres (disk_cell_reach)
+            for cy in range(by * B, min(by * B + B, gy)):
+                for cx in range(bx * B, min(bx * B + B, gx)):
+                    lc = (cy - by * B) * B + cx - bx * B
+                    y1 = t - cy * ch
+                    mdir[0, lc], mdir[1, lc], mdir[2, lc] = cell_direction(
+                        l + cx * cw + 0.5 * cw, y1 - ch + 0.5 * ch, vp
+                    )
         bc2 = box_corner2(bx0, bx1, by0, by1)
         nf = 0
         nt = 0
@@ -1980,6 +2032,7 @@ def _penumbra_kernel(
             rhn, ren = rhx * abs(sdy) + rhy * abs(sdx), _EPS_IMG * (abs(sdx) + abs(sdy))
             # the sphere's per-sample test (disk_reach): r / dmin with its margins, the edge's arc
             rdm = radius / qd[e, _QDMIN] * (1.0 + _REACH_SLACK) + _REACH_EPS if not rect else 0.0
+            iDb = 1.0 / (bin_maxd[bi] if per_bin else dmax)  # (disk_cell_reach) the farthest receivers
             for k in range(15):
                 arc[k] = qd[e, _QN + k]
             # the bin's cells that can overlap the quad's bounding box (one cell of margin for
@@ -2006,17 +2059,29 @@ def _penumbra_kernel(
                     if g_start[col] == g_start[col + S]:
                         continue
                     kc = 0.0
+                    dent = -1.0  # the sphere's wedge entry by angles (disk_cell_reach), if it applies
                     if rect:
                         kc = rect_reach(qd, e, x0, x1, y0, y1)
                         if kc > kq:
                             continue
-                    elif not (every or axes_overlap_box(ux, uy, qcx, qcy, hl, hw, x0, x1, y0, y1)):
-                        continue
+                    elif not every:
+                        lc = (cy - by * B) * B + cx - bx * B
+                        ang, dent = disk_cell_reach(
+                            mdir[0, lc], mdir[1, lc], mdir[2, lc], chd, shd, arc, rdm, radius, iDb
+                        )
+                        if ang:
+                            if dent < 0.0:
+                                continue
+                        elif not axes_overlap_box(ux, uy, qcx, qcy, hl, hw, x0, x1, y0, y1):
+                            continue
                     if cancels_in_box(e, ea, eb, tv_start, tv, col_box, ci):
                         continue
                     nf += 1
                     s0 = 0
-                    if rect:
+                    if dent >= 0.0:
+                        if wedge:
+                            s0 = slice_of(dent * (1.0 - _SLACK), sb)
+                    elif rect:
                         # the wedge enters the column where k = 1/z_min - 1/z reaches kc: at depth (so
                         # at distance) 1 / (1/z_min - kc) or beyond
                         if wedge and kc > 0.0:
