@@ -970,6 +970,81 @@ def _arc_setup(ea, eb, e, center, dmin, qd):
     qd[e, _QDMIN] = dmin
 
 
+#: disk_reach's margins: relative on r / dmin, and absolute (a sine)
+_REACH_SLACK = 1e-4
+_REACH_EPS = 1e-7
+
+
+@kernel(inline=True, nrt=False)
+def disk_reach(ux, uy, uz, iD, radius, rdm, arc):
+    """The sphere's per-sample test: can edge e (its arc ``arc`` = qd's columns ``_QN`` on, from
+    :func:`_arc_setup`) hide part of the disk facing a sample at unit direction u from the light
+    centre c and distance D = 1 / iD? ``rdm`` = r / dmin with margins (``_REACH_SLACK``,
+    ``_REACH_EPS``). Angles at c, no image-plane stretch (the quad's bound has the window's).
+
+    An edge point x at distance d >= dmin from c and angle a < 90 deg from u hides part of the
+    disk of radius r facing p iff the ray from p through x meets the disk:
+    d (D sin a + r cos a) <= r D, so sin a + (r / D) cos a <= r / dmin. That left side grows with a
+    up to 90 deg - atan(r / D) and is 1 > r / dmin at 90 deg, so, when every point of the edge lies
+    within 90 deg of u (both ends do: the arc is minor), it is smallest at the edge's nearest
+    direction to u: in the arc, sin a = |u . n^|; else an end's, cos a = max(u . a^, u . b^). With
+    cos a >= cos^2 a = 1 - sin^2 a (no square root): the sample is kept iff
+    sqrt(S2) <= rdm - (r / D)(1 - S2), S2 = sin^2 a. Every sample it drops has an exact zero term
+    (a relative margin of 1e-4 on r / dmin); with an end 90 deg or more away it keeps the sample."""
+    sn = ux * arc[0] + uy * arc[1] + uz * arc[2]
+    ta = ux * arc[3] + uy * arc[4] + uz * arc[5]
+    tb = ux * arc[6] + uy * arc[7] + uz * arc[8]
+    ca = ux * arc[9] + uy * arc[10] + uz * arc[11]
+    cb = ux * arc[12] + uy * arc[13] + uz * arc[14]
+    cm = ca if ca > cb else cb
+    s2 = sn * sn if (ta > 0.0) & (tb > 0.0) else 1.0 - cm * cm
+    tt = rdm - radius * iD * (1.0 - s2)
+    near = np.int8(tt >= 0.0) & np.int8(s2 <= tt * tt)
+    return near | np.int8(not ((ca > 0.0) & (cb > 0.0)))
+
+
+@kernel(inline=True, nrt=False)
+def cell_direction(xm, ym, vp):
+    """The unit direction from the light centre through image-plane point (xm, ym)."""
+    iw = 1.0 / np.sqrt(xm * xm + ym * ym + 1.0)
+    return (
+        (xm * vp[VP_RIGHT] + ym * vp[VP_UP] + vp[VP_FORWARD]) * iw,
+        (xm * vp[VP_RIGHT + 1] + ym * vp[VP_UP + 1] + vp[VP_FORWARD + 1]) * iw,
+        (xm * vp[VP_RIGHT + 2] + ym * vp[VP_UP + 2] + vp[VP_FORWARD + 2]) * iw,
+    )
+
+
+@kernel(inline=True, nrt=False)
+def disk_cell_reach(mx, my, mz, chd, shd, arc, rdm, radius, iDb):
+    """:func:`disk_reach` for a whole cell column (m: the unit direction through its image-plane
+    centre, :func:`cell_direction`; hd its half diagonal, ``chd``, ``shd`` = its cosine and sine,
+    rounded up) up to distance 1 / ``iDb``: (applies, entry). Every sample direction of the cell
+    lies within the angle hd of m (the image plane's stretch is >= 1), so its angle to the edge's
+    arc is at least a_lb = a_m - hd; the test's left side sin a + (r/D) cos a grows with a (while
+    < 1) and falls with D, so lower bounds of sin a_lb and cos a_lb bound it for every sample
+    (in the arc, 1 - sin^2 a_m <= cos a_m <= 1: no square root). ``applies`` is False when an end of the edge may lie 90 deg or more from a sample of the
+    cell (the caller then uses the quad); else ``entry`` is the distance from which a sample of the
+    cell can pass, r cos a_lb / (r/dmin - sin a_lb) (the wedge's entry), or -1 when none up to
+    1 / iDb can."""
+    sn = mx * arc[0] + my * arc[1] + mz * arc[2]
+    ta = mx * arc[3] + my * arc[4] + mz * arc[5]
+    tb = mx * arc[6] + my * arc[7] + mz * arc[8]
+    ca = mx * arc[9] + my * arc[10] + mz * arc[11]
+    cb = mx * arc[12] + my * arc[13] + mz * arc[14]
+    if not ((ca > shd) and (cb > shd)):
+        return False, -1.0
+    inarc = (ta > 0.0) and (tb > 0.0)
+    cm = ca if ca > cb else cb
+    s_lo = abs(sn) if inarc else np.sqrt(max(1.0 - cm * cm, 0.0))
+    c_lo = 1.0 - sn * sn if inarc else cm
+    c_hi = 1.0 if inarc else cm
+    s1 = max(s_lo * chd - c_hi * shd, 0.0)
+    c1 = c_lo * chd + s_lo * shd
+    if not (s1 + radius * iDb * c1 <= rdm):
+        return True, -1.0
+    return True, radius * c1 / (rdm - s1)
+
+
 @kernel
 def _quad_setup(ea, eb, vp, center, radius, shape, nrm_l, dmax, qd):
     """Per edge: image-plane endpoints, the minimum distance of the edge to the light centre and the
@@ -1207,6 +1282,17 @@ def _quad_bins(qd, radius, dmax, corner2, bin_maxd, per_bin, vp, gx, gy, B, nbx,
                     hit = R > 0.0 and (
                         not np.isfinite(R) or axes_overlap_box(ux, uy, qcx, qcy, hl0 + R, R, x0, x1, y0, y1)
                     )
+                    if hit and np.isfinite(R):
+                        # by angles (disk_cell_reach with the bin's centre and half diagonal): the
+                        # quad's stretch dropped
+                        hb = 0.5 * np.sqrt((x1 - x0) * (x1 - x0) + (y1 - y0) * (y1 - y0)) * (1.0 + 1e-12)
+                        mx, my, mz = cell_direction(0.5 * (x0 + x1), 0.5 * (y0 + y1), vp)
+                        rdm = radius / qd[e, _QDMIN] * (1.0 + _REACH_SLACK) + _REACH_EPS
+                        iDb = 1.0 / (bin_maxd[bi] if per_bin else dmax)
+                        ang, entry = disk_cell_reach(
+                            mx, my, mz, np.cos(hb), np.sin(hb) * (1.0 + 1e-12), qd[e, _QN:], rdm, radius, iDb
+                        )
+                        hit = not (ang and entry < 0.0)
                 if hit:
                     out[k + n] = bi
                     n += 1
@@ -1821,81 +1907,6 @@ def cancels_in_box(e, ea, eb, tv_start, tv, box, c):
             return False
         total += 1 if val > 0.0 else -1
     return total == 0
-
-
-#: disk_reach's margins: relative on r / dmin, and absolute (a sine)
-_REACH_SLACK = 1e-4
-_REACH_EPS = 1e-7
-
-
-@kernel(inline=True, nrt=False)
-def disk_reach(ux, uy, uz, iD, radius, rdm, arc):
-    """The sphere's per-sample test: can edge e (its arc ``arc`` = qd's columns ``_QN`` on, from
-    :func:`_arc_setup`) hide part of the disk facing a sample at unit direction u from the light
-    centre c and distance D = 1 / iD? ``rdm`` = r / dmin with margins (``_REACH_SLACK``,
-    ``_REACH_EPS``). Angles at c, no image-plane stretch (the quad's bound has the window's).
-
-    An edge point x at distance d >= dmin from c and angle a < 90 deg from u hides part of the
-    disk of radius r facing p iff the ray from p through x meets the disk:
-    d (D sin a + r cos a) <= r D, so sin a + (r / D) cos a <= r / dmin. That left side grows with a
-    up to 90 deg - atan(r / D) and is 1 > r / dmin at 90 deg, so, when every point of the edge lies
-    within 90 deg of u (both ends do: the arc is minor), it is smallest at the edge's nearest
-    direction to u: in the arc, sin a = |u . n^|; else an end's, cos a = max(u . a^, u . b^). With
-    cos a >= cos^2 a = 1 - sin^2 a (no square root): the sample is kept iff
-    sqrt(S2) <= rdm - (r / D)(1 - S2), S2 = sin^2 a. Every sample it drops has an exact zero term
-    (a relative margin of 1e-4 on r / dmin); with an end 90 deg or more away it keeps the sample."""
-    sn = ux * arc[0] + uy * arc[1] + uz * arc[2]
-    ta = ux * arc[3] + uy * arc[4] + uz * arc[5]
-    tb = ux * arc[6] + uy * arc[7] + uz * arc[8]
-    ca = ux * arc[9] + uy * arc[10] + uz * arc[11]
-    cb = ux * arc[12] + uy * arc[13] + uz * arc[14]
-    cm = ca if ca > cb else cb
-    s2 = sn * sn if (ta > 0.0) & (tb > 0.0) else 1.0 - cm * cm
-    tt = rdm - radius * iD * (1.0 - s2)
-    near = np.int8(tt >= 0.0) & np.int8(s2 <= tt * tt)
-    return near | np.int8(not ((ca > 0.0) & (cb > 0.0)))
-
-
-@kernel(inline=True, nrt=False)
-def cell_direction(xm, ym, vp):
-    """The unit direction from the light centre through image-plane point (xm, ym)."""
-    iw = 1.0 / np.sqrt(xm * xm + ym * ym + 1.0)
-    return (
-        (xm * vp[VP_RIGHT] + ym * vp[VP_UP] + vp[VP_FORWARD]) * iw,
-        (xm * vp[VP_RIGHT + 1] + ym * vp[VP_UP + 1] + vp[VP_FORWARD + 1]) * iw,
-        (xm * vp[VP_RIGHT + 2] + ym * vp[VP_UP + 2] + vp[VP_FORWARD + 2]) * iw,
-    )
-
-
-@kernel(inline=True, nrt=False)
-def disk_cell_reach(mx, my, mz, chd, shd, arc, rdm, radius, iDb):
-    """:func:`disk_reach` for a whole cell column (m: the unit direction through its image-plane
-    centre, :func:`cell_direction`; hd its half diagonal, ``chd``, ``shd`` = its cosine and sine,
-    rounded up) up to distance 1 / ``iDb``: (applies, entry). Every sample direction of the cell
-    lies within the angle hd of m (the image plane's stretch is >= 1), so its angle to the edge's
-    arc is at least a_lb = a_m - hd; the test's left side sin a + (r/D) cos a grows with a (while
-    < 1) and falls with D, so lower bounds of sin a_lb and cos a_lb bound it for every sample
-    (in the arc, 1 - sin^2 a_m <= cos a_m <= 1: no square root). ``applies`` is False when an end of the edge may lie 90 deg or more from a sample of the
-    cell (the caller then uses the quad); else ``entry`` is the distance from which a sample of the
-    cell can pass, r cos a_lb / (r/dmin - sin a_lb) (the wedge's entry), or -1 when none up to
-    1 / iDb can."""
-    sn = mx * arc[0] + my * arc[1] + mz * arc[2]
-    ta = mx * arc[3] + my * arc[4] + mz * arc[5]
-    tb = mx * arc[6] + my * arc[7] + mz * arc[8]
-    ca = mx * arc[9] + my * arc[10] + mz * arc[11]
-    cb = mx * arc[12] + my * arc[13] + mz * arc[14]
-    if not ((ca > shd) and (cb > shd)):
-        return False, -1.0
-    inarc = (ta > 0.0) and (tb > 0.0)
-    cm = ca if ca > cb else cb
-    s_lo = abs(sn) if inarc else np.sqrt(max(1.0 - cm * cm, 0.0))
-    c_lo = 1.0 - sn * sn if inarc else cm
-    c_hi = 1.0 if inarc else cm
-    s1 = max(s_lo * chd - c_hi * shd, 0.0)
-    c1 = c_lo * chd + s_lo * shd
-    if not (s1 + radius * iDb * c1 <= rdm):
-        return True, -1.0
-    return True, radius * c1 / (rdm - s1)
 
 
 @kernel(nogil=True)
