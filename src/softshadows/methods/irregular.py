@@ -1237,6 +1237,9 @@ def _quad_bins(qd, radius, dmax, corner2, bin_maxd, per_bin, vp, gx, gy, B, nbx,
     """The screen bins quad e overlaps (refined per bin with ``per_bin``), in bin order, into its
     slots ``out[offs[e]:offs[e + 1]]`` (the rest of them -1) and their number into ``counts[e]``.
     One pass of the tests."""
+    cw, ch = (vp[VP_R] - vp[VP_L]) / gx, (vp[VP_T] - vp[VP_B]) / gy
+    hb = 0.5 * B * np.sqrt(cw * cw + ch * ch) * (1.0 + 1e-12)  # a whole bin's half diagonal
+    chb, shb = np.cos(hb), np.sin(hb) * (1.0 + 1e-12)
     for e0 in prange(qd.shape[0]):
         e = np.int64(e0)  # prange's index may be unsigned: one specialisation of the quad helpers
         n = 0
@@ -1283,15 +1286,12 @@ def _quad_bins(qd, radius, dmax, corner2, bin_maxd, per_bin, vp, gx, gy, B, nbx,
                         not np.isfinite(R) or axes_overlap_box(ux, uy, qcx, qcy, hl0 + R, R, x0, x1, y0, y1)
                     )
                     if hit and np.isfinite(R):
-                        # by angles (disk_cell_reach with the bin's centre and half diagonal): the
-                        # quad's stretch dropped
-                        hb = 0.5 * np.sqrt((x1 - x0) * (x1 - x0) + (y1 - y0) * (y1 - y0)) * (1.0 + 1e-12)
+                        # by angles (disk_cell_reach with the bin's centre and a whole bin's half
+                        # diagonal, at least its own): the quad's stretch dropped
                         mx, my, mz = cell_direction(0.5 * (x0 + x1), 0.5 * (y0 + y1), vp)
                         rdm = radius / qd[e, _QDMIN] * (1.0 + _REACH_SLACK) + _REACH_EPS
                         iDb = 1.0 / (bin_maxd[bi] if per_bin else dmax)
-                        ang, entry = disk_cell_reach(
-                            mx, my, mz, np.cos(hb), np.sin(hb) * (1.0 + 1e-12), qd[e, _QN:], rdm, radius, iDb
-                        )
+                        ang, entry = disk_cell_reach(mx, my, mz, chb, shb, qd[e, _QN:], rdm, radius, iDb)
                         hit = not (ang and entry < 0.0)
                 if hit:
                     out[k + n] = bi
