@@ -2372,9 +2372,9 @@ def irregular_visibility(
     pts,
     nrm,
     *,
-    grid=128,
+    grid=96,
     bins=8,
-    slices=16,
+    slices=8,
     per_bin=True,
     wedge=True,
     silhouettes="adjacency",
@@ -2463,8 +2463,8 @@ class Irregular(Method):
     summary = "soft irregular shadow mapping: exact umbra count + exact per-edge penumbra at every eye sample"
     paper = "Johnson et al. 2009"
     params = (
-        Param("grid", 128, "light-view grid cells per side (image plane)", min=1, max=4096),
-        Param("slices", 16, "depth slices of the perspective grid", min=1, max=1024),
+        Param("grid", 96, "light-view grid cells per side (image plane)", min=1, max=4096),
+        Param("slices", 8, "depth slices of the perspective grid", min=1, max=1024),
         Param(
             "bins",
             8,
@@ -2505,7 +2505,7 @@ class Irregular(Method):
 
     #: what `softshadows pareto` sweeps (Method.sweep): V is exact whatever the grid; its size
     #: trades construction against the tests per cell
-    sweep: ClassVar = {"grid": [64, 128, 256]}
+    sweep: ClassVar = {"grid": [64, 96, 128, 256]}
 
     def run(self, ctx, grid, slices, bins, per_bin, wedge, silhouettes, folds, origin, offset, overdraw_stats):
         pts, nrm, idx = ctx.points()
