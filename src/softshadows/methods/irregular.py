@@ -23,7 +23,7 @@ from numba.extending import intrinsic
 
 from .._jit import kernel, run_slots
 from ..analytic import atan2_upper, rect_halfplanes_area
-from ..geometry.silhouette import build_adjacency, facing, find_silhouette
+from ..geometry.silhouette import _facing_one, build_adjacency, facing
 from ..raster.view import VP_B, VP_FORWARD, VP_L, VP_ORIGIN, VP_R, VP_RIGHT, VP_T, VP_UP, View, light_frame, light_view
 from .base import Method, MethodOutput, Param, register
 from .ground_truth import BOUND_SAFETY, hit_point_at
@@ -872,6 +872,67 @@ def _fold_kernel(count, edges, edge_faces, offsets, counted, V, normals, anchors
         out[e] = (s0 == 0) or (s1 == 0) or (s0 != s1)
 
 
+@kernel
+def _select_edges(count, offsets, edge_faces, edges, normals, anchors, center, fr, counted, orient, third, fold, V):
+    """:func:`select_silhouette_edges`' adjacency mode in one pass over the welded edges (ascending):
+    an edge is a candidate when it is a silhouette seen from the centre (``silhouette_adjacency``'s
+    test: a boundary, or a mix of faces facing it by the face planes), non-manifold, or a fold
+    candidate; it is kept when the orientations of its counted triangles seen from the centre do
+    not sum to zero, or it is a fold candidate. Returns (a, b, tv_start, tv, the kept fold edges
+    whose sum is zero): the endpoints and, per edge, its counted triangles' third vertices in the
+    adjacency's order."""
+    F = normals.shape[0]
+    fa_ = np.empty(F, np.bool_)
+    for f in range(F):
+        fa_[f] = _facing_one(
+            normals[f, 0], normals[f, 1], normals[f, 2], anchors[f, 0], anchors[f, 1], anchors[f, 2], center
+        )
+    E = count.shape[0]
+    keep = np.zeros(E, np.bool_)
+    n_kept = 0
+    n_tv = 0
+    n_fold = 0
+    for e in range(E):
+        s, c = offsets[e], count[e]
+        cf = 0
+        for k in range(s, s + c):
+            cf += fa_[edge_faces[k]]
+        if not ((c == 1) or (0 < cf < c) or (c > 2) or fold[e]):
+            continue
+        w = 0
+        nt = 0
+        for k in range(s, s + c):
+            f = edge_faces[k]
+            if counted[f]:
+                w += orient[k] if fr[f] else -orient[k]
+                nt += 1
+        if w != 0 or fold[e]:
+            keep[e] = True
+            n_kept += 1
+            n_tv += nt
+            n_fold += w == 0
+    a = np.empty((n_kept, 3))
+    b = np.empty((n_kept, 3))
+    tv_start = np.zeros(n_kept + 1, np.int64)
+    tv = np.empty((n_tv, 3))
+    i = 0
+    t = 0
+    for e in range(E):
+        if not keep[e]:
+            continue
+        for d in range(3):
+            a[i, d] = V[edges[e, 0], d]
+            b[i, d] = V[edges[e, 1], d]
+        for k in range(offsets[e], offsets[e] + count[e]):
+            if counted[edge_faces[k]]:
+                for d in range(3):
+                    tv[t, d] = V[third[k], d]
+                t += 1
+        i += 1
+        tv_start[i] = t
+    return a, b, tv_start, tv, n_fold
+
+
 def select_silhouette_edges(
     flat, center, mode: str, folds: bool = True, box=None, radius: float = 0.0, fc=None
 ) -> tuple[Edges, dict]:
@@ -895,41 +956,29 @@ def select_silhouette_edges(
         )
         return ed, {"silhouette_edges": E, "fold_edges": 0, "counted_triangles": int(counted.sum())}
     _occ, adj, _sheet, third, orient = _topology(flat)
-    sil = find_silhouette(V, occ, center, "adjacency", adjacency=adj)
-    nm = np.flatnonzero(adj.count > 2)
-    key_all = adj.edges[:, 0] * len(V) + adj.edges[:, 1]
-    cand = (
-        np.searchsorted(key_all, sil.edges[:, 0] * len(V) + sil.edges[:, 1]) if sil.n_edges else np.zeros(0, np.int64)
-    )
     fold = (
         fold_candidates(flat, counted, box[0], box[1], center, radius)
         if folds and box is not None
         else np.zeros(adj.n_edges, bool)
     )
-    cand = np.unique(np.r_[cand, nm, np.flatnonzero(fold)]).astype(np.int64)
-    c = adj.count[cand]
-    ent = np.repeat(adj.offsets[cand], c) + (np.arange(c.sum()) - np.repeat(np.cumsum(c) - c, c))
-    fa = adj.edge_faces[ent]
-    cnt = counted[fa]
-    sig = np.where(cnt, orient[ent] * np.where(fr[fa], 1, -1), 0)
-    eid = np.repeat(np.arange(len(cand)), c)
-    w = np.bincount(eid, weights=sig, minlength=len(cand))
-    keep = (w != 0) | fold[cand]
-    kept = cand[keep]
-    ent_keep = keep[eid] & cnt
-    tv_cnt = np.bincount(eid[ent_keep], minlength=len(cand))[keep]
-    tv_start = np.zeros(len(kept) + 1, np.int64)
-    np.cumsum(tv_cnt, out=tv_start[1:])
-    tv = V[third[ent[ent_keep]]]
-    ed = Edges(
-        np.ascontiguousarray(V[adj.edges[kept, 0]]),
-        np.ascontiguousarray(V[adj.edges[kept, 1]]),
-        tv_start,
-        np.ascontiguousarray(tv),
+    a, b, tv_start, tv, n_fold = _select_edges(
+        adj.count,
+        adj.offsets,
+        adj.edge_faces,
+        adj.edges,
+        adj.normals,
+        adj.anchors,
+        np.asarray(center, np.float64),
+        fr,
+        counted,
+        orient,
+        third,
+        fold,
+        V,
     )
-    n_fold = int((fold[kept] & (w[keep] == 0)).sum())
+    ed = Edges(a, b, tv_start, tv)
     return ed, {
-        "silhouette_edges": int(len(kept)) - n_fold,
+        "silhouette_edges": int(len(a)) - n_fold,
         "fold_edges": n_fold,
         "counted_triangles": int(counted.sum()),
     }
