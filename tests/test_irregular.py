@@ -1,6 +1,8 @@
 """``irregular`` (soft irregular shadow mapping): closed forms, the composition identity against
 brute-force clipping, the umbra against Embree, the two overdraw optimisations, V's range."""
 
+import functools
+
 import numpy as np
 import pytest
 
@@ -447,27 +449,13 @@ def test_rect_bound_keeps_every_nonzero_term(case):
     assert rejected_zeros > 0.5 * zeros
 
 
-@pytest.mark.parametrize("scale", [1e-3, 1.0, 1e3])
-def test_disk_bound_keeps_every_nonzero_term(scale):
-    """The sphere light's per-sample test (``disk_reach``: the angle at the light centre between the
-    sample and the edge's arc, against r / dmin) is conservative: every (edge, point) whose term
-    (``sample_edge_term``, the scalar path) is nonzero passes it, for edges with dmin > r (the pass
-    uses it only for those); and it rejects most of the zeros (it is not vacuous). Random edges
-    around a light, points below them, on the edges' lines, next to their ends and just past
-    them (where the terms start), at three scene scales."""
+@functools.cache
+def _sphere_terms():
+    """A compiled function: the scalar path's (``sample_edge_term``) sphere term of every edge at
+    every point, (edges, points)."""
     from numba import njit
 
-    from softshadows.methods.irregular import (
-        _QCOLS,
-        _QN,
-        _REACH_EPS,
-        _REACH_SLACK,
-        _ROW,
-        _arc_setup,
-        disk_reach,
-        sample_edge_term,
-        sample_row,
-    )
+    from softshadows.methods.irregular import _ROW, sample_edge_term, sample_row
 
     @njit
     def terms(pts, center, radius, ea, eb, tv_start, tv):
@@ -482,6 +470,19 @@ def test_disk_bound_keeps_every_nonzero_term(scale):
             for j in range(n):
                 out[e, j] = sample_edge_term(1, rw, j, z, z, radius, 0.0, 0.0, e, ea, eb, tv_start, tv, buf)
         return out
+
+    return terms
+
+
+@pytest.mark.parametrize("scale", [1e-3, 1.0, 1e3])
+def test_disk_bound_keeps_every_nonzero_term(scale):
+    """The sphere light's per-sample test (``disk_reach``: the angle at the light centre between the
+    sample and the edge's arc, against r / dmin) is conservative: every (edge, point) whose term
+    (``sample_edge_term``, the scalar path) is nonzero passes it, for edges with dmin > r (the pass
+    uses it only for those); and it rejects most of the zeros (it is not vacuous). Random edges
+    around a light, points below them, on the edges' lines, next to their ends and just past
+    them (where the terms start), at three scene scales."""
+    from softshadows.methods.irregular import _QCOLS, _QN, _REACH_EPS, _REACH_SLACK, _arc_setup, disk_reach
 
     rng = np.random.default_rng(11)
     ne = 80
@@ -500,7 +501,7 @@ def test_disk_bound_keeps_every_nonzero_term(scale):
     along = center + (x - center) * rng.uniform(1.0, 2.0, 300)[:, None]
     along += rng.normal(0, 1e-3, (300, 3)) * scale
     pts = np.concatenate([below, along])
-    got = terms(pts, center, radius, ea, eb, tv_start, tv)
+    got = _sphere_terms()(pts, center, radius, ea, eb, tv_start, tv)
     reach = py_callable(disk_reach)
     arc_setup = py_callable(_arc_setup)
     qd = np.zeros((ne, _QCOLS))
@@ -537,36 +538,17 @@ def test_disk_cell_bound_keeps_every_nonzero_term():
     edges around a light, a view from the light centre, cells of three sizes, samples on rays
     through random points of each cell at random distances; and it rejects most cells holding only
     zeros (it is not vacuous)."""
-    from numba import njit
-
     from softshadows.methods.irregular import (
         _QCOLS,
         _QN,
         _REACH_EPS,
         _REACH_SLACK,
-        _ROW,
         _SLACK,
         _arc_setup,
         cell_direction,
         disk_cell_reach,
-        sample_edge_term,
-        sample_row,
     )
     from softshadows.raster.view import VP_FORWARD, VP_RIGHT, VP_SIZE, VP_UP
-
-    @njit
-    def terms(pts, center, radius, ea, eb, tv_start, tv):
-        n = pts.shape[0]
-        out = np.empty((ea.shape[0], n))
-        rw = np.empty((_ROW, n))
-        z = np.zeros(3)
-        buf = np.zeros((4, 8))
-        for j in range(n):
-            sample_row(1, center, z, pts, j, rw, j)
-        for e in range(ea.shape[0]):
-            for j in range(n):
-                out[e, j] = sample_edge_term(1, rw, j, z, z, radius, 0.0, 0.0, e, ea, eb, tv_start, tv, buf)
-        return out
 
     rng = np.random.default_rng(12)
     center, radius = np.array([0.1, 2.5, -0.2]), 0.45
@@ -598,7 +580,7 @@ def test_disk_cell_bound_keeps_every_nonzero_term():
         dirs /= np.linalg.norm(dirs, axis=-1, keepdims=True)
         pts = (center + dirs * rng.uniform(2.0, 6.0, (150, 12, 1))).reshape(-1, 3)
         D = np.linalg.norm(pts - center, axis=1).reshape(150, 12)
-        got = terms(pts, center, radius, ea, eb, tv_start, tv).reshape(ne, 150, 12)
+        got = _sphere_terms()(pts, center, radius, ea, eb, tv_start, tv).reshape(ne, 150, 12)
         for e in range(ne):
             w = eb[e] - ea[e]
             tt = np.clip((center - ea[e]) @ w / (w @ w), 0.0, 1.0)
