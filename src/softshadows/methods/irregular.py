@@ -298,10 +298,11 @@ def _extent(pts, c):
             lo0, lo1, lo2 = min(lo0, x), min(lo1, y), min(lo2, z)
             hi0, hi1, hi2 = max(hi0, x), max(hi1, y), max(hi2, z)
             dx, dy, dz = x - c[0], y - c[1], z - c[2]
-            d = np.sqrt(dx * dx + dy * dy + dz * dz)
-            d0, d1 = min(d0, d), max(d1, d)
-        part[q, 0], part[q, 1], part[q, 2], part[q, 3] = lo0, lo1, lo2, d0
-        part[q, 4], part[q, 5], part[q, 6], part[q, 7] = hi0, hi1, hi2, d1
+            d2 = dx * dx + dy * dy + dz * dz
+            d0, d1 = min(d0, d2), max(d1, d2)
+        # (the square root once per chunk: it is monotonic and correctly rounded, so the same bits)
+        part[q, 0], part[q, 1], part[q, 2], part[q, 3] = lo0, lo1, lo2, np.sqrt(d0)
+        part[q, 4], part[q, 5], part[q, 6], part[q, 7] = hi0, hi1, hi2, np.sqrt(d1)
     lo = np.full(3, np.inf)
     hi = np.full(3, -np.inf)
     d0, d1 = np.inf, 0.0
