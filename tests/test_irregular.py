@@ -668,3 +668,17 @@ def test_sort_samples_is_the_serial_counting_sort_whatever_the_threads(threads):
     np.testing.assert_array_equal(order, o_ref)
     np.testing.assert_array_equal(np.stack([sx, sy, sd], 1), rec[o_ref][:, :3])
     np.testing.assert_array_equal(sp, rec[o_ref][:, 3:])
+
+
+def test_median_in_place_is_numpys_median():
+    """``median_in_place`` (one partition around the middle; the statistic ``origin_bound_median``)
+    gives ``np.median``'s value exactly, for odd and even counts, ties and the bounds' magnitudes."""
+    from softshadows.methods.irregular import median_in_place
+
+    rng = np.random.default_rng(4)
+    for n in (1, 2, 3, 4, 5, 10, 11, 1000, 1001):
+        for x in (rng.normal(size=n), rng.integers(0, 5, n).astype(float), np.abs(rng.normal(3e-6, 1e-6, n))):
+            want = np.median(x)
+            y = x.copy()
+            assert median_in_place(y) == want
+            assert np.array_equal(np.sort(y), np.sort(x))  # a permutation of x

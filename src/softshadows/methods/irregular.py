@@ -2397,6 +2397,15 @@ def _error_bound_samples(verts, faces, tri_img, bary_img, idx, nrm, eps, out, bo
             out[k0 + i, 0], out[k0 + i, 1], out[k0 + i, 2] = g[14, i], g[15, i], g[16, i]
 
 
+def median_in_place(x: np.ndarray) -> float:
+    """``np.median(x)`` for x without NaNs, x partitioned in place around its middle once (0.3 ms
+    for `bunny`'s 227k bounds against 0.7 ms: ``np.median`` partitions around both middles and the
+    maximum); for an even count the lower middle is the largest value below the upper one."""
+    k = len(x) // 2
+    x.partition(k)
+    return float(x[k]) if len(x) % 2 else float(0.5 * (x[:k].max() + x[k]))
+
+
 def error_bound_samples(flat, eye, idx, nrm, eps):
     """(samples (K,3), bound (K,)): the samples at ground truth's ray origins plus ``eps`` along the
     normal; the same points as ``hit_points`` + ``offset_points``, without their temporaries."""
@@ -2482,7 +2491,7 @@ def irregular_visibility(
         penumbra_evaluated_terms=st_p["evaluated_terms"],
         penumbra_nonzero_terms=st_p["nonzero_terms"],
         eps=eps,
-        origin_bound_median=float(np.median(origin_bound)) if origin_bound is not None and len(pts) else 0.0,
+        origin_bound_median=median_in_place(origin_bound.copy()) if origin_bound is not None and len(pts) else 0.0,
         **st_u,
         **st_s,
     )
@@ -2570,7 +2579,7 @@ class Irregular(Method):
             # (bound is not used again: the median may partition it in place)
             extra = {
                 "eps": eps,
-                "origin_bound_median": float(np.median(bound, overwrite_input=True)) if len(bound) else 0.0,
+                "origin_bound_median": median_in_place(bound) if len(bound) else 0.0,
             }
         v, stats = irregular_visibility(
             ctx.scene,
