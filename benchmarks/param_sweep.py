@@ -10,15 +10,8 @@ interleaved in one process after warm-up (medians), and whether V changes betwee
 from __future__ import annotations
 
 import argparse
+import sys
 import time
-
-
-def _setting(text: str) -> dict:
-    out = {}
-    for part in filter(None, text.split(",")):
-        k, v = part.split("=", 1)
-        out[k.strip()] = v.strip()
-    return out
 
 
 def main() -> int:
@@ -33,11 +26,17 @@ def main() -> int:
     import numpy as np
 
     import softshadows as ss
+    from softshadows.cli import parse_sets
+    from softshadows.errors import SoftShadowsError
     from softshadows.methods import get_method
 
     ss.tune_malloc()
-    m = get_method(a.method)
-    cfgs = [m.resolve_params(_setting(s)) for s in a.settings]
+    try:
+        m = get_method(a.method)
+        cfgs = [m.resolve_params(parse_sets([p for p in s.split(",") if p])) for s in a.settings]
+    except SoftShadowsError as exc:
+        print(f"param_sweep: {exc}", file=sys.stderr)
+        return 2
     print(f"{a.method} at {a.size}x{a.size}, median ms of {a.reps} interleaved frames; max |dV| against the first")
     print("| scene | light | " + " | ".join(a.settings[i] or "defaults" for i in range(len(cfgs))) + " |")
     print("|---|---|" + "---|" * len(cfgs))

@@ -474,6 +474,21 @@ def _sphere_terms():
     return terms
 
 
+def _edge_arc(ea, eb, e, center, radius):
+    """(edge e's arc as ``_arc_setup`` writes it, r / dmin with the pass's margins), or None when
+    the edge comes within the light's radius of its centre (the pass then skips the angular tests)."""
+    from softshadows.methods.irregular import _QCOLS, _QN, _REACH_EPS, _REACH_SLACK, _arc_setup
+
+    u = eb[e] - ea[e]
+    tt = np.clip((center - ea[e]) @ u / (u @ u), 0.0, 1.0)
+    dmin = float(np.linalg.norm(ea[e] + tt * u - center))
+    if not dmin > radius:
+        return None
+    qd = np.zeros((len(ea), _QCOLS))
+    py_callable(_arc_setup)(ea, eb, e, center, dmin, qd)
+    return np.ascontiguousarray(qd[e, _QN : _QN + 15]), radius / dmin * (1.0 + _REACH_SLACK) + _REACH_EPS
+
+
 @pytest.mark.parametrize("scale", [1e-3, 1.0, 1e3])
 def test_disk_bound_keeps_every_nonzero_term(scale):
     """The sphere light's per-sample test (``disk_reach``: the angle at the light centre between the
@@ -482,7 +497,7 @@ def test_disk_bound_keeps_every_nonzero_term(scale):
     uses it only for those); and it rejects most of the zeros (it is not vacuous). Random edges
     around a light, points below them, on the edges' lines, next to their ends and just past
     them (where the terms start), at three scene scales."""
-    from softshadows.methods.irregular import _QCOLS, _QN, _REACH_EPS, _REACH_SLACK, _arc_setup, disk_reach
+    from softshadows.methods.irregular import disk_reach
 
     rng = np.random.default_rng(11)
     ne = 80
@@ -503,20 +518,14 @@ def test_disk_bound_keeps_every_nonzero_term(scale):
     pts = np.concatenate([below, along])
     got = _sphere_terms()(pts, center, radius, ea, eb, tv_start, tv)
     reach = py_callable(disk_reach)
-    arc_setup = py_callable(_arc_setup)
-    qd = np.zeros((ne, _QCOLS))
     d = pts - center
     D = np.sqrt((d * d).sum(1))
     kept = nonzero = rejected_zeros = zeros = 0
     for e in range(ne):
-        u = eb[e] - ea[e]
-        tt = np.clip((center - ea[e]) @ u / (u @ u), 0.0, 1.0)
-        dmin = float(np.linalg.norm(ea[e] + tt * u - center))
-        if not dmin > radius:
+        ar = _edge_arc(ea, eb, e, center, radius)
+        if ar is None:
             continue
-        arc_setup(ea, eb, e, center, dmin, qd)
-        arc = np.ascontiguousarray(qd[e, _QN : _QN + 15])
-        rdm = radius / dmin * (1.0 + _REACH_SLACK) + _REACH_EPS
+        arc, rdm = ar
         for j in range(len(pts)):
             iD = 1.0 / D[j]
             ok = reach(d[j, 0] * iD, d[j, 1] * iD, d[j, 2] * iD, iD, radius, rdm, arc)
@@ -539,12 +548,7 @@ def test_disk_cell_bound_keeps_every_nonzero_term():
     through random points of each cell at random distances; and it rejects most cells holding only
     zeros (it is not vacuous)."""
     from softshadows.methods.irregular import (
-        _QCOLS,
-        _QN,
-        _REACH_EPS,
-        _REACH_SLACK,
         _SLACK,
-        _arc_setup,
         cell_direction,
         disk_cell_reach,
     )
@@ -565,10 +569,8 @@ def test_disk_cell_bound_keeps_every_nonzero_term():
     ntri = rng.integers(1, 3, ne)
     tv_start = np.concatenate([[0], np.cumsum(ntri)])
     tv = rng.uniform(-1, 1, (tv_start[-1], 3))
-    qd = np.zeros((ne, _QCOLS))
     reach = py_callable(disk_cell_reach)
     cdir = py_callable(cell_direction)
-    arc_setup = py_callable(_arc_setup)
     covered = nonzero = empty_cells = rejected = 0
     for half in (0.005, 0.02, 0.06):  # half the cell's side (image-plane units)
         cells = rng.uniform(-0.8, 0.8, (150, 2))
@@ -582,14 +584,10 @@ def test_disk_cell_bound_keeps_every_nonzero_term():
         D = np.linalg.norm(pts - center, axis=1).reshape(150, 12)
         got = _sphere_terms()(pts, center, radius, ea, eb, tv_start, tv).reshape(ne, 150, 12)
         for e in range(ne):
-            w = eb[e] - ea[e]
-            tt = np.clip((center - ea[e]) @ w / (w @ w), 0.0, 1.0)
-            dmin = float(np.linalg.norm(ea[e] + tt * w - center))
-            if not dmin > radius:
+            ar = _edge_arc(ea, eb, e, center, radius)
+            if ar is None:
                 continue
-            arc_setup(ea, eb, e, center, dmin, qd)
-            arc = np.ascontiguousarray(qd[e, _QN : _QN + 15])
-            rdm = radius / dmin * (1.0 + _REACH_SLACK) + _REACH_EPS
+            arc, rdm = ar
             for c in range(150):
                 mx, my, mz = cdir(cells[c, 0], cells[c, 1], vp)
                 ok, entry = reach(mx, my, mz, chd, shd, arc, rdm, radius, 1.0 / D[c].max())

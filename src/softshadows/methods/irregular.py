@@ -23,7 +23,7 @@ from numba.extending import intrinsic
 
 from .._jit import kernel, run_slots
 from ..analytic import atan2_upper, rect_halfplanes_area
-from ..geometry.silhouette import _facing_one, build_adjacency, facing
+from ..geometry.silhouette import _facing_from_planes, build_adjacency, facing
 from ..raster.view import VP_B, VP_FORWARD, VP_L, VP_ORIGIN, VP_R, VP_RIGHT, VP_T, VP_UP, View, light_frame, light_view
 from .base import Method, MethodOutput, Param, register
 from .ground_truth import BOUND_SAFETY, hit_point_at
@@ -874,20 +874,15 @@ def _fold_kernel(count, edges, edge_faces, offsets, counted, V, normals, anchors
 
 
 @kernel
-def _select_edges(count, offsets, edge_faces, edges, normals, anchors, center, fr, counted, orient, third, fold, V):
+def _select_edges(count, offsets, edge_faces, edges, fa_, fr, counted, orient, third, fold, V):
     """:func:`select_silhouette_edges`' adjacency mode in one pass over the welded edges (ascending):
     an edge is a candidate when it is a silhouette seen from the centre (``silhouette_adjacency``'s
     test: a boundary, or a mix of faces facing it by the face planes), non-manifold, or a fold
     candidate; it is kept when the orientations of its counted triangles seen from the centre do
     not sum to zero, or it is a fold candidate. Returns (a, b, tv_start, tv, the kept fold edges
     whose sum is zero): the endpoints and, per edge, its counted triangles' third vertices in the
-    adjacency's order."""
-    F = normals.shape[0]
-    fa_ = np.empty(F, np.bool_)
-    for f in range(F):
-        fa_[f] = _facing_one(
-            normals[f, 0], normals[f, 1], normals[f, 2], anchors[f, 0], anchors[f, 1], anchors[f, 2], center
-        )
+    adjacency's order. ``fa_``: each face facing the centre by its plane (``_facing_from_planes``,
+    as ``silhouette_adjacency``)."""
     E = count.shape[0]
     keep = np.zeros(E, np.bool_)
     n_kept = 0
@@ -967,9 +962,7 @@ def select_silhouette_edges(
         adj.offsets,
         adj.edge_faces,
         adj.edges,
-        adj.normals,
-        adj.anchors,
-        np.asarray(center, np.float64),
+        _facing_from_planes(adj.normals, adj.anchors, center),
         fr,
         counted,
         orient,
@@ -1026,6 +1019,18 @@ _REACH_EPS = 1e-7
 
 
 @kernel(inline=True, nrt=False)
+def arc_position(ux, uy, uz, arc):
+    """Unit direction u against edge e's arc (``arc``: qd's columns from ``_QN`` on, from
+    :func:`_arc_setup`): (u . n^, inside the arc's wedge, u . a^, u . b^), branch-free."""
+    sn = ux * arc[0] + uy * arc[1] + uz * arc[2]
+    ta = ux * arc[3] + uy * arc[4] + uz * arc[5]
+    tb = ux * arc[6] + uy * arc[7] + uz * arc[8]
+    ca = ux * arc[9] + uy * arc[10] + uz * arc[11]
+    cb = ux * arc[12] + uy * arc[13] + uz * arc[14]
+    return sn, (ta > 0.0) & (tb > 0.0), ca, cb
+
+
+@kernel(inline=True, nrt=False)
 def disk_reach(ux, uy, uz, iD, radius, rdm, arc):
     """The sphere's per-sample test: can edge e (its arc ``arc`` = qd's columns ``_QN`` on, from
     :func:`_arc_setup`) hide part of the disk facing a sample at unit direction u from the light
@@ -1041,13 +1046,9 @@ def disk_reach(ux, uy, uz, iD, radius, rdm, arc):
     cos a >= cos^2 a = 1 - sin^2 a (no square root): the sample is kept iff
     sqrt(S2) <= rdm - (r / D)(1 - S2), S2 = sin^2 a. Every sample it drops has an exact zero term
     (a relative margin of 1e-4 on r / dmin); with an end 90 deg or more away it keeps the sample."""
-    sn = ux * arc[0] + uy * arc[1] + uz * arc[2]
-    ta = ux * arc[3] + uy * arc[4] + uz * arc[5]
-    tb = ux * arc[6] + uy * arc[7] + uz * arc[8]
-    ca = ux * arc[9] + uy * arc[10] + uz * arc[11]
-    cb = ux * arc[12] + uy * arc[13] + uz * arc[14]
+    sn, inarc, ca, cb = arc_position(ux, uy, uz, arc)
     cm = ca if ca > cb else cb
-    s2 = sn * sn if (ta > 0.0) & (tb > 0.0) else 1.0 - cm * cm
+    s2 = sn * sn if inarc else 1.0 - cm * cm
     tt = rdm - radius * iD * (1.0 - s2)
     near = np.int8(tt >= 0.0) & np.int8(s2 <= tt * tt)
     return near | np.int8(not ((ca > 0.0) & (cb > 0.0)))
@@ -1076,14 +1077,9 @@ def disk_cell_reach(mx, my, mz, chd, shd, arc, rdm, radius, iDb):
     cell (the caller then uses the quad); else ``entry`` is the distance from which a sample of the
     cell can pass, r cos a_lb / (r/dmin - sin a_lb) (the wedge's entry), or -1 when none up to
     1 / iDb can."""
-    sn = mx * arc[0] + my * arc[1] + mz * arc[2]
-    ta = mx * arc[3] + my * arc[4] + mz * arc[5]
-    tb = mx * arc[6] + my * arc[7] + mz * arc[8]
-    ca = mx * arc[9] + my * arc[10] + mz * arc[11]
-    cb = mx * arc[12] + my * arc[13] + mz * arc[14]
+    sn, inarc, ca, cb = arc_position(mx, my, mz, arc)
     if not ((ca > shd) and (cb > shd)):
         return False, -1.0
-    inarc = (ta > 0.0) and (tb > 0.0)
     cm = ca if ca > cb else cb
     s_lo = abs(sn) if inarc else np.sqrt(max(1.0 - cm * cm, 0.0))
     c_lo = 1.0 - sn * sn if inarc else cm
@@ -1297,6 +1293,7 @@ def _quad_bins(qd, radius, dmax, corner2, bin_maxd, per_bin, vp, gx, gy, B, nbx,
         by0, by1, bx0, bx1 = _quad_bin_range(qd, e, radius, dmax, corner2, vp, gx, gy, B)
         Rg = quad_half_width(qd, e, radius, dmax, corner2)
         ux, uy, qcx, qcy, hl0, _hw = quad_axes(qd, e, 0.0)  # once per quad (only R varies per bin)
+        rdm = radius / qd[e, _QDMIN] * (1.0 + _REACH_SLACK) + _REACH_EPS if qd[e, _QDMIN] > 0.0 else 0.0
         for by in range(by0, by1):
             if per_bin and not (qd[e, 7] > 0.0):
                 # the sphere: skip a row of bins that no bin of it can hit. R grows with the
@@ -1339,7 +1336,6 @@ def _quad_bins(qd, radius, dmax, corner2, bin_maxd, per_bin, vp, gx, gy, B, nbx,
                         # by angles (disk_cell_reach with the bin's centre and a whole bin's half
                         # diagonal, at least its own): the quad's stretch dropped
                         mx, my, mz = cell_direction(0.5 * (x0 + x1), 0.5 * (y0 + y1), vp)
-                        rdm = radius / qd[e, _QDMIN] * (1.0 + _REACH_SLACK) + _REACH_EPS
                         iDb = 1.0 / (bin_maxd[bi] if per_bin else dmax)
                         ang, entry = disk_cell_reach(mx, my, mz, chb, shb, qd[e, _QN:], rdm, radius, iDb)
                         hit = not (ang and entry < 0.0)
@@ -2023,7 +2019,6 @@ def _penumbra_kernel(
     rw = np.empty((_ROW, max_bin))  # the current bin's sample rows (one row per field) and 1 / distance
     sinv = np.empty(max_bin)
     sdir = np.empty((3, max_bin))  # the bin's samples' unit directions from the light centre (sphere)
-    arc = np.empty(15)  # the current edge's arc (disk_reach)
     mdir = np.empty((3, B * B))  # the current bin's cells' directions (disk_cell_reach)
     c0, c1, c2 = center[0], center[1], center[2]
     while True:
@@ -2094,8 +2089,7 @@ def _penumbra_kernel(
             # the sphere's per-sample test (disk_reach): r / dmin with its margins, the edge's arc
             rdm = radius / qd[e, _QDMIN] * (1.0 + _REACH_SLACK) + _REACH_EPS if not rect else 0.0
             iDb = 1.0 / (bin_maxd[bi] if per_bin else dmax)  # (disk_cell_reach) the farthest receivers
-            for k in range(15):
-                arc[k] = qd[e, _QN + k]
+            arc = qd[e, _QN:]
             # the bin's cells that can overlap the quad's bounding box (one cell of margin for
             # rounding: every cell outside is one ``axes_overlap_box`` rejects on the box axes)
             cx_lo, cx_hi, cy_lo, cy_hi = bx * B, min(bx * B + B, gx), by * B, min(by * B + B, gy)
