@@ -36,54 +36,38 @@ def build_embree_scene(vertices: np.ndarray, faces: np.ndarray):
     return sc
 
 
-#: pi/2 as two float64 (Cody-Waite): PIO2_HI = fl(pi/2), PIO2_LO = pi/2 - PIO2_HI
-PIO2_HI = 1.5707963267948966
-PIO2_LO = 6.123233995736766e-17
+_F32 = np.float32
 
-
-@kernel(inline=True)
-def _sin_kernel(x):
-    """sin(x) for |x| <= pi/4: fdlibm's minimax polynomial (``k_sin.c``), error < 1 ulp."""
-    z = x * x
-    w = z * z
-    r = 8.33333333332248946124e-03 + z * (-1.98412698298579493134e-04 + z * 2.75573137070700676789e-06)
-    r = r + z * w * (-2.50507602534068634195e-08 + z * 1.58969099521155010221e-10)
-    return x + (z * x) * (-1.66666666666666324348e-01 + z * r)
-
-
-@kernel(inline=True)
-def _cos_kernel(x):
-    """cos(x) for |x| <= pi/4: fdlibm's minimax polynomial (``k_cos.c``), error < 1 ulp."""
-    z = x * x
-    w = z * z
-    r = z * (4.16666666666666019037e-02 + z * (-1.38888888888741095749e-03 + z * 2.48015872894767294178e-05))
-    r = r + w * w * (-2.75573143513906633035e-07 + z * (2.08757232129817482790e-09 + z * -1.13596475577881948265e-11))
-    hz = 0.5 * z
-    w = 1.0 - hz
-    return w + (((1.0 - w) - hz) + z * r)
+#: how far past the disk's rim :func:`_concentric` may put a point, as a fraction of the radius
+#: (float32 rounding of the map; tests/test_ground_truth.py measures it): _facing_class widens the
+#: disk by it
+DISK_SLACK = 2.0**-20
 
 
 @kernel(inline=True)
 def _concentric(a, b):
-    """Shirley-Chiu concentric map of [0,1)^2 to the unit disk: (r cos phi, r sin phi) with
-    r = x, phi = pi/4 y/x where |x| > |y| (x, y = 2a - 1, 2b - 1), else r = y,
-    phi = pi/2 - pi/4 x/y. Without branches (both angles computed, one selected) and with
-    polynomial sine and cosine (:func:`_sin_kernel`, :func:`_cos_kernel`) on the angle reduced to
-    [-pi/4, pi/4] exactly (phi - pi/2 by Cody-Waite), so that a loop over samples vectorises; the
-    result is within 2 ulp of the same map through libm's cos and sin."""
-    x = 2.0 * a - 1.0
-    y = 2.0 * b - 1.0
+    """Shirley-Chiu concentric map of [0,1)^2 to the unit disk, in float32 (``a``, ``b`` and the
+    result): with x, y = 2a - 1, 2b - 1, where |x| > |y| r = x and phi = pi/4 y/x, else r = y and
+    phi = pi/2 - pi/4 x/y; so (r cos t, r sin t) or (r sin t, r cos t) with t = pi/4 q, q the smaller
+    coordinate over the larger (one division). Without branches (selects), with Cephes' float32
+    minimax polynomials for sin and cos on [-pi/4, pi/4], so that the loop over samples vectorises
+    eight lanes wide. Within a few float32 ulps of the exact map of the same (a, b)
+    (tests/test_ground_truth.py): the disk's points move by under 1e-6 of its radius, below the
+    float32 rounding of the ray directions they end in."""
+    x = _F32(2.0) * a - _F32(1.0)
+    y = _F32(2.0) * b - _F32(1.0)
     big = abs(x) > abs(y)
-    t_x = (np.pi / 4.0) * (y / x)
-    t_y = ((np.pi / 2.0 - (np.pi / 4.0) * (x / y)) - PIO2_HI) - PIO2_LO  # phi - pi/2
-    t = t_x if big else t_y
-    sn = _sin_kernel(t)
-    cs = _cos_kernel(t)
     r = x if big else y
-    c = cs if big else -sn  # cos(pi/2 + t) = -sin t
-    sv = sn if big else cs  # sin(pi/2 + t) = cos t
-    zero = (x == 0.0) & (y == 0.0)
-    return (0.0 if zero else r * c), (0.0 if zero else r * sv)
+    t = _F32(np.pi / 4.0) * ((y if big else x) / r)
+    z = t * t
+    sn = t + t * z * (_F32(-1.6666654611e-1) + z * (_F32(8.3321608736e-3) + z * _F32(-1.9515295891e-4)))
+    cs = (_F32(1.0) - _F32(0.5) * z) + z * z * (
+        _F32(4.166664568298827e-2) + z * (_F32(-1.388731625493765e-3) + z * _F32(2.443315711809948e-5))
+    )
+    zero = (x == _F32(0.0)) & (y == _F32(0.0))
+    dx = r * (cs if big else sn)
+    dy = r * (sn if big else cs)
+    return (_F32(0.0) if zero else dx), (_F32(0.0) if zero else dy)
 
 
 @kernel(inline=True)
@@ -231,8 +215,8 @@ def _facing_class(px, py, pz, nx, ny, nz, g, shape, center, u, v, radius):
     d0 = nx * cx + ny * cy + nz * cz
     dc = np.sqrt(cx * cx + cy * cy + cz * cz)
     if shape == 1:
-        ext = radius
-        half = radius
+        ext = radius * (1.0 + DISK_SLACK)  # _concentric's points may lie that far past the rim
+        half = ext
     else:
         ext = 0.5 * (abs(nx * u[0] + ny * u[1] + nz * u[2]) + abs(nx * v[0] + ny * v[1] + nz * v[2]))
         half = 0.5 * (
@@ -338,7 +322,8 @@ def generate_light_rays(
 
     Per point, the jittered light samples are computed first (``jitter_pair`` with its per-sample
     constants tabled once per call), then the rays, in loops without branches that the compiler
-    vectorises; the per-sample cosine at p is computed only where it is needed (the physical mode,
+    vectorises (the rows of ``org`` and ``dirs`` written through flat views, at a stride of 3 the
+    compiler knows: interleaved vector stores instead of six scalar ones per ray); the per-sample cosine at p is computed only where it is needed (the physical mode,
     or an occluder point that :func:`_facing_class` cannot put wholly in front of or behind its
     tangent plane). Serial: trace_in_pipeline runs one chunk per thread."""
     S = n_side * n_side
@@ -359,9 +344,12 @@ def generate_light_rays(
     sx = np.empty(S)
     sy = np.empty(S)
     sz = np.empty(S)
-    tx = np.empty(S, np.float32)
-    ty = np.empty(S, np.float32)
-    tz = np.empty(S, np.float32)
+    ja32 = np.empty(S, np.float32)
+    jb32 = np.empty(S, np.float32)
+    dx32 = np.empty(S, np.float32)
+    dy32 = np.empty(S, np.float32)
+    orgf = org.reshape(org.size)  # flat views: rows of 3 at a constant stride (the stores vectorise)
+    dirf = dirs.reshape(dirs.size)
     lnx, lny, lnz = 0.0, 0.0, 0.0
     if shape != 1:
         lnx = u[1] * v[2] - u[2] * v[1]
@@ -385,21 +373,28 @@ def generate_light_rays(
                 org[q, 2] = oz32
                 _blocked_ray(dirs, dist, geo, q, nx, ny, nz)
             continue
-        # the stratified, jittered point (a, b) of every sample (jitter_pair, vectorised)
+        # the stratified, jittered point (a, b) of every sample (jitter_pair, vectorised), then
+        # the light's point; the disk's in float32 (eight lanes), through float32 (a, b)
         key = point_key(seed, pix[k])
-        for s in range(S):
-            fa, fb = _salted_pair(key, salt_a[s], salt_b[s])
-            ja[s] = (cell_a[s] + fa) / nsf
-            jb[s] = (cell_b[s] + fb) / nsf
         if shape == 1:  # sphere: disk facing p
+            for s in range(S):
+                fa, fb = _salted_pair(key, salt_a[s], salt_b[s])
+                ja32[s] = _F32((cell_a[s] + fa) / nsf)
+                jb32[s] = _F32((cell_b[s] + fb) / nsf)
+            for s in range(S):
+                dx32[s], dy32[s] = _concentric(ja32[s], jb32[s])
             wx, wy, wz, e1x, e1y, e1z, e2x, e2y, e2z = _disk_frame(px, py, pz, center)
             lnx, lny, lnz = wx, wy, wz
             for s in range(S):
-                dx, dy = _concentric(ja[s], jb[s])
+                dx, dy = np.float64(dx32[s]), np.float64(dy32[s])
                 sx[s] = center[0] + radius * (dx * e1x + dy * e2x)
                 sy[s] = center[1] + radius * (dx * e1y + dy * e2y)
                 sz[s] = center[2] + radius * (dx * e1z + dy * e2z)
         else:
+            for s in range(S):
+                fa, fb = _salted_pair(key, salt_a[s], salt_b[s])
+                ja[s] = (cell_a[s] + fa) / nsf
+                jb[s] = (cell_b[s] + fb) / nsf
             for s in range(S):
                 a = ja[s]
                 b = jb[s]
@@ -407,27 +402,22 @@ def generate_light_rays(
                 sy[s] = center[1] + (a - 0.5) * u[1] + (b - 0.5) * v[1]
                 sz[s] = center[2] + (a - 0.5) * u[2] + (b - 0.5) * v[2]
         if cls == 1 and not need_geo:  # the common case: every ray traced, no cosine needed
-            # directions first (vectorised), then the interleaved rows Embree's wrapper reads
+            # unsigned indices (no negative-index wrap-around) at a stride of 3: this loop vectorises
+            # with interleaved stores into the rows Embree's wrapper reads
+            ub = np.uint64(3 * base)
             for s in range(S):
                 rx, ry, rz = sx[s] - ox32, sy[s] - oy32, sz[s] - oz32
                 rl = np.sqrt(rx * rx + ry * ry + rz * rz)
                 ri = 1.0 / rl
-                tx[s] = rx * ri
-                ty[s] = ry * ri
-                tz[s] = rz * ri
                 dist[base + s] = rl * (1.0 - 1e-6)
                 geo[base + s] = 0.0
-            # unsigned indices: no negative-index wrap-around, so this loop vectorises too
-            ub = np.uint64(base)
-            for s in range(S):
-                us = np.uint64(s)
-                q = ub + us
-                org[q, 0] = ox32
-                org[q, 1] = oy32
-                org[q, 2] = oz32
-                dirs[q, 0] = tx[us]
-                dirs[q, 1] = ty[us]
-                dirs[q, 2] = tz[us]
+                q = ub + np.uint64(3) * np.uint64(s)
+                orgf[q] = ox32
+                orgf[q + np.uint64(1)] = oy32
+                orgf[q + np.uint64(2)] = oz32
+                dirf[q] = rx * ri
+                dirf[q + np.uint64(1)] = ry * ri
+                dirf[q + np.uint64(2)] = rz * ri
             continue
         check = own_blocks[k] and cls != 1
         g = grazing[k]
