@@ -323,9 +323,10 @@ def generate_light_rays(
     Per point, the jittered light samples are computed first (``jitter_pair`` with its per-sample
     constants tabled once per call), then the rays, in loops without branches that the compiler
     vectorises (the rows of ``org`` and ``dirs`` written through flat views, at a stride of 3 the
-    compiler knows: interleaved vector stores instead of six scalar ones per ray); the per-sample cosine at p is computed only where it is needed (the physical mode,
-    or an occluder point that :func:`_facing_class` cannot put wholly in front of or behind its
-    tangent plane). Serial: trace_in_pipeline runs one chunk per thread."""
+    compiler knows: interleaved vector stores instead of six scalar ones per ray); the per-sample
+    cosine at p is computed only where it is needed (the physical mode, or an occluder point that
+    :func:`_facing_class` cannot put wholly in front of or behind its tangent plane). Serial:
+    trace_in_pipeline runs one chunk per thread."""
     S = n_side * n_side
     # per-sample halves of jitter_pair's hash, and the stratum of each sample
     cell_a = np.empty(S)
