@@ -477,7 +477,7 @@ def _sphere_terms():
 def _edge_arc(ea, eb, e, center, radius):
     """(edge e's arc as ``_arc_setup`` writes it, r / dmin with the pass's margins), or None when
     the edge comes within the light's radius of its centre (the pass then skips the angular tests)."""
-    from softshadows.methods.irregular import _QCOLS, _QN, _REACH_EPS, _REACH_SLACK, _arc_setup
+    from softshadows.methods.irregular import _QCOLS, _QN, _arc_setup, reach_ratio
 
     u = eb[e] - ea[e]
     tt = np.clip((center - ea[e]) @ u / (u @ u), 0.0, 1.0)
@@ -486,7 +486,7 @@ def _edge_arc(ea, eb, e, center, radius):
         return None
     qd = np.zeros((len(ea), _QCOLS))
     py_callable(_arc_setup)(ea, eb, e, center, dmin, qd)
-    return np.ascontiguousarray(qd[e, _QN : _QN + 15]), radius / dmin * (1.0 + _REACH_SLACK) + _REACH_EPS
+    return np.ascontiguousarray(qd[e, _QN : _QN + 15]), py_callable(reach_ratio)(qd, e, radius)
 
 
 @pytest.mark.parametrize("scale", [1e-3, 1.0, 1e3])

@@ -1019,6 +1019,13 @@ _REACH_EPS = 1e-7
 
 
 @kernel(inline=True, nrt=False)
+def reach_ratio(qd, e, radius):
+    """:func:`disk_reach`'s ``rdm``: r / dmin of edge e with its margins (0 where dmin is 0)."""
+    d = qd[e, _QDMIN]
+    return radius / d * (1.0 + _REACH_SLACK) + _REACH_EPS if d > 0.0 else 0.0
+
+
+@kernel(inline=True, nrt=False)
 def arc_position(ux, uy, uz, arc):
     """Unit direction u against edge e's arc (``arc``: qd's columns from ``_QN`` on, from
     :func:`_arc_setup`): (u . n^, inside the arc's wedge, u . a^, u . b^), branch-free."""
@@ -1293,7 +1300,7 @@ def _quad_bins(qd, radius, dmax, corner2, bin_maxd, per_bin, vp, gx, gy, B, nbx,
         by0, by1, bx0, bx1 = _quad_bin_range(qd, e, radius, dmax, corner2, vp, gx, gy, B)
         Rg = quad_half_width(qd, e, radius, dmax, corner2)
         ux, uy, qcx, qcy, hl0, _hw = quad_axes(qd, e, 0.0)  # once per quad (only R varies per bin)
-        rdm = radius / qd[e, _QDMIN] * (1.0 + _REACH_SLACK) + _REACH_EPS if qd[e, _QDMIN] > 0.0 else 0.0
+        rdm = reach_ratio(qd, e, radius)
         for by in range(by0, by1):
             if per_bin and not (qd[e, 7] > 0.0):
                 # the sphere: skip a row of bins that no bin of it can hit. R grows with the
@@ -2087,7 +2094,7 @@ def _penumbra_kernel(
             rex, rey = 0.5 * abs(sdx) + _EPS_IMG, 0.5 * abs(sdy) + _EPS_IMG
             rhn, ren = rhx * abs(sdy) + rhy * abs(sdx), _EPS_IMG * (abs(sdx) + abs(sdy))
             # the sphere's per-sample test (disk_reach): r / dmin with its margins, the edge's arc
-            rdm = radius / qd[e, _QDMIN] * (1.0 + _REACH_SLACK) + _REACH_EPS if not rect else 0.0
+            rdm = reach_ratio(qd, e, radius) if not rect else 0.0
             iDb = 1.0 / (bin_maxd[bi] if per_bin else dmax)  # (disk_cell_reach) the farthest receivers
             arc = qd[e, _QN:]
             # the bin's cells that can overlap the quad's bounding box (one cell of margin for
