@@ -397,3 +397,16 @@ def test_docstring_example_loads(tmp_path):
     s = load_scene(_toml(tmp_path, text))
     assert s.name == "bunny on a table" and [m.name for m in s.meshes] == ["bunny", "box #2", "ground"]
     assert [m.role for m in s.meshes] == ["occluder", "both", "receiver"]
+
+
+def test_rect_light_normal_and_area_are_numpys_cross_bit_for_bit():
+    """``RectLight.normal`` / ``area`` compute u x v with scalar arithmetic (``_cross3``, ~20x faster
+    than ``np.cross`` on 3-vectors): the same bits as ``np.cross`` over lights of every scale."""
+    rng = np.random.default_rng(11)
+    for _ in range(2000):
+        s = 10.0 ** rng.uniform(-6, 6)
+        u, v = rng.normal(size=3) * s, rng.normal(size=3) * s
+        light = RectLight(rng.normal(size=3), u, v)
+        n = np.cross(u, v)
+        assert np.array_equal(light.normal, n / np.linalg.norm(n))
+        assert light.area == float(np.linalg.norm(n))

@@ -42,6 +42,14 @@ def _number(x, what: str, *, gt=None, ge=None) -> float:
     return float(x)
 
 
+def _cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``np.cross(a, b)`` of two 3-vectors, the same bits (the same products and differences, in
+    float64) in ~1 us instead of ~23 us (``RectLight.normal`` is read several times a frame)."""
+    a0, a1, a2 = a.tolist()
+    b0, b1, b2 = b.tolist()
+    return np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])
+
+
 def _vec3(x, what: str) -> np.ndarray:
     if isinstance(x, (str, bytes, bool, np.bool_)):
         raise SceneError(f"{what}: expected 3 numbers, got {x!r}")
@@ -143,12 +151,12 @@ class RectLight:
 
     @property
     def normal(self) -> np.ndarray:
-        n = np.cross(self.u, self.v)
+        n = _cross3(self.u, self.v)
         return n / np.linalg.norm(n)
 
     @property
     def area(self) -> float:
-        return float(np.linalg.norm(np.cross(self.u, self.v)))
+        return float(np.linalg.norm(_cross3(self.u, self.v)))
 
     @property
     def size(self) -> float:
