@@ -400,7 +400,7 @@ def test_docstring_example_loads(tmp_path):
 
 
 def test_rect_light_normal_and_area_are_numpys_cross_bit_for_bit():
-    """``RectLight.normal`` / ``area`` compute u x v with scalar arithmetic (``_cross3``, faster than
+    """``RectLight.normal`` / ``area`` compute u x v with scalar arithmetic (``geometry.vectors.cross3``, faster than
     ``np.cross`` on 3-vectors): the same bits as ``np.cross`` over lights of every scale."""
     rng = np.random.default_rng(11)
     for _ in range(2000):

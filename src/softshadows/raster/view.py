@@ -18,6 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..geometry.vectors import cross3
+
 # The packed view-parameter vector ``View.params()`` that every kernel reads (``vp[VP_...]``):
 # a vector's components are at its index + 0, 1, 2 (x, y, z), e.g. ``vp[VP_FORWARD + 1]``.
 VP_ORIGIN = 0  #: origin (3)
@@ -63,11 +65,11 @@ class View:
         """Frame with ``right = forward x up_hint`` and ``up = right x forward`` (OpenGL camera
         convention: the image is not mirrored for a camera looking along ``forward``)."""
         f = _unit(forward)
-        r = np.cross(f, np.asarray(up_hint, float))
+        r = cross3(f, np.asarray(up_hint, float))
         if np.linalg.norm(r) < 1e-9:  # up_hint parallel to forward: pick any perpendicular
-            r = np.cross(f, np.array([1.0, 0.0, 0.0]) if abs(f[0]) < 0.9 else np.array([0.0, 0.0, 1.0]))
+            r = cross3(f, np.array([1.0, 0.0, 0.0]) if abs(f[0]) < 0.9 else np.array([0.0, 0.0, 1.0]))
         r = _unit(r)
-        u = np.cross(r, f)
+        u = cross3(r, f)
         return View(
             np.asarray(origin, float).copy(),
             r,
@@ -187,7 +189,7 @@ def light_frame(light, toward=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]
     if getattr(light, "shape", None) == "rect":
         f = light.normal
         r = _unit(light.u - np.dot(light.u, f) * f)
-        u = np.cross(f, r)
+        u = cross3(f, r)
         return r, u, f
     d = np.asarray(toward, float) - light.center if toward is not None else np.zeros(3)
     # toward the light's own centre (e.g. a light at the occluders' centre) has no direction: look down
@@ -197,8 +199,8 @@ def light_frame(light, toward=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]
         else np.array([0.0, -1.0, 0.0])
     )
     a = np.array([0.0, 0.0, 1.0]) if abs(f[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
-    r = _unit(np.cross(a, f))
-    u = np.cross(f, r)
+    r = _unit(cross3(a, f))
+    u = cross3(f, r)
     return r, u, f
 
 

@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import SceneError
+from ..geometry.vectors import cross3
 
 ROLES = ("both", "occluder", "receiver")
 
@@ -40,15 +41,6 @@ def _number(x, what: str, *, gt=None, ge=None) -> float:
     if ge is not None and not x >= ge:
         raise SceneError(f"{what} must be >= {ge}, got {x!r}")
     return float(x)
-
-
-def _cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """``np.cross(a, b)`` of two 3-vectors, the same bits (the same products and differences, in
-    float64) without ``np.cross``'s general broadcasting machinery, which costs tens of
-    microseconds a call (``RectLight.normal`` is read several times a frame)."""
-    a0, a1, a2 = a.tolist()
-    b0, b1, b2 = b.tolist()
-    return np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])
 
 
 def _vec3(x, what: str) -> np.ndarray:
@@ -152,12 +144,12 @@ class RectLight:
 
     @property
     def normal(self) -> np.ndarray:
-        n = _cross3(self.u, self.v)
+        n = cross3(self.u, self.v)
         return n / np.linalg.norm(n)
 
     @property
     def area(self) -> float:
-        return float(np.linalg.norm(_cross3(self.u, self.v)))
+        return float(np.linalg.norm(cross3(self.u, self.v)))
 
     @property
     def size(self) -> float:
