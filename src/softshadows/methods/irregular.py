@@ -2399,8 +2399,9 @@ def _error_bound_samples(verts, faces, tri_img, bary_img, idx, nrm, eps, out, bo
 
 
 #: the statistic ``origin_bound_median`` is the median of every ``_BOUND_MEDIAN_STRIDE``-th sample's
-#: error bound: the median of all of them (one partition of `bunny`'s 227k bounds) took 0.4-0.7 ms
-#: of a ~36 ms frame (``benchmarks/frame_ab.py``), for a statistic that shows the bound's scale
+#: error bound: the median of all of them (one partition of `bunny`'s 227k bounds) cost 0.5-0.8 ms
+#: of a ~37 ms frame (``benchmarks/frame_ab.py``: rect 38.1 -> 37.6 ms subsampled, 36.7 -> 35.9 ms
+#: without the statistic), for a statistic that shows the bound's scale
 _BOUND_MEDIAN_STRIDE = 16
 
 
