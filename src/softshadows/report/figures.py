@@ -58,6 +58,42 @@ def _fig_png(fig, dpi) -> bytes:
 def error_heatmap(err: np.ndarray, limit: float, path=None, title: str | None = None) -> bytes:
     """PNG bytes (and file at ``path``) of a signed-error map at its native resolution with a
     colorbar labelled 'V - V_ref  (red: darker than truth, blue: brighter)'."""
+    return error_heatmaps([err], limit, [path], [title])[0]
+
+
+def error_heatmaps(errs, limit: float, paths=None, titles=None) -> list[bytes]:
+    """:func:`error_heatmap` of each map in ``errs`` (with its path and title), drawn on one figure
+    per image size: the maps, the titles and nothing else change from one to the next (a new
+    figure for each cost about as much as drawing it). The same PNG bytes as one call each."""
+    plt = _mpl()
+    n = len(errs)
+    paths = list(paths) if paths is not None else [None] * n
+    titles = list(titles) if titles is not None else [None] * n
+    out = []
+    fig = key = None
+    for err, path, title in zip(errs, paths, titles, strict=True):
+        if fig is None or (err.shape, bool(title)) != key:  # (the figure's size depends on both)
+            if fig is not None:
+                plt.close(fig)
+            fig, ax, im = _heatmap_figure(err, limit, title)
+            key = (err.shape, bool(title))
+        else:
+            im.set_data(np.ma.masked_invalid(err))
+            if title:
+                ax.set_title(title, fontsize=9)
+        buf = io.BytesIO()
+        fig.savefig(buf, format="png", dpi=100)
+        data = buf.getvalue()
+        if path is not None:
+            write_bytes(path, data)
+        out.append(data)
+    if fig is not None:
+        plt.close(fig)
+    return out
+
+
+def _heatmap_figure(err: np.ndarray, limit: float, title: str | None):
+    """The figure of :func:`error_heatmaps` for maps of ``err``'s size: (figure, image axes, image)."""
     plt = _mpl()
     H, W = err.shape
     dpi = 100
@@ -76,10 +112,7 @@ def error_heatmap(err: np.ndarray, limit: float, path=None, title: str | None = 
     cb = fig.colorbar(im, cax=cax)
     cb.ax.tick_params(labelsize=7)
     cb.set_label("V - V_ref\nred: darker than truth\nblue: brighter", fontsize=7)
-    data = _fig_png(fig, dpi)
-    if path is not None:
-        write_bytes(path, data)
-    return data
+    return fig, ax, im
 
 
 def colorbar_png(limit: float, width_in: float = 5.0) -> bytes:
