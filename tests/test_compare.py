@@ -57,6 +57,30 @@ def test_metrics_json_and_report_name_every_method(compared):
     assert "sortTable" in html and "numba" in html  # sortable tables, machine description
 
 
+def test_first_run_timings_are_flagged(monkeypatch, tmp_path):
+    # with a warm-up helper (a cold cache) the frames are timed while it compiles: the report,
+    # metrics.json and the result say so; without one (a warm cache) nothing is said
+    from softshadows import _warm
+    from softshadows.compare import COMPILING_NOTE
+
+    class FakeHelper:  # the main process renders everything itself
+        def claim(self, name):
+            return True
+
+        def cached(self, name):
+            return False
+
+    monkeypatch.setattr(_warm, "stop_warmup", lambda helper: None)
+    for helper in (FakeHelper(), None):
+        monkeypatch.setattr(_warm, "start_warmup", lambda *a, h=helper, **k: h)
+        out = tmp_path / str(helper is None)
+        res = compare("spheres", "hard", 24, 18, str(out), gt_samples=4)
+        flagged = helper is not None
+        assert res["timed_while_compiling"] is flagged and "hard" in res["timings"]
+        assert json.loads((out / "metrics.json").read_text())["timed_while_compiling"] is flagged
+        assert (COMPILING_NOTE.split(";")[0] in (out / "report.html").read_text()) is flagged
+
+
 def test_skipped_light_shape_is_noted(monkeypatch):
     from softshadows.methods import base, methods
 

@@ -100,6 +100,9 @@ def test_main_process_renders_the_helpers_methods_last_in_the_original_order(mon
         def claim(self, name):
             return name not in ("penumbra-map", "layered-attenuation")
 
+        def cached(self, name):
+            return False  # still compiling while the main process renders its own
+
         def wait(self, name):
             calls.append(("wait", name))
 
@@ -120,6 +123,46 @@ def test_main_process_renders_the_helpers_methods_last_in_the_original_order(mon
         expect += [("render", m)] * 2
     for m in ("penumbra-map", "layered-attenuation"):
         expect += [("wait", m)] + [("render", m)] * 2
+    assert calls == expect
+    assert list(results) == names and not failed
+
+
+def test_main_process_renders_a_helper_method_as_soon_as_it_is_cached(monkeypatch):
+    # the helper has claimed the last method of the list and cached it once the main process has
+    # rendered "hard" (the first of its own): the main process renders it right then, without
+    # waiting, instead of at the end of the list; a helper method not yet cached is still waited
+    # for at the end
+    sys.path.insert(0, SRC)
+    from types import SimpleNamespace
+
+    import softshadows
+    from softshadows import compare
+
+    calls = []
+
+    class FakeHelper:
+        def claim(self, name):
+            return name not in ("coherent-raytrace", "irregular")
+
+        def cached(self, name):
+            return name == "coherent-raytrace" and ("render", "hard") in calls
+
+        def wait(self, name):
+            calls.append(("wait", name))
+
+    def fake_render(sc, m, w, h, **kw):
+        calls.append(("render", m))
+        return m
+
+    monkeypatch.setattr(softshadows, "render", fake_render)
+    names = ["hard", "irregular", "pcss", "coherent-raytrace"]
+    resolved = {m: {} for m in names} | {"ground-truth": {"samples": 4}}
+    sc = SimpleNamespace(name="s", light=SimpleNamespace(shape="rect"))
+    _gt, results, failed = compare._render_all(
+        sc, names, resolved, 8, 8, 0, None, False, lambda msg: None, FakeHelper()
+    )
+    expect = [("render", "ground-truth")] + [("render", "hard")] * 2 + [("render", "coherent-raytrace")] * 2
+    expect += [("render", "pcss")] * 2 + [("wait", "irregular")] + [("render", "irregular")] * 2
     assert calls == expect
     assert list(results) == names and not failed
 
@@ -176,19 +219,22 @@ def test_closure_kernels_have_the_same_cache_key_in_every_process():
     assert runs[0] == runs[1]
 
 
-def test_helper_takes_the_costliest_method_first():
-    # longest job first (softshadows._warm.COMPILE_COST): the helper's first claim is the method
-    # with the most compile work, the rest by cost, ties (unknown methods: 5 s) from the list's end
+def test_helper_takes_the_slow_frames_then_the_costliest_method_first():
+    # the slow-frame methods (softshadows._warm.SLOW_FRAMES) first, so that their frames do not
+    # fall at the end of the run; then longest job first (COMPILE_COST): the method with the most
+    # compile work, the rest by cost, ties (unknown methods: 5 s) from the list's end
     sys.path.insert(0, SRC)
-    from softshadows._warm import COMPILE_COST, helper_order
+    from softshadows._warm import COMPILE_COST, SLOW_FRAMES, helper_order
 
     names = ["hard", "pcss", "irregular", "x-new", "coherent-raytrace", "y-new"]
     order = helper_order(names)
     assert sorted(order) == sorted(names)
-    assert order[0] == max(COMPILE_COST, key=COMPILE_COST.get) == "irregular"
-    costs = [COMPILE_COST.get(m, 5.0) for m in order]
+    assert SLOW_FRAMES == ("coherent-raytrace",) and order[0] == "coherent-raytrace"
+    assert order[1] == max(COMPILE_COST, key=COMPILE_COST.get) == "irregular"
+    costs = [COMPILE_COST.get(m, 5.0) for m in order[1:]]
     assert costs == sorted(costs, reverse=True)
     assert order.index("y-new") < order.index("x-new")  # equal cost: from the end of the list
+    assert helper_order(["hard", "irregular"]) == ["irregular", "hard"]  # no slow-frame method
 
 
 def test_helpers_have_no_python_entry_and_raise_instead_of_crashing():

@@ -3,13 +3,13 @@
 Numba holds the GIL while it compiles, so a cold ``compare`` compiles its ~100 kernels one after
 the other on one core. :func:`start_warmup` starts a helper process (``python -m softshadows._warm``)
 that compiles the rasterizer's tile kernels the main process needs only after the eye G-buffer
-(:func:`warm_raster_modes`), then renders the same methods, costliest first (:func:`helper_order`),
-while the main process takes them from the front; a method goes to whichever process claims it
-first (:class:`Claims`). The helper writes its kernels into the on-disk cache (the package's
-normal ``__pycache__``/user cache or ``NUMBA_CACHE_DIR``: the helper inherits the environment and
-so the same locator); when the main
-process reaches a method, Numba loads what the helper already compiled instead of compiling it
-again. Nothing changes in the results (the same kernels, from the same cache). The helper is only
+(:func:`warm_raster_modes`), then renders the same methods, slow frames then costliest first
+(:func:`helper_order`), while the main process takes them from the front; a method goes to
+whichever process claims it first (:class:`Claims`). The helper writes its kernels into the
+on-disk cache (the package's normal ``__pycache__``/user cache or ``NUMBA_CACHE_DIR``: the helper
+inherits the environment and so the same locator); the main process renders a helper's method
+once the helper has marked it done, between its own methods or at the end (waiting for it), and
+Numba loads what the helper compiled instead of compiling it again. Nothing changes in the results (the same kernels, from the same cache). The helper is only
 started when the cache is cold, writable and there is more than one core; ``SOFTSHADOWS_WARMUP=0``
 turns it off. Measured in docs/results/cold-start.md.
 """
@@ -79,11 +79,21 @@ COMPILE_COST = {
 }
 
 
+#: Methods whose frames take about a second or more at ``compare``'s size (``coherent-raytrace``:
+#: ~1 s at 320x240 on 2 cores). The helper claims them before the others: it renders a method once
+#: after compiling it, and the main process renders it twice once it is cached. Claimed first, a
+#: slow method's three frames fall while both processes are still compiling (the main process
+#: renders it between its own methods); claimed last, they fell at the end of the run, with one
+#: core idle (a cold compare waited 2.6 s for the helper's frame, then rendered for 3.0 s).
+SLOW_FRAMES = ("coherent-raytrace",)
+
+
 def helper_order(names) -> list:
-    """The order in which the helper claims ``names`` (the main process's order): costliest first
-    (:data:`COMPILE_COST`, unknown methods 5 s), ties from the end of the list."""
+    """The order in which the helper claims ``names`` (the main process's order): the slow-frame
+    methods (:data:`SLOW_FRAMES`) first, then the costliest to compile first (:data:`COMPILE_COST`,
+    unknown methods 5 s); ties from the end of the list."""
     names = list(names)
-    return sorted(reversed(names), key=lambda m: -COMPILE_COST.get(m, 5.0))
+    return sorted(reversed(names), key=lambda m: (m not in SLOW_FRAMES, -COMPILE_COST.get(m, 5.0)))
 
 
 class Claims:
@@ -127,6 +137,10 @@ class Warmup:
         """True: this (main) process renders ``name`` now; False: the helper has taken it."""
         return self.claims.claim(name)
 
+    def cached(self, name: str) -> bool:
+        """Whether the helper has rendered ``name`` (so claimed it) and cached its kernels."""
+        return self.claims.is_done(name)
+
     def wait(self, name: str, timeout: float = 600.0) -> None:
         """Wait until the helper has cached ``name``'s kernels, or has ended, or ``timeout``."""
         end = time.monotonic() + timeout
@@ -136,9 +150,9 @@ class Warmup:
 
 def start_warmup(scene, light_shape: str, width: int, height: int, names, params: dict):
     """Start the helper (a :class:`Warmup`) when worth it, else None. ``names`` in the main
-    process's order; the helper claims them costliest first (:func:`helper_order`), the main
-    process from the front (:class:`Claims`), so no method is compiled by both. ``scene``: a built-in name or file path
-    (any other Scene: the built-in ``bunny``; kernel types do not depend on the scene)."""
+    process's order; the helper claims them in :func:`helper_order`, the main process from the
+    front (:class:`Claims`), so no method is compiled by both. ``scene``: a built-in name or file
+    path (any other Scene: the built-in ``bunny``; kernel types do not depend on the scene)."""
     if os.environ.get("SOFTSHADOWS_WARMUP", "1") == "0" or (os.cpu_count() or 1) < 2 or not names:
         return None
     cold, writable = cache_state()

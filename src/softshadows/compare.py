@@ -203,7 +203,9 @@ def compare(
     ``metrics.json`` and ``report.html`` into ``out_dir``.
 
     ``params_by_method`` = {method: {param: value}}. Returns a dict with ``out_dir``, ``report``,
-    ``files``, ``metrics``/``timings``/``params``/``stats`` by method, ``skipped``, ``failed``.
+    ``files``, ``metrics``/``timings``/``params``/``stats`` by method, ``skipped``, ``failed``,
+    ``timed_while_compiling`` (a cold cache: a second process compiled while the frames were
+    timed; :data:`COMPILING_NOTE`).
     """
     from .methods import get_method
 
@@ -233,20 +235,37 @@ def compare(
 
     t_start = time.perf_counter()
     say_if_cold()
-    # a cold cache: a helper process compiles methods, costliest first, while this one traces
-    # the ground truth and compiles from the front (softshadows._warm)
+    # a cold cache: a helper process compiles methods (slow frames, then costliest first) while
+    # this one traces the ground truth and compiles from the front (softshadows._warm)
     helper = start_warmup(scene, sc.light.shape, width, height, names, resolved)
     try:
         gt, results, failed = _render_all(sc, names, resolved, width, height, seed, progress, verbose, say, helper)
     finally:
         stop_warmup(helper)
-    return _finish(sc, skipped, resolved, gt, results, failed, width, height, out_dir, command, seed, t_start)
+    timed_while_compiling = helper is not None
+    return _finish(
+        sc,
+        skipped,
+        resolved,
+        gt,
+        results,
+        failed,
+        width,
+        height,
+        out_dir,
+        command,
+        seed,
+        t_start,
+        timed_while_compiling,
+    )
 
 
 def _render_all(sc, names, resolved, width, height, seed, progress, verbose, say, helper=None):
-    """Ground truth, then each method. With a warm-up ``helper`` (a cold cache), the methods it has
-    claimed (costliest first, softshadows._warm.helper_order) are rendered last, once it has cached their kernels, so that
-    no kernel is compiled by both processes; the results keep the order of ``names``."""
+    """Ground truth, then each method. With a warm-up ``helper`` (a cold cache), a method it has
+    claimed (softshadows._warm.helper_order) is rendered once it has cached its kernels, so that no
+    kernel is compiled by both processes: after the method this process has just rendered if the
+    helper is done with it by then, else at the end, waiting for it; the results keep the order of
+    ``names``."""
     from . import render
 
     say(
@@ -254,12 +273,18 @@ def _render_all(sc, names, resolved, width, height, seed, progress, verbose, say
     )
     gt = render(sc, REFERENCE, width, height, seed=seed, progress=progress, **resolved[REFERENCE])
     results, failed = {}, {}
-    later = []
-    for m in names:
+    todo = list(names)  # not rendered yet
+    later = []  # claimed by the helper, not cached yet when this process came to them
+    while todo:
+        m = todo.pop(0)
         if helper is not None and not helper.claim(m):
             later.append(m)  # the helper compiles it now
             continue
         _render_method(sc, m, resolved, width, height, seed, verbose, say, results, failed)
+        # the helper's methods cached meanwhile (the slow-frame ones are claimed first): now, not at the end
+        for x in [x for x in later + todo if helper is not None and helper.cached(x)]:
+            (later if x in later else todo).remove(x)
+            _render_method(sc, x, resolved, width, height, seed, verbose, say, results, failed)
     for m in later:
         helper.wait(m)
         _render_method(sc, m, resolved, width, height, seed, verbose, say, results, failed)
@@ -287,10 +312,32 @@ def _render_method(sc, m, resolved, width, height, seed, verbose, say, results, 
             traceback.print_exc()
 
 
-def _finish(sc, skipped, resolved, gt, results, failed, width, height, out_dir, command, seed, t_start):
+#: said in the report, metrics.json and the command's output when a warm-up helper compiled while
+#: the frames were timed (a cold cache: softshadows._warm)
+COMPILING_NOTE = (
+    "first run: the frame times were measured while a second process compiled kernels on the other"
+    " core(s), so they can be up to about twice the steady-state ones; run the command again for those"
+)
+
+
+def _finish(
+    sc,
+    skipped,
+    resolved,
+    gt,
+    results,
+    failed,
+    width,
+    height,
+    out_dir,
+    command,
+    seed,
+    t_start,
+    timed_while_compiling=False,
+):
     from .methods import get_method
     from .metrics import compute_metrics, receiver_pixels, signed_error_map
-    from .report import colorbar_png, error_heatmap, error_limit, error_rgb, grid_image, machine_info, write_html
+    from .report import colorbar_png, error_heatmaps, error_limit, error_rgb, grid_image, machine_info, write_html
     from .shading import to_srgb8, visibility_to_rgb
 
     # metrics and images
@@ -319,7 +366,8 @@ def _finish(sc, skipped, resolved, gt, results, failed, width, height, out_dir, 
         _write(out(f"{name}_V.png"), v_png)
         e_png = e_raw = None
         if err is not None:
-            e_png = error_heatmap(err, limit, out(f"{name}_error.png"), title=f"{name}: V - V_ref")
+            e_png = heatmaps[name]
+            files.append(os.path.join(out_dir, f"{name}_error.png"))
             e_raw = _png_bytes(error_rgb(err, limit))
         return {
             "name": name,
@@ -331,6 +379,10 @@ def _finish(sc, skipped, resolved, gt, results, failed, width, height, out_dir, 
             "v8": v8,
         }
 
+    # the error maps' figures, drawn on one figure (report.error_heatmaps), written as they are drawn
+    heat_paths = [os.path.join(out_dir, f"{m}_error.png") for m in results]
+    titles = [f"{m}: V - V_ref" for m in results]
+    heatmaps = dict(zip(results, error_heatmaps(list(errors.values()), limit, heat_paths, titles), strict=True))
     ref_entry = entry(REFERENCE, gt, None)
     entries = []
     for m, r in results.items():
@@ -366,6 +418,8 @@ def _finish(sc, skipped, resolved, gt, results, failed, width, height, out_dir, 
     grid_png = grid_image(rows, limit, out("grid.png"), title=f"{sc.name}, {sc.light.shape} light, {width}x{height}")
 
     notes = [f"skipped {m}: {why}" for m, why in skipped.items()]
+    if timed_while_compiling:
+        notes.append(COMPILING_NOTE)
     info = scene_info(sc, width, height)
     machine = machine_info()
     doc = {
@@ -380,6 +434,7 @@ def _finish(sc, skipped, resolved, gt, results, failed, width, height, out_dir, 
         "error_limit": limit,
         "machine": machine,
         "seed": seed,
+        "timed_while_compiling": timed_while_compiling,
     }
     mpath = out("metrics.json")
     write_json(mpath, jsonable(doc))
@@ -411,6 +466,7 @@ def _finish(sc, skipped, resolved, gt, results, failed, width, height, out_dir, 
         "failed": failed,
         "error_limit": limit,
         "wall_s": time.perf_counter() - t_start,
+        "timed_while_compiling": timed_while_compiling,
     }
 
 
@@ -461,6 +517,8 @@ def _cmd_compare(args) -> int:
                 )
         for m, why in res["skipped"].items():
             print(f"skipped {m}: {why}")
+        if res["timed_while_compiling"]:
+            print(f"note: {COMPILING_NOTE}")
         print(f"done in {time.perf_counter() - t0:.1f} s")
     print(f"report: {res['report']}")
     return 1 if res["failed"] else 0
