@@ -26,6 +26,7 @@ __all__ = [
     "Silhouette",
     "build_adjacency",
     "facing",
+    "facing_from_planes",
     "find_silhouette",
     "silhouette_adjacency",
     "silhouette_brute",
@@ -215,7 +216,10 @@ def _face_planes(vertices, faces) -> tuple[np.ndarray, np.ndarray]:
     return np.cross(b - a, c - a), a
 
 
-def _facing_from_planes(normals, anchors, point) -> np.ndarray:
+def facing_from_planes(normals, anchors, point) -> np.ndarray:
+    """(F,) bool: whether each triangle of plane normal ``normals`` (F, 3) (unnormalized, as
+    :func:`_face_planes` gives them) through ``anchors`` (F, 3) faces ``point``: the test of
+    :func:`facing` (:func:`_facing_one`) on planes computed once (e.g. an adjacency's)."""
     p = np.asarray(point, dtype=np.float64).reshape(3)
     return _facing_planes_kernel(
         np.ascontiguousarray(normals, dtype=np.float64), np.ascontiguousarray(anchors, dtype=np.float64), p
@@ -337,7 +341,7 @@ def silhouette_adjacency(adj: EdgeAdjacency, point) -> Silhouette:
     face, one segmented sum of facing flags per edge."""
     if adj.n_faces == 0:
         return _finish(np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0, bool), point)
-    fr = _facing_from_planes(adj.normals, adj.anchors, point)
+    fr = facing_from_planes(adj.normals, adj.anchors, point)
     frc = fr[adj.edge_faces]
     cf = np.add.reduceat(frc.astype(np.int64), adj.offsets[:-1])
     ca = adj.count

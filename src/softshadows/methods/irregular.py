@@ -23,7 +23,7 @@ from numba.extending import intrinsic
 
 from .._jit import kernel, run_slots
 from ..analytic import atan2_upper, rect_halfplanes_area
-from ..geometry.silhouette import _facing_from_planes, build_adjacency, facing
+from ..geometry.silhouette import build_adjacency, facing, facing_from_planes
 from ..raster.view import VP_B, VP_FORWARD, VP_L, VP_ORIGIN, VP_R, VP_RIGHT, VP_T, VP_UP, View, light_frame, light_view
 from .base import Method, MethodOutput, Param, register
 from .ground_truth import BOUND_SAFETY, hit_point_at
@@ -881,7 +881,7 @@ def _select_edges(count, offsets, edge_faces, edges, fa_, fr, counted, orient, t
     candidate; it is kept when the orientations of its counted triangles seen from the centre do
     not sum to zero, or it is a fold candidate. Returns (a, b, tv_start, tv, the kept fold edges
     whose sum is zero): the endpoints and, per edge, its counted triangles' third vertices in the
-    adjacency's order. ``fa_``: each face facing the centre by its plane (``_facing_from_planes``,
+    adjacency's order. ``fa_``: each face facing the centre by its plane (``facing_from_planes``,
     as ``silhouette_adjacency``)."""
     E = count.shape[0]
     keep = np.zeros(E, np.bool_)
@@ -962,7 +962,7 @@ def select_silhouette_edges(
         adj.offsets,
         adj.edge_faces,
         adj.edges,
-        _facing_from_planes(adj.normals, adj.anchors, center),
+        facing_from_planes(adj.normals, adj.anchors, center),
         fr,
         counted,
         orient,
@@ -2440,14 +2440,19 @@ def offset_points(pts, nrm, eps, bound=None):
     return np.ascontiguousarray(pts + (off[:, None] if np.ndim(off) else off) * nrm, dtype=np.float64)
 
 
+#: the method's defaults (``Irregular.params`` and :func:`irregular_visibility`'s keywords): light-view
+#: grid cells per side, grid cells per screen-bin side, depth slices
+GRID, BINS, SLICES = 96, 8, 8
+
+
 def irregular_visibility(
     scene,
     pts,
     nrm,
     *,
-    grid=96,
-    bins=8,
-    slices=8,
+    grid=GRID,
+    bins=BINS,
+    slices=SLICES,
     per_bin=True,
     wedge=True,
     silhouettes="adjacency",
@@ -2536,11 +2541,11 @@ class Irregular(Method):
     summary = "soft irregular shadow mapping: exact umbra count + exact per-edge penumbra at every eye sample"
     paper = "Johnson et al. 2009"
     params = (
-        Param("grid", 96, "light-view grid cells per side (image plane)", min=1, max=4096),
-        Param("slices", 8, "depth slices of the perspective grid", min=1, max=1024),
+        Param("grid", GRID, "light-view grid cells per side (image plane)", min=1, max=4096),
+        Param("slices", SLICES, "depth slices of the perspective grid", min=1, max=1024),
         Param(
             "bins",
-            8,
+            BINS,
             "grid cells per screen-bin side (the unit of parallel work and of quad refinement)",
             min=1,
             max=4096,
