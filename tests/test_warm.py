@@ -84,10 +84,9 @@ def test_claims_give_each_method_to_one_process(tmp_path):
     assert a.is_done("pcss")
 
 
-def test_main_process_renders_the_helpers_methods_last_in_the_original_order(monkeypatch):
-    # with a helper that has claimed the last two methods, the main process renders the others
-    # first, then waits for each of the helper's (its kernels cached) before rendering it; the
-    # results keep the order of the method list
+def _render_all_with_helper(monkeypatch, names, helpers, cached):
+    """compare._render_all over ``names`` with a fake helper that has claimed ``helpers`` and
+    reports ``cached(name, calls)``, and a fake render: (the calls in order, results, failed)."""
     sys.path.insert(0, SRC)
     from types import SimpleNamespace
 
@@ -98,10 +97,10 @@ def test_main_process_renders_the_helpers_methods_last_in_the_original_order(mon
 
     class FakeHelper:
         def claim(self, name):
-            return name not in ("penumbra-map", "layered-attenuation")
+            return name not in helpers
 
         def cached(self, name):
-            return False  # still compiling while the main process renders its own
+            return cached(name, calls)
 
         def wait(self, name):
             calls.append(("wait", name))
@@ -111,11 +110,22 @@ def test_main_process_renders_the_helpers_methods_last_in_the_original_order(mon
         return m
 
     monkeypatch.setattr(softshadows, "render", fake_render)
-    names = ["hard", "pcss", "penumbra-map", "layered-attenuation"]
     resolved = {m: {} for m in names} | {"ground-truth": {"samples": 4}}
     sc = SimpleNamespace(name="s", light=SimpleNamespace(shape="rect"))
     _gt, results, failed = compare._render_all(
         sc, names, resolved, 8, 8, 0, None, False, lambda msg: None, FakeHelper()
+    )
+    return calls, results, failed
+
+
+def test_main_process_renders_the_helpers_methods_last_in_the_original_order(monkeypatch):
+    # with a helper that has claimed the last two methods and is still compiling them while the
+    # main process renders its own, the main process renders the others first, then waits for
+    # each of the helper's (its kernels cached) before rendering it; the results keep the order of
+    # the method list
+    names = ["hard", "pcss", "penumbra-map", "layered-attenuation"]
+    calls, results, failed = _render_all_with_helper(
+        monkeypatch, names, ("penumbra-map", "layered-attenuation"), lambda name, calls: False
     )
     # each method twice (an untimed first frame, then the timed one)
     expect = [("render", "ground-truth")]
@@ -132,34 +142,12 @@ def test_main_process_renders_a_helper_method_as_soon_as_it_is_cached(monkeypatc
     # rendered "hard" (the first of its own): the main process renders it right then, without
     # waiting, instead of at the end of the list; a helper method not yet cached is still waited
     # for at the end
-    sys.path.insert(0, SRC)
-    from types import SimpleNamespace
-
-    import softshadows
-    from softshadows import compare
-
-    calls = []
-
-    class FakeHelper:
-        def claim(self, name):
-            return name not in ("coherent-raytrace", "irregular")
-
-        def cached(self, name):
-            return name == "coherent-raytrace" and ("render", "hard") in calls
-
-        def wait(self, name):
-            calls.append(("wait", name))
-
-    def fake_render(sc, m, w, h, **kw):
-        calls.append(("render", m))
-        return m
-
-    monkeypatch.setattr(softshadows, "render", fake_render)
     names = ["hard", "irregular", "pcss", "coherent-raytrace"]
-    resolved = {m: {} for m in names} | {"ground-truth": {"samples": 4}}
-    sc = SimpleNamespace(name="s", light=SimpleNamespace(shape="rect"))
-    _gt, results, failed = compare._render_all(
-        sc, names, resolved, 8, 8, 0, None, False, lambda msg: None, FakeHelper()
+    calls, results, failed = _render_all_with_helper(
+        monkeypatch,
+        names,
+        ("coherent-raytrace", "irregular"),
+        lambda name, calls: name == "coherent-raytrace" and ("render", "hard") in calls,
     )
     expect = [("render", "ground-truth")] + [("render", "hard")] * 2 + [("render", "coherent-raytrace")] * 2
     expect += [("render", "pcss")] * 2 + [("wait", "irregular")] + [("render", "irregular")] * 2
