@@ -170,9 +170,11 @@ def grid_image(rows: list[dict], limit: float, path=None, title: str | None = No
         if r.get("caption"):
             axes[i, 0].set_xlabel(r["caption"], fontsize=8, loc="left")
             axes[i, 2].set_xlabel(r.get("error_caption", ""), fontsize=8, loc="left")
+    top = 1.0
     if title:
         fig.suptitle(title, fontsize=11)
-    fig.tight_layout(rect=(0, 0, 0.92, 1))
+        top = 1.0 - 0.4 / fig.get_size_inches()[1]  # the column titles stay below it
+    fig.tight_layout(rect=(0, 0, 0.92, top))
     if im is not None:
         cax = fig.add_axes([0.93, 0.25, 0.015, 0.5])
         cb = fig.colorbar(im, cax=cax)
