@@ -48,11 +48,22 @@ def error_rgb(err: np.ndarray, limit: float) -> np.ndarray:
     return (np.asarray(cm(x))[..., :3] * 255 + 0.5).astype(np.uint8)
 
 
-def _fig_png(fig, dpi) -> bytes:
+def _png_of(fig, dpi) -> bytes:
+    """The figure as PNG bytes (the figure stays open: :func:`error_heatmaps` draws it again)."""
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=dpi)
-    _mpl().close(fig)
     return buf.getvalue()
+
+
+def _fig_png(fig, dpi) -> bytes:
+    """The figure as PNG bytes, then closed."""
+    data = _png_of(fig, dpi)
+    _mpl().close(fig)
+    return data
+
+
+#: dots per inch of the error heat maps: one figure pixel per map pixel (tiny maps upscaled)
+_HEATMAP_DPI = 100
 
 
 def error_heatmap(err: np.ndarray, limit: float, path=None, title: str | None = None) -> bytes:
@@ -81,9 +92,7 @@ def error_heatmaps(errs, limit: float, paths=None, titles=None) -> list[bytes]:
             im.set_data(np.ma.masked_invalid(err))
             if title:
                 ax.set_title(title, fontsize=9)
-        buf = io.BytesIO()
-        fig.savefig(buf, format="png", dpi=100)
-        data = buf.getvalue()
+        data = _png_of(fig, _HEATMAP_DPI)
         if path is not None:
             write_bytes(path, data)
         out.append(data)
@@ -96,7 +105,7 @@ def _heatmap_figure(err: np.ndarray, limit: float, title: str | None):
     """The figure of :func:`error_heatmaps` for maps of ``err``'s size: (figure, image axes, image)."""
     plt = _mpl()
     H, W = err.shape
-    dpi = 100
+    dpi = _HEATMAP_DPI
     scale = max(1.0, 320.0 / W)  # tiny images are upscaled (nearest) so the bar stays readable
     img_w, img_h = W * scale / dpi, H * scale / dpi
     bar_w = 1.25
