@@ -19,10 +19,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
-from numba import prange
 
-from .._jit import kernel
+from .._jit import kernel, run_slots
 from ..raster import View, rasterize_depth
 from ..raster.kernels import view_project
 from ..raster.view import VP_L, VP_ORIGIN, VP_ORTHO, VP_R, VP_W, light_view
@@ -134,21 +134,21 @@ def biased_light_row(vp, position, normal, mask, i, bias, slope_bias, sc):
         sc[9, j] = 1.0 if hit else 0.0
 
 
-@kernel(parallel=True)
-def shadow_lookup(vp, depth_map, position, normal, mask, bias, slope_bias, pcf_radius):
+@kernel(nogil=True)
+def shadow_lookup_slot(slot, vp, depth_map, position, normal, mask, bias, slope_bias, pcf_radius, out, nslot):
     """V per surface pixel of an image of points (``position``, ``normal``: (H,W,3), ``mask``:
-    (H,W) True where a surface is): 1 lit, 0 shadowed; with ``pcf_radius`` r > 0, the fraction of
-    lit tests over the (2r+1)^2 texels around the point (percentage-closer filtering). Pixels
-    without a surface get 1. The normal's sign does not matter (the bias uses |n.l|).
+    (H,W) True where a surface is) into ``out`` (H,W): 1 lit, 0 shadowed; with ``pcf_radius`` r >
+    0, the fraction of lit tests over the (2r+1)^2 texels around the point (percentage-closer
+    filtering). Pixels without a surface get 1. The normal's sign does not matter (the bias uses
+    |n.l|). Run by ``run_slots``: slot ``slot`` of ``nslot`` takes every ``nslot``-th row.
 
     Per row, the projections and biased depths of :func:`biased_light_row`, then the depth tests
     (a point that is not ``ok`` or has no surface has ``zt`` = NaN, which no stored depth is below:
     lit)."""
     Hm, Wm = depth_map.shape
     H, W = mask.shape
-    out = np.empty((H, W), np.float32)
-    for i in prange(H):
-        sc = np.empty((10, W))  # x, y, z, nx, ny, nz, then sx, sy, zt, ok
+    sc = np.empty((10, W))  # x, y, z, nx, ny, nz, then sx, sy, zt, ok
+    for i in range(slot, H, nslot):
         biased_light_row(vp, position, normal, mask, i, bias, slope_bias, sc)
         if pcf_radius == 0:
             for j in range(W):
@@ -171,6 +171,15 @@ def shadow_lookup(vp, depth_map, position, normal, mask, bias, slope_bias, pcf_r
                         if r < 0 or r >= Hm or c < 0 or c >= Wm or not (depth_map[r, c] < zt):
                             lit += 1
                 out[i, j] = lit / cnt
+
+
+def shadow_lookup(vp, depth_map, position, normal, mask, bias, slope_bias, pcf_radius) -> np.ndarray:
+    """:func:`shadow_lookup_slot` over the whole image, one slot per thread: V (H,W) float32."""
+    out = np.empty(mask.shape, np.float32)
+    nslot = numba.get_num_threads()
+    run_slots(
+        shadow_lookup_slot, nslot, vp, depth_map, position, normal, mask, bias, slope_bias, pcf_radius, out, nslot
+    )
     return out
 
 
