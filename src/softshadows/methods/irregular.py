@@ -18,7 +18,7 @@ from typing import ClassVar
 import numba
 import numpy as np
 from llvmlite import ir
-from numba import prange, types
+from numba import types
 from numba.extending import intrinsic
 
 from .._jit import kernel, run_slots
@@ -103,15 +103,19 @@ def slice_of(d, sb):
     return s
 
 
-@kernel(parallel=True)
-def _sample_keys(pts, vp, gx, gy, rx, ry, slices, sb, near, rec, key):
+@kernel(nogil=True, nrt=False, noalias=True)
+def _sample_keys_slot(slot, pts, vp, gx, gy, rx, ry, slices, sb, near, rec, key, nslot):
     """Per sample: its grid key (bin, cell in bin, slice; -1 behind the view) and its record
     ``rec[k]`` = (image x, image y, distance to the light centre, position): one row, so that the
     counting sort's gather reads one cache line per sample. ``rx[cx] + ry[cy]`` is cell (cx, cy)'s
-    number, bin-major (:func:`cell_numbers`: tables instead of two integer divisions per sample)."""
+    number, bin-major (:func:`cell_numbers`: tables instead of two integer divisions per sample).
+    Run by ``run_slots``: slot ``slot`` of ``nslot`` takes one contiguous block of the samples."""
     n = pts.shape[0]
     l, r, b, t = vp[VP_L], vp[VP_R], vp[VP_B], vp[VP_T]
-    for k in prange(n):
+    # unsigned indices: no negative-index wrap-around code at every access (a prange's index is
+    # unsigned too; with signed ones _compose_slot's scatter ran slower in a micro-benchmark)
+    k0, k1 = np.uint64(slot * n // nslot), np.uint64((slot + 1) * n // nslot)
+    for k in range(k0, k1):
         dx = pts[k, 0] - vp[VP_ORIGIN]
         dy = pts[k, 1] - vp[VP_ORIGIN + 1]
         dz = pts[k, 2] - vp[VP_ORIGIN + 2]
@@ -235,15 +239,14 @@ def sort_samples(key, rec, n_keys: int):
     return start, order, sx, sy, sp, sd
 
 
-@kernel(parallel=True)
-def _column_boxes(start, sp, sd, S):
+@kernel(nogil=True, nrt=False, noalias=True)
+def _column_boxes_slot(slot, start, sp, sd, S, box, dmax, occ, nslot):
     """Per cell column: 3D box of its samples, their maximum distance to the light centre, and
-    (for the statistics) how many of its cells hold samples and the most samples in one of them."""
-    nc = (start.shape[0] - 1) // S
-    box = np.empty((nc, 6))
-    dmax = np.zeros(nc)
-    occ = np.zeros((nc, 2), np.int64)
-    for c in prange(nc):
+    (for the statistics) how many of its cells hold samples and the most samples in one of them,
+    into ``box``, ``dmax``, ``occ``. Run by ``run_slots``: slot ``slot`` of ``nslot`` takes one
+    contiguous block of the columns."""
+    nc = box.shape[0]
+    for c in range(slot * nc // nslot, (slot + 1) * nc // nslot):
         ne = 0
         mc = 0
         for s in range(S):
@@ -263,6 +266,17 @@ def _column_boxes(start, sp, sd, S):
             for k in range(3):
                 box[c, k] = min(box[c, k], sp[j, k])
                 box[c, 3 + k] = max(box[c, 3 + k], sp[j, k])
+
+
+def _column_boxes(start, sp, sd, S):
+    """:func:`_column_boxes_slot` over every cell column, one slot per thread: (box (nc, 6),
+    dmax (nc,), occ (nc, 2) int64)."""
+    nc = (start.shape[0] - 1) // S
+    box = np.empty((nc, 6))
+    dmax = np.zeros(nc)
+    occ = np.zeros((nc, 2), np.int64)
+    nslot = numba.get_num_threads()
+    run_slots(_column_boxes_slot, nslot, start, sp, sd, S, box, dmax, occ, nslot)
     return box, dmax, occ
 
 
@@ -279,64 +293,81 @@ def receivers_box(col_box):
     return lo, hi
 
 
-#: chunks of the samples' parallel min/max passes (``_extent``, ``_window_of``): a few per thread
-_CHUNKS = 64
+# The samples' min/max passes (``_extent``, ``_window_of``) run one contiguous block of the samples
+# per slot and fold the slots' rows in slot order afterwards (in Python: a handful of rows). min and
+# max are exact, and a fold over contiguous blocks taken in order keeps the first of equal values
+# (as Numba's and Python's ``min``/``max`` do over the whole sequence: -0.0 against 0.0), so the
+# bits are the serial loop's whatever the number of slots.
+@kernel(nogil=True, nrt=False, noalias=True)
+def _extent_slot(slot, pts, c, part, nslot):
+    """Row ``slot`` of ``part`` (nslot, 8): (lo xyz, smallest distance to c, hi xyz, largest
+    distance to c) of one contiguous block of the samples. Run by ``run_slots`` (:func:`_extent`)."""
+    n = pts.shape[0]
+    lo0 = lo1 = lo2 = d0 = np.inf
+    hi0 = hi1 = hi2 = -np.inf
+    d1 = 0.0
+    k0, k1 = np.uint64(slot * n // nslot), np.uint64((slot + 1) * n // nslot)  # unsigned: see _sample_keys_slot
+    for k in range(k0, k1):
+        x, y, z = pts[k, 0], pts[k, 1], pts[k, 2]
+        lo0, lo1, lo2 = min(lo0, x), min(lo1, y), min(lo2, z)
+        hi0, hi1, hi2 = max(hi0, x), max(hi1, y), max(hi2, z)
+        dx, dy, dz = x - c[0], y - c[1], z - c[2]
+        d2 = dx * dx + dy * dy + dz * dz
+        d0, d1 = min(d0, d2), max(d1, d2)
+    # (the square root once per block: it is monotonic and correctly rounded, so the same bits)
+    part[slot, 0], part[slot, 1], part[slot, 2], part[slot, 3] = lo0, lo1, lo2, np.sqrt(d0)
+    part[slot, 4], part[slot, 5], part[slot, 6], part[slot, 7] = hi0, hi1, hi2, np.sqrt(d1)
 
 
-@kernel(parallel=True)
 def _extent(pts, c):
     """(lo (3,), hi (3,), d0, d1): the samples' bounding box and their smallest and largest distance
-    to c, by chunks in parallel (min and max are exact: any order gives the same bits)."""
-    n = pts.shape[0]
-    part = np.empty((_CHUNKS, 8))
-    for q in prange(_CHUNKS):
-        lo0 = lo1 = lo2 = d0 = np.inf
-        hi0 = hi1 = hi2 = -np.inf
-        d1 = 0.0
-        for k in range(q * n // _CHUNKS, (q + 1) * n // _CHUNKS):
-            x, y, z = pts[k, 0], pts[k, 1], pts[k, 2]
-            lo0, lo1, lo2 = min(lo0, x), min(lo1, y), min(lo2, z)
-            hi0, hi1, hi2 = max(hi0, x), max(hi1, y), max(hi2, z)
-            dx, dy, dz = x - c[0], y - c[1], z - c[2]
-            d2 = dx * dx + dy * dy + dz * dz
-            d0, d1 = min(d0, d2), max(d1, d2)
-        # (the square root once per chunk: it is monotonic and correctly rounded, so the same bits)
-        part[q, 0], part[q, 1], part[q, 2], part[q, 3] = lo0, lo1, lo2, np.sqrt(d0)
-        part[q, 4], part[q, 5], part[q, 6], part[q, 7] = hi0, hi1, hi2, np.sqrt(d1)
+    to c, one block of the samples per slot (:func:`_extent_slot`), the slots' rows folded in order."""
+    nslot = numba.get_num_threads()
+    part = np.empty((nslot, 8))
+    run_slots(_extent_slot, nslot, pts, c, part, nslot)
     lo = np.full(3, np.inf)
     hi = np.full(3, -np.inf)
     d0, d1 = np.inf, 0.0
-    for q in range(_CHUNKS):
+    for q in part.tolist():
         for i in range(3):
-            lo[i] = min(lo[i], part[q, i])
-            hi[i] = max(hi[i], part[q, 4 + i])
-        d0, d1 = min(d0, part[q, 3]), max(d1, part[q, 7])
-    if n == 0:
+            lo[i] = min(lo[i], q[i])
+            hi[i] = max(hi[i], q[4 + i])
+        d0, d1 = min(d0, q[3]), max(d1, q[7])
+    if pts.shape[0] == 0:
         d0, d1 = 1.0, 1.0
     return lo, hi, d0, d1
 
 
-@kernel(parallel=True)
+@kernel(nogil=True, nrt=False, noalias=True)
+def _window_of_slot(slot, pts, o, r, u, f, near, part, nslot):
+    """Row ``slot`` of ``part`` (nslot, 6): the image-plane window (x0, x1, y0, y1) and depth range
+    (z0, z1) of the samples in front of the view (o; r, u, f) in one contiguous block of the
+    samples. Run by ``run_slots`` (:func:`_window_of`)."""
+    n = pts.shape[0]
+    x0, x1, y0, y1, z0, z1 = np.inf, -np.inf, np.inf, -np.inf, np.inf, -np.inf
+    k0, k1 = np.uint64(slot * n // nslot), np.uint64((slot + 1) * n // nslot)  # unsigned: see _sample_keys_slot
+    for k in range(k0, k1):
+        dx, dy, dz = pts[k, 0] - o[0], pts[k, 1] - o[1], pts[k, 2] - o[2]
+        z = dx * f[0] + dy * f[1] + dz * f[2]
+        if z > near:
+            x = (dx * r[0] + dy * r[1] + dz * r[2]) / z
+            y = (dx * u[0] + dy * u[1] + dz * u[2]) / z
+            x0, x1, y0, y1 = min(x0, x), max(x1, x), min(y0, y), max(y1, y)
+            z0, z1 = min(z0, z), max(z1, z)
+    part[slot, 0], part[slot, 1], part[slot, 2], part[slot, 3], part[slot, 4], part[slot, 5] = x0, x1, y0, y1, z0, z1
+
+
 def _window_of(pts, o, r, u, f, near):
     """The image-plane window (x0, x1, y0, y1) and depth range (z0, z1) of the samples in front of
-    the view (o; r, u, f), by chunks in parallel."""
-    n = pts.shape[0]
-    part = np.empty((_CHUNKS, 6))
-    for q in prange(_CHUNKS):
-        x0, x1, y0, y1, z0, z1 = np.inf, -np.inf, np.inf, -np.inf, np.inf, -np.inf
-        for k in range(q * n // _CHUNKS, (q + 1) * n // _CHUNKS):
-            dx, dy, dz = pts[k, 0] - o[0], pts[k, 1] - o[1], pts[k, 2] - o[2]
-            z = dx * f[0] + dy * f[1] + dz * f[2]
-            if z > near:
-                x = (dx * r[0] + dy * r[1] + dz * r[2]) / z
-                y = (dx * u[0] + dy * u[1] + dz * u[2]) / z
-                x0, x1, y0, y1 = min(x0, x), max(x1, x), min(y0, y), max(y1, y)
-                z0, z1 = min(z0, z), max(z1, z)
-        part[q, 0], part[q, 1], part[q, 2], part[q, 3], part[q, 4], part[q, 5] = x0, x1, y0, y1, z0, z1
+    the view (o; r, u, f), one block of the samples per slot (:func:`_window_of_slot`), the slots'
+    rows folded in order."""
+    nslot = numba.get_num_threads()
+    part = np.empty((nslot, 6))
+    run_slots(_window_of_slot, nslot, pts, o, r, u, f, near, part, nslot)
     x0, x1, y0, y1, z0, z1 = np.inf, -np.inf, np.inf, -np.inf, np.inf, -np.inf
-    for q in range(_CHUNKS):
-        x0, x1, y0, y1 = min(x0, part[q, 0]), max(x1, part[q, 1]), min(y0, part[q, 2]), max(y1, part[q, 3])
-        z0, z1 = min(z0, part[q, 4]), max(z1, part[q, 5])
+    for q in part.tolist():
+        x0, x1, y0, y1 = min(x0, q[0]), max(x1, q[1]), min(y0, q[2]), max(y1, q[3])
+        z0, z1 = min(z0, q[4]), max(z1, q[5])
     return x0, x1, y0, y1, z0, z1
 
 
@@ -378,7 +409,8 @@ def build_sample_grid(light, pts: np.ndarray, grid: int, bins: int, slices: int)
     near = view.near
     sb = slice_bounds(dlo, dhi, slices)
     rx, ry = cell_numbers(grid, grid, bins, nbx)
-    _sample_keys(pts, vp, grid, grid, rx, ry, slices, sb, near, rec, key)
+    nslot = numba.get_num_threads()
+    run_slots(_sample_keys_slot, nslot, pts, vp, grid, grid, rx, ry, slices, sb, near, rec, key, nslot)
     start, order, sx, sy, sp, sd = sort_samples(key, rec, nbx * nby * bins * bins * slices)
     m = len(order)
     cbox, cmax, occ = _column_boxes(start, sp, sd, slices)
@@ -806,7 +838,10 @@ def fold_candidates(flat, counted, lo, hi, center, radius) -> np.ndarray:
     _occ, adj, _sheet, _t, _o = _topology(flat)
     corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])], np.float64)
     out = np.zeros(adj.n_edges, np.bool_)
-    _fold_kernel(
+    nslot = numba.get_num_threads()
+    run_slots(
+        _fold_slot,
+        nslot,
         adj.count,
         adj.edges,
         adj.edge_faces,
@@ -819,6 +854,7 @@ def fold_candidates(flat, counted, lo, hi, center, radius) -> np.ndarray:
         float(radius),
         corners,
         out,
+        nslot,
     )
     return out
 
@@ -845,10 +881,13 @@ def _box_side(normals, anchors, f, corners):
     return 1 if pos else (-1 if neg else 0)
 
 
-@kernel(parallel=True)
-def _fold_kernel(count, edges, edge_faces, offsets, counted, V, normals, anchors, c, radius, corners, out):
-    """:func:`fold_candidates` per manifold edge (one thread per edge)."""
-    for e in prange(count.shape[0]):
+@kernel(nogil=True, nrt=False, noalias=True)
+def _fold_slot(slot, count, edges, edge_faces, offsets, counted, V, normals, anchors, c, radius, corners, out, nslot):
+    """:func:`fold_candidates` per manifold edge. Run by ``run_slots``: slot ``slot`` of ``nslot``
+    takes one contiguous block of the edges."""
+    E = count.shape[0]
+    e0, e1 = np.uint64(slot * E // nslot), np.uint64((slot + 1) * E // nslot)  # unsigned: see _sample_keys_slot
+    for e in range(e0, e1):
         if count[e] != 2:
             continue
         f0 = edge_faces[offsets[e]]
@@ -1275,26 +1314,28 @@ def _quad_bin_range(qd, e, radius, dmax, corner2, vp, gx, gy, B):
     return 0, 0, 0, 0
 
 
-@kernel(parallel=True)
-def _quad_bin_slots(qd, radius, dmax, corner2, vp, gx, gy, B, slots):
+@kernel(nogil=True, nrt=False, noalias=True)
+def _quad_bin_slots_slot(slot, qd, radius, dmax, corner2, vp, gx, gy, B, slots, nslot):
     """Per quad: the number of bins its bounding box touches (``_quad_bin_range``), the slots the
-    test pass may fill."""
-    for e0 in prange(qd.shape[0]):
-        e = np.int64(e0)  # prange's index may be unsigned: one specialisation of the quad helpers
+    test pass may fill. Run by ``run_slots``: slot ``slot`` of ``nslot`` takes one contiguous block
+    of the quads."""
+    E = qd.shape[0]
+    for e in range(slot * E // nslot, (slot + 1) * E // nslot):
         by0, by1, bx0, bx1 = _quad_bin_range(qd, e, radius, dmax, corner2, vp, gx, gy, B)
         slots[e] = (by1 - by0) * (bx1 - bx0)
 
 
-@kernel(parallel=True)
-def _quad_bins(qd, radius, dmax, corner2, bin_maxd, per_bin, vp, gx, gy, B, nbx, offs, out, counts):
+@kernel(nogil=True, nrt=False, noalias=True)
+def _quad_bins_slot(slot, qd, radius, dmax, corner2, bin_maxd, per_bin, vp, gx, gy, B, nbx, offs, out, counts, nslot):
     """The screen bins quad e overlaps (refined per bin with ``per_bin``), in bin order, into its
     slots ``out[offs[e]:offs[e + 1]]`` (the rest of them -1) and their number into ``counts[e]``.
-    One pass of the tests."""
+    One pass of the tests. Run by ``run_slots``: slot ``slot`` of ``nslot`` takes one contiguous
+    block of the quads."""
     cw, ch = (vp[VP_R] - vp[VP_L]) / gx, (vp[VP_T] - vp[VP_B]) / gy
     hb = 0.5 * B * np.sqrt(cw * cw + ch * ch) * (1.0 + 1e-12)  # a whole bin's half diagonal
     chb, shb = np.cos(hb), np.sin(hb) * (1.0 + 1e-12)
-    for e0 in prange(qd.shape[0]):
-        e = np.int64(e0)  # prange's index may be unsigned: one specialisation of the quad helpers
+    E = qd.shape[0]
+    for e in range(slot * E // nslot, (slot + 1) * E // nslot):
         n = 0
         k = offs[e]
         by0, by1, bx0, bx1 = _quad_bin_range(qd, e, radius, dmax, corner2, vp, gx, gy, B)
@@ -1399,10 +1440,24 @@ def bin_penumbra_quads(grid: SampleGrid, qd: np.ndarray, light_radius: float, pe
         grid.nbx,
     )
     offs = np.zeros(E + 1, np.int64)
-    _quad_bin_slots(qd, light_radius, grid.dmax, args[3], grid.vp, grid.gx, grid.gy, grid.bins, offs[1:])
+    nslot = numba.get_num_threads()
+    run_slots(
+        _quad_bin_slots_slot,
+        nslot,
+        qd,
+        light_radius,
+        grid.dmax,
+        args[3],
+        grid.vp,
+        grid.gx,
+        grid.gy,
+        grid.bins,
+        offs[1:],
+        nslot,
+    )
     np.cumsum(offs[1:], out=offs[1:])
     slots = np.empty(offs[-1], np.int64)
-    _quad_bins(*args, offs, slots, counts)
+    run_slots(_quad_bins_slot, nslot, *args, offs, slots, counts, nslot)
     return _pairs_by_bin(counts, slots[slots >= 0], grid.n_bins)
 
 
@@ -2334,11 +2389,14 @@ def accumulate_penumbrae(
 # ---------------------------------------------------------------------------------------------
 # composition
 # ---------------------------------------------------------------------------------------------
-@kernel(parallel=True)
-def _compose(order, dest, umbra, pen, out):
-    for k in prange(out.shape[0]):
-        out[k] = 1.0
-    for j in prange(order.shape[0]):
+@kernel(nogil=True, nrt=False, noalias=True)
+def _compose_slot(slot, order, dest, umbra, pen, out, nslot):
+    """V = 1 - (umbra + pen), clamped, of the grid's samples scattered to ``out[dest[order[j]]]``
+    (``out`` already 1 everywhere). Run by ``run_slots``: slot ``slot`` of ``nslot`` takes one
+    contiguous block of the grid's samples (``dest`` is one-to-one: no two slots write one place)."""
+    m = order.shape[0]
+    j0, j1 = np.uint64(slot * m // nslot), np.uint64((slot + 1) * m // nslot)  # unsigned: see _sample_keys_slot
+    for j in range(j0, j1):
         x = 1.0 - (umbra[j] + pen[j])
         out[dest[order[j]]] = min(max(x, 0.0), 1.0)
 
@@ -2348,8 +2406,9 @@ def compose_visibility(grid: SampleGrid, umbra, pen, n_all: int, pixels=None) ->
     [0, 1]; samples outside the grid (behind the light's view) are lit. V of the n_all input
     samples, or with ``pixels`` (each input sample's flat pixel index) an image of n_all pixels,
     1 where no sample lies (``FrameContext.scatter``'s, without the per-sample array)."""
-    out = np.empty(n_all, np.float32)
-    _compose(grid.order, np.arange(n_all) if pixels is None else pixels, umbra, pen, out)
+    out = np.ones(n_all, np.float32)
+    nslot = numba.get_num_threads()
+    run_slots(_compose_slot, nslot, grid.order, np.arange(n_all) if pixels is None else pixels, umbra, pen, out, nslot)
     return out
 
 
@@ -2357,20 +2416,21 @@ def compose_visibility(grid: SampleGrid, umbra, pen, n_all: int, pixels=None) ->
 _EB_BLOCK = 256
 
 
-@kernel(parallel=True)
-def _error_bound_samples(verts, faces, tri_img, bary_img, idx, nrm, eps, out, bound):
+@kernel(nogil=True, noalias=True)
+def _error_bound_samples_slot(slot, verts, faces, tri_img, bary_img, idx, nrm, eps, out, bound, nslot):
     """Ground truth's ray origins (:func:`ground_truth.hit_point`, float64): p + (BOUND_SAFETY x its
     error bound + eps) n, n the geometric normal turned toward the eye; gathers from the G-buffer.
     By blocks of points: the triangles' vertices and the points' inputs gathered into contiguous
     scratch first, then ``hit_point_at`` in a loop without gathers or branches (it vectorizes), its
     outputs stored contiguous and copied to the rows of ``out`` last: the same arithmetic, the same
-    bits as ``hit_point`` point by point."""
+    bits as ``hit_point`` point by point. Run by ``run_slots``: slot ``slot`` of ``nslot`` takes one
+    contiguous run of the blocks (its scratch made once)."""
     n = idx.shape[0]
     nblk = (n + _EB_BLOCK - 1) // _EB_BLOCK
-    for blk in prange(nblk):
+    g = np.empty((17, _EB_BLOCK))  # inputs (14 rows), then the result (3)
+    for blk in range(slot * nblk // nslot, (slot + 1) * nblk // nslot):
         k0 = blk * _EB_BLOCK
         m = min(n, k0 + _EB_BLOCK) - k0
-        g = np.empty((17, _EB_BLOCK))  # inputs (14 rows), then the result (3)
         for i in range(m):
             k = k0 + i
             q = idx[k]
@@ -2426,9 +2486,9 @@ def error_bound_samples(flat, eye, idx, nrm, eps):
     K = len(idx)
     out = np.empty((K, 3))
     bound = np.empty(K)
-    _error_bound_samples(
-        flat.vertices, flat.faces, eye.tri_id.ravel(), eye.bary.reshape(-1, 2), idx, nrm, eps, out, bound
-    )
+    nslot = numba.get_num_threads()
+    tri, bary = eye.tri_id.ravel(), eye.bary.reshape(-1, 2)
+    run_slots(_error_bound_samples_slot, nslot, flat.vertices, flat.faces, tri, bary, idx, nrm, eps, out, bound, nslot)
     return out, bound
 
 
