@@ -20,7 +20,6 @@ from typing import ClassVar
 
 import numba
 import numpy as np
-from numba import prange
 
 from .._jit import kernel, run_slots
 from ..errors import SoftShadowsError
@@ -298,26 +297,27 @@ def occupied_bounds(tex: np.ndarray) -> np.ndarray:
 # =====================================================================================
 # 2. Prefiltering (Sec. 3.2)
 # =====================================================================================
-@kernel(parallel=True)
-def _mip_level0(tex, pyr):
+@kernel(nogil=True, nrt=False)
+def _mip_build_slot(slot, tex, pyr, offs, sizes, nslot):
+    """The mipmap pyramid of :func:`prefilter_mipmap` (level 0 the texture, level l the 2x2 box
+    average of level l-1) of the slices ``slot``, ``slot + nslot``, ... (run by ``run_slots``, one
+    slot per thread): every level of a slice in turn, the slice's levels staying in cache."""
     n, h, w = tex.shape
-    for s in prange(n):
+    for s in range(slot, n, nslot):
         for i in range(h):
             for j in range(w):
                 pyr[s, i * w + j] = tex[s, i, j]
-
-
-@kernel(parallel=True)
-def _mip_reduce(pyr, src_off, src_h, src_w, dst_off, dst_h, dst_w):
-    n = pyr.shape[0]
-    for job in prange(n * dst_h):
-        s = job // dst_h
-        i = job - s * dst_h
-        for j in range(dst_w):
-            a = src_off + (2 * i) * src_w + 2 * j
-            pyr[s, dst_off + i * dst_w + j] = 0.25 * (
-                pyr[s, a] + pyr[s, a + 1] + pyr[s, a + src_w] + pyr[s, a + src_w + 1]
-            )
+        for lv in range(1, sizes.shape[0]):
+            src_off = offs[lv - 1]
+            src_w = sizes[lv - 1]
+            dst_off = offs[lv]
+            dst_w = sizes[lv]
+            for i in range(dst_w):
+                for j in range(dst_w):
+                    a = src_off + (2 * i) * src_w + 2 * j
+                    pyr[s, dst_off + i * dst_w + j] = 0.25 * (
+                        pyr[s, a] + pyr[s, a + 1] + pyr[s, a + src_w] + pyr[s, a + src_w + 1]
+                    )
 
 
 def prefilter_mipmap(tex: np.ndarray):
@@ -331,47 +331,47 @@ def prefilter_mipmap(tex: np.ndarray):
     offs = np.cumsum([0] + [s * s for s in sizes[:-1]]).astype(np.int64)
     total = int(offs[-1] + sizes[-1] ** 2)
     pyr = np.empty((n, total), np.float32)
-    _mip_level0(tex, pyr)
-    for lv in range(1, len(sizes)):
-        _mip_reduce(pyr, offs[lv - 1], sizes[lv - 1], sizes[lv - 1], offs[lv], sizes[lv], sizes[lv])
-    return pyr, offs, np.asarray(sizes, np.int64)
+    sizes = np.asarray(sizes, np.int64)
+    nslot = numba.get_num_threads()
+    run_slots(_mip_build_slot, nslot, tex, pyr, offs, sizes, nslot)
+    return pyr, offs, sizes
 
 
-@kernel(parallel=True)
-def _nbuffer_levels(tex, nb, bounds):
+@kernel(nogil=True, nrt=False)
+def _nbuffer_levels_slot(slot, tex, nb, bounds, nslot):
     """nb[s, l, i, j] = mean of tex[s] over rows [i, i+2^l) x cols [j, j+2^l) (zero outside):
     level l from four lookups in level l-1 at offsets 0 and 2^(l-1) (Décoret's N-Buffers).
     ``bounds[s]`` (:func:`occupied_bounds`): a row whose boxes miss the set texels' rows is 0
-    without reading level l-1 (the sum would be 0 too; the textures are mostly empty)."""
+    without reading level l-1 (the sum would be 0 too; the textures are mostly empty). Run by
+    ``run_slots``: slot ``slot`` of ``nslot`` builds every level of the slices ``slot``,
+    ``slot + nslot``, ... (a level reads only its own slice's previous level: no wait between
+    levels, one launch)."""
     n, nl, h, w = nb.shape
-    for job in prange(n * h):
-        s = job // h
-        i = job - s * h
-        for j in range(w):
-            nb[s, 0, i, j] = tex[s, i, j]
-    for lv in range(1, nl):
-        o = 1 << (lv - 1)
-        jm = max(w - o, 0)
-        for job in prange(n * h):
-            s = job // h
-            i = job - s * h
-            dst = nb[s, lv, i]
-            if i + 2 * o <= bounds[s, 2] or i >= bounds[s, 3]:
-                for j in range(w):
-                    dst[j] = 0.0
-                continue
-            a = nb[s, lv - 1, i]
-            if i + o < h:
-                c = nb[s, lv - 1, i + o]
-                for j in range(jm):  # branch-free body (vectorizes)
-                    dst[j] = 0.25 * (a[j] + a[j + o] + c[j] + c[j + o])
-                for j in range(jm, w):
-                    dst[j] = 0.25 * (a[j] + c[j])
-            else:
-                for j in range(jm):
-                    dst[j] = 0.25 * (a[j] + a[j + o])
-                for j in range(jm, w):
-                    dst[j] = 0.25 * a[j]
+    for s in range(slot, n, nslot):
+        for i in range(h):
+            for j in range(w):
+                nb[s, 0, i, j] = tex[s, i, j]
+        for lv in range(1, nl):
+            o = 1 << (lv - 1)
+            jm = max(w - o, 0)
+            for i in range(h):
+                dst = nb[s, lv, i]
+                if i + 2 * o <= bounds[s, 2] or i >= bounds[s, 3]:
+                    for j in range(w):
+                        dst[j] = 0.0
+                    continue
+                a = nb[s, lv - 1, i]
+                if i + o < h:
+                    c = nb[s, lv - 1, i + o]
+                    for j in range(jm):  # branch-free body (vectorizes)
+                        dst[j] = 0.25 * (a[j] + a[j + o] + c[j] + c[j + o])
+                    for j in range(jm, w):
+                        dst[j] = 0.25 * (a[j] + c[j])
+                else:
+                    for j in range(jm):
+                        dst[j] = 0.25 * (a[j] + a[j + o])
+                    for j in range(jm, w):
+                        dst[j] = 0.25 * a[j]
 
 
 def prefilter_nbuffers(tex: np.ndarray, levels: int | None = None, bounds: np.ndarray | None = None) -> np.ndarray:
@@ -383,14 +383,17 @@ def prefilter_nbuffers(tex: np.ndarray, levels: int | None = None, bounds: np.nd
     nl = full if levels is None else int(min(max(levels, 0), full))
     nb = np.empty((n, nl + 1, h, w), np.float32)
     bb = occupied_bounds(tex) if bounds is None else np.ascontiguousarray(bounds, dtype=np.float64)
-    _nbuffer_levels(tex, nb, bb)
+    nslot = numba.get_num_threads()
+    run_slots(_nbuffer_levels_slot, nslot, tex, nb, bb, nslot)
     return nb
 
 
-@kernel(parallel=True)
-def _sat_build(tex, sat):
+@kernel(nogil=True, nrt=False)
+def _sat_build_slot(slot, tex, sat, nslot):
+    """The summed-area tables of :func:`prefilter_sat` of the slices ``slot``, ``slot + nslot``, ...
+    (run by ``run_slots``, one slot per thread; integer sums, exact)."""
     n, h, w = tex.shape
-    for s in prange(n):
+    for s in range(slot, n, nslot):
         for j in range(w + 1):
             sat[s, 0, j] = 0
         for i in range(h):
@@ -407,7 +410,8 @@ def prefilter_sat(tex: np.ndarray) -> np.ndarray:
     if h * w >= 2**31:
         raise SoftShadowsError("method 'occlusion-textures': texture too large for a 32-bit summed-area table")
     sat = np.empty((n, h + 1, w + 1), np.int32)
-    _sat_build(tex, sat)
+    nslot = numba.get_num_threads()
+    run_slots(_sat_build_slot, nslot, tex, sat, nslot)
     return sat
 
 
