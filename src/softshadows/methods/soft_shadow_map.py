@@ -21,7 +21,6 @@ from typing import ClassVar
 
 import numba
 import numpy as np
-from numba import prange
 from numba.cpython.unsafe.numbers import trailing_zeros
 
 from .._jit import kernel, py_callable, run_slots
@@ -405,8 +404,8 @@ def _rect_max(vals, off, ws, i0, i1, j0, j1):
     return m
 
 
-@kernel(parallel=True)
-def refine_extents_sphere(patches, ext, rho, pyr_vals, pyr_off, pyr_ws, svp, rounds, z_plane=0.0):
+@kernel(nogil=True, nrt=False)
+def refine_extents_sphere_slot(slot, patches, ext, rho, pyr_vals, pyr_off, pyr_ws, svp, rounds, z_plane, nslot):
     """Narrow :func:`penumbra_extents_sphere`'s ranges in place, ``rounds`` times: a texel p that the
     patch shadows lies in its current range R, so (1) its receiver depth is at most the largest one
     in R (:func:`_rect_max`, instead of the deepest receiver of the whole map) and (2) its facing
@@ -415,11 +414,13 @@ def refine_extents_sphere(patches, ext, rho, pyr_vals, pyr_off, pyr_ws, svp, rou
     recomputed with both (:func:`_sphere_extent`), intersected with R, still contains p. A range
     without receivers deeper than the patch becomes empty. ``z_plane`` > 0: ``ext``'s rows are
     first set to :func:`penumbra_extents_sphere`'s ranges for receivers up to that depth (the same
-    arithmetic, in this parallel loop instead of a serial pass of its own)."""
+    arithmetic, in this parallel pass instead of a serial pass of its own). Run by ``run_slots``:
+    slot ``slot`` of ``nslot`` takes the ``slot``-th of ``nslot`` contiguous runs of patches."""
     l, r, b, t = svp[VP_L], svp[VP_R], svp[VP_B], svp[VP_T]
     dxs = (r - l) / svp[VP_W]
     dys = (t - b) / svp[VP_H]
-    for k in prange(patches.shape[0]):
+    n = patches.shape[0]
+    for k in range(slot * n // nslot, (slot + 1) * n // nslot):
         if z_plane > 0.0:
             _patch_sphere_extent(patches, k, rho, z_plane, svp, ext)
         for _ in range(rounds):
@@ -441,6 +442,26 @@ def refine_extents_sphere(patches, ext, rho, pyr_vals, pyr_off, pyr_ws, svp, rou
             if n0 > n1 or m0 > m1:
                 n0, n1, m0, m1 = 1, 0, 1, 0
             ext[k, 0], ext[k, 1], ext[k, 2], ext[k, 3] = n0, n1, m0, m1
+
+
+def refine_extents_sphere(patches, ext, rho, pyr_vals, pyr_off, pyr_ws, svp, rounds, z_plane=0.0) -> np.ndarray:
+    """:func:`refine_extents_sphere_slot` over every patch, one slot per thread: ``ext``, narrowed
+    in place."""
+    nslot = numba.get_num_threads()
+    run_slots(
+        refine_extents_sphere_slot,
+        nslot,
+        patches,
+        ext,
+        float(rho),
+        pyr_vals,
+        pyr_off,
+        pyr_ws,
+        svp,
+        int(rounds),
+        float(z_plane),
+        nslot,
+    )
     return ext
 
 
@@ -559,18 +580,18 @@ def _disk_frame(px, py, pz, rho, out):
     out[11] = math.sqrt(1.0 + out[10] * out[10])
 
 
-@kernel(parallel=True)
-def disk_frames(recv_depth, svp, rho):
-    """:func:`_disk_frame` of every SSM texel's receiver point as 12 planes (12,H,W) (contiguous
-    along rows, for the vectorized pass); zeros where no receiver."""
+@kernel(nogil=True)
+def disk_frames_slot(slot, recv_depth, svp, rho, out, nslot):
+    """:func:`_disk_frame` of every SSM texel's receiver point into ``out``: 12 planes (12,H,W)
+    (contiguous along rows, for the vectorized pass), left as they are (zeros) where no receiver.
+    Run by ``run_slots``: slot ``slot`` of ``nslot`` takes every ``nslot``-th row."""
     H, W = recv_depth.shape
     l, r, b, t = svp[VP_L], svp[VP_R], svp[VP_B], svp[VP_T]
     dxs = (r - l) / W
     dys = (t - b) / H
-    out = np.zeros((12, H, W))
-    for i in prange(H):
+    f = np.empty(12)
+    for i in range(slot, H, nslot):
         uy = t - (i + 0.5) * dys
-        f = np.empty(12)
         for j in range(W):
             zr = np.float64(recv_depth[i, j])
             if zr > 0.0:
@@ -578,6 +599,14 @@ def disk_frames(recv_depth, svp, rho):
                 _disk_frame(ux * zr, uy * zr, zr, rho, f)
                 for k in range(12):
                     out[k, i, j] = f[k]
+
+
+def disk_frames(recv_depth, svp, rho) -> np.ndarray:
+    """:func:`disk_frames_slot` over the whole map, one slot per thread: (12,H,W) float64, zeros
+    where no receiver."""
+    out = np.zeros((12, *recv_depth.shape))
+    nslot = numba.get_num_threads()
+    run_slots(disk_frames_slot, nslot, recv_depth, svp, float(rho), out, nslot)
     return out
 
 
@@ -1246,19 +1275,20 @@ def _patch_constants(x0, x1, y0, y1, zo, pk, p):
     pk[p, 12] = pk[p, 5] * (1.0 + 2.0**-10)
 
 
-@kernel(parallel=True)
-def disk_frames32(recv_depth, svp, rho):
-    """The planes of :func:`disk_frames` that :func:`_disk_row_pass` reads, in float32 (6,H,W):
-    w (3), |p|, kappa, sqrt(1 + kappa^2) (the same arithmetic as :func:`disk_frames`, rounded;
-    the float64 planes themselves are not kept: the exact path recomputes a texel's frame)."""
+@kernel(nogil=True)
+def disk_frames32_slot(slot, recv_depth, svp, rho, out, nslot):
+    """The planes of :func:`disk_frames` that :func:`_disk_row_pass` reads, in float32, into ``out``
+    (6,H,W) (zeros; left as it is where no receiver): w (3), |p|, kappa, sqrt(1 + kappa^2) (the
+    same arithmetic as :func:`disk_frames`, rounded; the float64 planes themselves are not kept:
+    the exact path recomputes a texel's frame). Run by ``run_slots``: slot ``slot`` of ``nslot``
+    takes every ``nslot``-th row."""
     H, W = recv_depth.shape
     l, r, b, t = svp[VP_L], svp[VP_R], svp[VP_B], svp[VP_T]
     dxs = (r - l) / W
     dys = (t - b) / H
-    out = np.zeros((6, H, W), np.float32)
-    for i in prange(H):
+    f = np.empty(12)
+    for i in range(slot, H, nslot):
         uy = t - (i + 0.5) * dys
-        f = np.empty(12)
         for j in range(W):
             zr = np.float64(recv_depth[i, j])
             if zr > 0.0:
@@ -1270,6 +1300,14 @@ def disk_frames32(recv_depth, svp, rho):
                 out[3, i, j] = f[9]
                 out[4, i, j] = f[10]
                 out[5, i, j] = f[11]
+
+
+def disk_frames32(recv_depth, svp, rho) -> np.ndarray:
+    """:func:`disk_frames32_slot` over the whole map, one slot per thread: (6,H,W) float32, zeros
+    where no receiver."""
+    out = np.zeros((6, *recv_depth.shape), np.float32)
+    nslot = numba.get_num_threads()
+    run_slots(disk_frames32_slot, nslot, recv_depth, svp, float(rho), out, nslot)
     return out
 
 
@@ -1495,26 +1533,22 @@ def merge_two_pass(front: np.ndarray, back: np.ndarray) -> np.ndarray:
 
 
 # ---- 9. projection onto the eye view -----------------------------------------------------------
-@kernel(parallel=True)
-def project_soft_shadow_map(position, tri_id, receiver, svp, ssm):
-    """V (H,W) float32 of the eye view straight from its G-buffer image (``position`` (H,W,3),
-    ``tri_id`` (H,W), -1 where no surface; ``receiver``: per triangle, whether it is a receiver):
-    receivers read the SSM (bilinear) at their projection from the light; V = 1 - occlusion.
-    Outside the SSM, behind the light, on occluder-only geometry or without a surface: V = 1.
-    Per row, the projections first (one float64 array per coordinate, no branch: LLVM vectorizes
-    it), then the lookups. Returns (V, the number of receiver pixels).
+@kernel(nogil=True)
+def project_soft_shadow_map_slot(slot, position, tri_id, receiver, svp, ssm, out, n_row, nslot):
+    """V (H,W) float32 of the eye view into ``out``, straight from its G-buffer image (``position``
+    (H,W,3), ``tri_id`` (H,W), -1 where no surface; ``receiver``: per triangle, whether it is a
+    receiver): receivers read the SSM (bilinear) at their projection from the light; V = 1 -
+    occlusion. Outside the SSM, behind the light, on occluder-only geometry or without a surface:
+    V = 1. Per row, the projections first (one float64 array per coordinate, no branch: LLVM
+    vectorizes it), then the lookups; ``n_row[i]``: row i's number of receiver pixels.
 
-    The rows are visited interleaved (r -> 2r, then the odd rows): a ``prange`` gives each thread a
-    contiguous run of r, and in row order the upper half of an eye image is often sky (no surface,
-    nothing to look up), which left one thread idle for most of the pass."""
+    Run by ``run_slots``: slot ``slot`` of ``nslot`` takes every ``nslot``-th row (in row order
+    the upper half of an eye image is often sky, no surface, nothing to look up: contiguous runs
+    of rows left one thread idle for most of the pass)."""
     H, W = tri_id.shape
     Hs, Ws = ssm.shape
-    out = np.empty((H, W), np.float32)
-    n_row = np.zeros(H, np.int64)
-    half = (H + 1) // 2
-    for r in prange(H):
-        i = 2 * r if r < half else 2 * (r - half) + 1
-        sc = np.empty((3, W))
+    sc = np.empty((3, W))
+    for i in range(slot, H, nslot):
         for j in range(W):
             sx, sy, z = view_project(
                 svp, np.float64(position[i, j, 0]), np.float64(position[i, j, 1]), np.float64(position[i, j, 2])
@@ -1536,7 +1570,16 @@ def project_soft_shadow_map(position, tri_id, receiver, svp, ssm):
             if o > 0.0:
                 out[i, j] = 1.0 - min(o, 1.0)
         n_row[i] = n
-    return out, n_row.sum()
+
+
+def project_soft_shadow_map(position, tri_id, receiver, svp, ssm) -> tuple[np.ndarray, int]:
+    """:func:`project_soft_shadow_map_slot` over the eye image, one slot per thread: (V (H,W)
+    float32, the number of receiver pixels)."""
+    out = np.empty(tri_id.shape, np.float32)
+    n_row = np.zeros(tri_id.shape[0], np.int64)
+    nslot = numba.get_num_threads()
+    run_slots(project_soft_shadow_map_slot, nslot, position, tri_id, receiver, svp, ssm, out, n_row, nslot)
+    return out, int(n_row.sum())
 
 
 # ---- orchestration -----------------------------------------------------------------------------
