@@ -174,7 +174,7 @@ def test_front_end_compiles_once_for_read_only_and_writable_geometry():
     V.flags.writeable = F.flags.writeable = False
     d2, _ = rasterize_depth(view, V, F)
     assert np.array_equal(d1, d2) and np.isfinite(d1).any()
-    kernels = [r._vertex_screen, r._select, r._setup_count, r._bin_fill]
+    kernels = [r._vertex_screen_slot, r._select_slot, r._setup_count_slot, r._bin_fill_slot]
     assert [len(k.signatures) for k in kernels] == [1] * len(kernels)
 
 

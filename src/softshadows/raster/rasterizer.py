@@ -20,7 +20,7 @@ import numba
 import numpy as np
 from llvmlite import binding as llvm
 from llvmlite import ir
-from numba import prange, types
+from numba import types
 from numba.core import cgutils
 from numba.cpython.unsafe.numbers import trailing_zeros
 from numba.extending import intrinsic
@@ -382,40 +382,58 @@ def _byte_bits(x):
     return np.int64((b * _PACK) >> _PACK_SHIFT)
 
 
-@kernel(parallel=True)
-def _tile_row_bits(mask, words, T, ntx, nty, bits, tile_any):
+@kernel(nogil=True, nrt=False)
+def _tile_row_bits_slot(slot, mask, words, T, ntx, nty, bits, tile_any, nslot):
     """bits[tile, li]: bit k set where texel (li, k) of the tile is set (nonzero) in ``mask`` (H,W)
     uint8; tile_any[tile]: any of them. ``words``: ``mask`` viewed as (H, W / 8) uint64 where W is a
-    multiple of 8 (8 texels a word, :func:`_byte_bits`), else empty (texel by texel)."""
+    multiple of 8 (8 texels a word, :func:`_byte_bits`), else empty (texel by texel). Run by
+    ``run_slots``: slot ``slot`` of ``nslot`` takes the rows of tiles slot, slot + nslot, ... (whole
+    rows: no two slots read the same mask line)."""
     H, W = mask.shape
     nwords = words.shape[1] if words.shape[0] == H else 0
-    for tile in prange(ntx * nty):
-        ty = tile // ntx
-        tx = tile - ty * ntx
-        x0 = tx * T
-        nw = min(T, W - x0)
-        nfull = min(nw // 8, nwords - (x0 >> 3)) if nwords > 0 else 0
-        a = 0
-        for li in range(T):
-            i = ty * T + li
-            b = 0
-            if i < H:
-                for w in range(nfull):
-                    b |= _byte_bits(words[i, (x0 >> 3) + w]) << (8 * w)
-                for k in range(8 * nfull, nw):
-                    b |= np.int64(mask[i, x0 + k] != 0) << k
-            bits[tile, li] = b
-            a |= b
-        tile_any[tile] = a != 0
+    for ty in range(slot, nty, nslot):
+        for tx in range(ntx):
+            tile = ty * ntx + tx
+            x0 = tx * T
+            nw = min(T, W - x0)
+            nfull = min(nw // 8, nwords - (x0 >> 3)) if nwords > 0 else 0
+            a = 0
+            for li in range(T):
+                i = ty * T + li
+                b = 0
+                if i < H:
+                    for w in range(nfull):
+                        b |= _byte_bits(words[i, (x0 >> 3) + w]) << (8 * w)
+                    for k in range(8 * nfull, nw):
+                        b |= np.int64(mask[i, x0 + k] != 0) << k
+                bits[tile, li] = b
+                a |= b
+            tile_any[tile] = a != 0
 
 
-@kernel(parallel=True)
-def _vertex_screen(verts, vp, near, vs):
+def _tile_row_bits(mask, words, T, ntx, nty, bits, tile_any) -> None:
+    """:func:`_tile_row_bits_slot` over every tile, one slot per thread."""
+    nslot = numba.get_num_threads()
+    run_slots(_tile_row_bits_slot, nslot, mask, words, T, ntx, nty, bits, tile_any, nslot)
+
+
+#: a mesh with fewer vertices (faces) than this runs :func:`_vertex_screen_slot`
+#: (:func:`_select_fill_slot`) as one slot on the calling thread: tens of microseconds at ten
+#: thousand, less than a launch on the slot threads costs (``run_slots``: ~30 us)
+_SERIAL_VERTICES = 1 << 15
+_SERIAL_FACES = 1 << 17
+
+
+@kernel(nogil=True, nrt=False)
+def _vertex_screen_slot(slot, verts, vp, near, vs, nslot):
     """Per vertex (once per vertex instead of once per triangle corner):
     vs[v, 0] = its view depth z and, where z >= near, vs[v, 1], vs[v, 2] = its snapped screen
     coordinates (NaN elsewhere). The same operations as :func:`_setup_one` / :func:`_setup_piece`
-    on a corner, so the values are theirs bit for bit."""
-    for v in prange(verts.shape[0]):
+    on a corner, so the values are theirs bit for bit. Run by ``run_slots``: slot ``slot`` of
+    ``nslot`` takes the slot-th of ``nslot`` contiguous blocks of vertices (one slot, all of them,
+    below ``_SERIAL_VERTICES``)."""
+    n = verts.shape[0]
+    for v in range(n * slot // nslot, n * (slot + 1) // nslot):
         x, y, z = view_coords(vp, verts[v, 0], verts[v, 1], verts[v, 2])
         vs[v, 0] = z
         if z >= near:
@@ -465,7 +483,7 @@ def _classify(t, verts, faces, vp, near, cull, vs):
     the triangle covers none of them); a code > 0 (see ``_TC_*``) if it is such a small triangle
     and covers some of its few centers (the bits of the covered ones; the degenerate and cull tests
     are then left to the caller); 0 otherwise (the full setup decides). The same operations, in the
-    same order, as :func:`_setup_one` and :func:`_setup_piece` (corners from :func:`_vertex_screen`),
+    same order, as :func:`_setup_one` and :func:`_setup_piece` (corners from :func:`_vertex_screen_slot`),
     so the decisions are theirs bit for bit."""
     ortho = vp[VP_ORTHO] != 0.0
     far = vp[VP_FAR]
@@ -525,121 +543,121 @@ def _classify(t, verts, faces, vp, near, cull, vs):
     return -1 if _culled(vp, ortho, cull, nx, ny, nz, ax, ay, az) else 0
 
 
-@kernel(parallel=True)
-def _select(verts, faces, vp, near, cull, vs, chunk, ccount, nslot, keep, tcode, tcount):
+@kernel(nogil=True, nrt=False)
+def _select_slot(slot, verts, faces, vp, near, cull, vs, chunk, ccount, nslot, keep, tcode, tcount):
     """Small-triangle rejection, first pass (:func:`_classify`): keep[t] = 1 for the faces that go on to
     setup (2 if they cross the near plane), 3 for the small triangles drawn directly (tiny path:
     only where ``tcount`` has columns, their code in tcode[t]), 0 for the others; ccount[c] = how
     many faces of chunk c go to setup, tcount[c, b] = how many small ones of chunk c have their
-    first row in band b of ``TILE`` rows (chunks of faces dealt round-robin to ``nslot`` slots)."""
+    first row in band b of ``TILE`` rows (chunks of faces dealt round-robin to ``nslot`` slots). Run by
+    ``run_slots``: slot ``slot`` takes chunks slot, slot + nslot, ..."""
     nchunk = ccount.shape[0]
     F = faces.shape[0]
     tiny = tcount.shape[1] > 0
-    for slot in prange(nslot):
-        for c in range(slot, nchunk, nslot):
-            n = 0
-            if tiny:
-                for b in range(tcount.shape[1]):
-                    tcount[c, b] = 0
-            for t in range(c * chunk, min(F, (c + 1) * chunk)):
-                code = _classify(t, verts, faces, vp, near, cull, vs)
-                k = 0
-                if code > 0 and tiny:
-                    k = 3
-                    tcode[t] = code
-                    tcount[c, (code >> _TC_I0) // TILE] += 1
-                elif code >= 0:
-                    # 2: the face crosses the near plane (it may be clipped into two pieces)
-                    k = (
-                        1
-                        if (vs[faces[t, 0], 0] >= near and vs[faces[t, 1], 0] >= near and vs[faces[t, 2], 0] >= near)
-                        else 2
-                    )
-                    n += 1
-                keep[t] = k
-            ccount[c] = n
+    for c in range(slot, nchunk, nslot):
+        n = 0
+        if tiny:
+            for b in range(tcount.shape[1]):
+                tcount[c, b] = 0
+        for t in range(c * chunk, min(F, (c + 1) * chunk)):
+            code = _classify(t, verts, faces, vp, near, cull, vs)
+            k = 0
+            if code > 0 and tiny:
+                k = 3
+                tcode[t] = code
+                tcount[c, (code >> _TC_I0) // TILE] += 1
+            elif code >= 0:
+                # 2: the face crosses the near plane (it may be clipped into two pieces)
+                k = (
+                    1
+                    if (vs[faces[t, 0], 0] >= near and vs[faces[t, 1], 0] >= near and vs[faces[t, 2], 0] >= near)
+                    else 2
+                )
+                n += 1
+            keep[t] = k
+        ccount[c] = n
 
 
-@kernel(parallel=True)
-def _select_fill(chunk, coff, nslot, keep, tri, tcode, toff, tface, tlist):
+@kernel(nogil=True, nrt=False)
+def _select_fill_slot(slot, chunk, coff, keep, tri, tcode, toff, tface, tlist, nslot):
     """Second pass: the faces kept for setup in increasing index into ``tri`` (chunk c from coff[c]);
     the small ones (keep 3) into the lists of their bands, ``tface`` (face) and ``tlist`` (code),
-    chunk c of band b from toff[c, b]."""
+    chunk c of band b from toff[c, b]. Run by ``run_slots``: slot ``slot`` takes chunks slot, slot
+    + nslot, ... (one slot, all of them, below ``_SERIAL_FACES``)."""
     nchunk = coff.shape[0]
     F = keep.shape[0]
-    for slot in prange(nslot):
-        for c in range(slot, nchunk, nslot):
-            w = coff[c]
-            for t in range(c * chunk, min(F, (c + 1) * chunk)):
-                k = keep[t]
-                if k == 3:
-                    code = tcode[t]
-                    b = (code >> _TC_I0) // TILE
-                    o = toff[c, b]
-                    tface[o] = t
-                    tlist[o] = code
-                    toff[c, b] = o + 1
-                elif k != 0:
-                    tri[w] = t
-                    w += 1
+    for c in range(slot, nchunk, nslot):
+        w = coff[c]
+        for t in range(c * chunk, min(F, (c + 1) * chunk)):
+            k = keep[t]
+            if k == 3:
+                code = tcode[t]
+                b = (code >> _TC_I0) // TILE
+                o = toff[c, b]
+                tface[o] = t
+                tlist[o] = code
+                toff[c, b] = o + 1
+            elif k != 0:
+                tri[w] = t
+                w += 1
 
 
-@kernel(parallel=True)
-def _tiny_depth(verts, faces, vp, near, cull, bstart, tface, tlist, phase, nslot, zt, ft):
+@kernel(nogil=True, nrt=False)
+def _tiny_depth_slot(slot, verts, faces, vp, near, cull, bstart, tface, tlist, phase, nslot, zt, ft):
     """The tiny path of the depth modes: the nearest depth ``zt`` (float64) and face ``ft`` of every
     pixel over the small triangles listed per band of ``TILE`` rows (``bstart``, ``tface``,
-    ``tlist``; see :func:`_select`), drawn directly at their few covered pixel centers: the
+    ``tlist``; see :func:`_select_slot`), drawn directly at their few covered pixel centers: the
     degenerate and cull tests, the view-space plane, the depth clamp and the far test of
     :func:`_setup_one` / :func:`_depth_pass`, with the same inline helpers, so every fragment's depth
     is the tile kernels' bit for bit. The nearest wins, equal depths go to the smaller face: the
     tile pass's rule, so merging zt/ft into its output in any order gives the output of one pass
     over all faces. A small triangle's rows lie in its band and the next one: ``phase`` 0 clears
     and draws the even bands (bands b and b + 1 cleared by the slot of band b), phase 1 draws the
-    odd ones; no two slots write the same row."""
+    odd ones; no two slots write the same row. Run by ``run_slots``, one slot per thread."""
     W, H, ortho, far, wl, wt, wsx, wsy = _view_window(vp)
     nb = bstart.shape[0] - 1
-    for slot in prange(nslot):
-        for b in range(phase + 2 * slot, nb, 2 * nslot):
-            if phase == 0:
-                for i in range(b * TILE, min((b + 2) * TILE, H)):
-                    for j in range(W):
-                        zt[i, j] = np.inf
-                        ft[i, j] = -1
-            for e in range(bstart[b], bstart[b + 1]):
-                t = tface[e]
-                code = tlist[e]
-                ax, ay, az, bx, by, bz, cx, cy, cz = _face_corners(verts, faces, t)
-                nx, ny, nz, nn = _world_normal(ax, ay, az, bx, by, bz, cx, cy, cz)
-                if not (nn > 0.0 and math.isfinite(nn)):
-                    continue
-                if _culled(vp, ortho, cull, nx, ny, nz, ax, ay, az):
-                    continue
-                x0, y0, z0 = view_coords(vp, ax, ay, az)
-                x1, y1, z1 = view_coords(vp, bx, by, bz)
-                x2, y2, z2 = view_coords(vp, cx, cy, cz)
-                _f1x, _f1y, _f1z, _f2x, _f2y, _f2z, vnx, vny, vnz, n2 = _view_plane(x0, y0, z0, x1, y1, z1, x2, y2, z2)
-                if not (n2 > 0.0 and math.isfinite(n2)):
-                    continue
-                pl = (vnx, vny, vnz, vnx * x0 + vny * y0 + vnz * z0)
-                zlo, zhi = _depth_range(min(z0, min(z1, z2)), max(z0, max(z1, z2)), ortho, near)
-                i0 = code >> _TC_I0
-                j0 = (code >> _TC_J0) & 0xFFFFFF
-                nw = (code >> _TC_NW) & 15
-                bits = code & _TC_BITS
-                for q in range(int(_FEW_CENTERS)):
-                    if (bits >> q) & 1:
-                        i = i0 + q // nw
-                        j = j0 + q % nw
-                        zrow = _row_depth(ortho, pl, wt - (i + 0.5) * wsy)
-                        z = _clamp_depth(_frag_depth(ortho, pl, zrow, wl + (j + 0.5) * wsx), zlo, zhi)
-                        zc = zt[i, j]
-                        if not (z > far) and (z < zc or (z == zc and t < ft[i, j])):
-                            zt[i, j] = z
-                            ft[i, j] = t
+    for b in range(phase + 2 * slot, nb, 2 * nslot):
+        if phase == 0:
+            for i in range(b * TILE, min((b + 2) * TILE, H)):
+                for j in range(W):
+                    zt[i, j] = np.inf
+                    ft[i, j] = -1
+        for e in range(bstart[b], bstart[b + 1]):
+            t = tface[e]
+            code = tlist[e]
+            ax, ay, az, bx, by, bz, cx, cy, cz = _face_corners(verts, faces, t)
+            nx, ny, nz, nn = _world_normal(ax, ay, az, bx, by, bz, cx, cy, cz)
+            if not (nn > 0.0 and math.isfinite(nn)):
+                continue
+            if _culled(vp, ortho, cull, nx, ny, nz, ax, ay, az):
+                continue
+            x0, y0, z0 = view_coords(vp, ax, ay, az)
+            x1, y1, z1 = view_coords(vp, bx, by, bz)
+            x2, y2, z2 = view_coords(vp, cx, cy, cz)
+            _f1x, _f1y, _f1z, _f2x, _f2y, _f2z, vnx, vny, vnz, n2 = _view_plane(x0, y0, z0, x1, y1, z1, x2, y2, z2)
+            if not (n2 > 0.0 and math.isfinite(n2)):
+                continue
+            pl = (vnx, vny, vnz, vnx * x0 + vny * y0 + vnz * z0)
+            zlo, zhi = _depth_range(min(z0, min(z1, z2)), max(z0, max(z1, z2)), ortho, near)
+            i0 = code >> _TC_I0
+            j0 = (code >> _TC_J0) & 0xFFFFFF
+            nw = (code >> _TC_NW) & 15
+            bits = code & _TC_BITS
+            for q in range(int(_FEW_CENTERS)):
+                if (bits >> q) & 1:
+                    i = i0 + q // nw
+                    j = j0 + q % nw
+                    zrow = _row_depth(ortho, pl, wt - (i + 0.5) * wsy)
+                    z = _clamp_depth(_frag_depth(ortho, pl, zrow, wl + (j + 0.5) * wsx), zlo, zhi)
+                    zc = zt[i, j]
+                    if not (z > far) and (z < zc or (z == zc and t < ft[i, j])):
+                        zt[i, j] = z
+                        ft[i, j] = t
 
 
-@kernel(parallel=True)
-def _setup_count(
+@kernel(nogil=True, nrt=False)
+def _setup_count_slot(
+    slot,
     verts,
     faces,
     tri,
@@ -664,25 +682,24 @@ def _setup_count(
     """Setup of the selected faces ``tri`` (front-end triangle u is face tri[u]; parallel over chunks of
     them, dealt round-robin to ``nslot`` slots: load balance, see docs/rasterizer.md) and per (chunk,
     tile) bin counts. With ``use_bits``, only the tiles with ``tile_any`` set get pieces (min-blend's
-    texel mask)."""
+    texel mask). Run by ``run_slots``: slot ``slot`` takes chunks slot, slot + nslot, ..."""
     nchunk = cnt.shape[0]
     ntiles = cnt.shape[1]
     U = NC.shape[0]
-    for slot in prange(nslot):
-        for c in range(slot, nchunk, nslot):
-            for tt in range(ntiles):
-                cnt[c, tt] = 0
-            t1 = min(U, (c + 1) * chunk)
-            for u in range(c * chunk, t1):
-                _setup_one(u, tri[u], verts, faces, vp, near, cull, NC, box, edges, zinfo, planes, normals, sh)
-                for k in range(NC[u]):
-                    ct = (u << sh) + k
-                    for ty in range(box[ct, BOX_I0] // T, box[ct, BOX_I1] // T + 1):
-                        for tx in range(box[ct, BOX_J0] // T, box[ct, BOX_J1] // T + 1):
-                            tile = ty * ntx + tx
-                            if use_bits and tile_any[tile] == 0:
-                                continue
-                            cnt[c, tile] += 1
+    for c in range(slot, nchunk, nslot):
+        for tt in range(ntiles):
+            cnt[c, tt] = 0
+        t1 = min(U, (c + 1) * chunk)
+        for u in range(c * chunk, t1):
+            _setup_one(u, tri[u], verts, faces, vp, near, cull, NC, box, edges, zinfo, planes, normals, sh)
+            for k in range(NC[u]):
+                ct = (u << sh) + k
+                for ty in range(box[ct, BOX_I0] // T, box[ct, BOX_I1] // T + 1):
+                    for tx in range(box[ct, BOX_J0] // T, box[ct, BOX_J1] // T + 1):
+                        tile = ty * ntx + tx
+                        if use_bits and tile_any[tile] == 0:
+                            continue
+                        cnt[c, tile] += 1
 
 
 @kernel
@@ -701,23 +718,25 @@ def _bin_offsets(cnt, bstart):
     bstart[ntiles] = o
 
 
-@kernel(parallel=True)
-def _bin_fill(NC, box, T, ntx, chunk, off, bins, nslot, tile_any, use_bits, sh):
+@kernel(nogil=True, nrt=False)
+def _bin_fill_slot(slot, NC, box, T, ntx, chunk, off, bins, nslot, tile_any, use_bits, sh):
+    """The pieces' slots into ``bins``, chunk c of tile t from the offset off[c, t] (advanced in
+    place; see :func:`_bin_offsets`): per tile, in chunk order and in face order within a chunk.
+    Run by ``run_slots``: slot ``slot`` takes chunks slot, slot + nslot, ..."""
     nchunk = off.shape[0]
     F = NC.shape[0]
-    for slot in prange(nslot):
-        for c in range(slot, nchunk, nslot):
-            t1 = min(F, (c + 1) * chunk)
-            for t in range(c * chunk, t1):
-                for k in range(NC[t]):
-                    ct = (t << sh) + k
-                    for ty in range(box[ct, BOX_I0] // T, box[ct, BOX_I1] // T + 1):
-                        for tx in range(box[ct, BOX_J0] // T, box[ct, BOX_J1] // T + 1):
-                            tile = ty * ntx + tx
-                            if use_bits and tile_any[tile] == 0:
-                                continue
-                            bins[off[c, tile]] = ct
-                            off[c, tile] += 1
+    for c in range(slot, nchunk, nslot):
+        t1 = min(F, (c + 1) * chunk)
+        for t in range(c * chunk, t1):
+            for k in range(NC[t]):
+                ct = (t << sh) + k
+                for ty in range(box[ct, BOX_I0] // T, box[ct, BOX_I1] // T + 1):
+                    for tx in range(box[ct, BOX_J0] // T, box[ct, BOX_J1] // T + 1):
+                        tile = ty * ntx + tx
+                        if use_bits and tile_any[tile] == 0:
+                            continue
+                        bins[off[c, tile]] = ct
+                        off[c, tile] += 1
 
 
 # ----------------------------------------------------------------------------------------------
@@ -1673,7 +1692,7 @@ def _tiles_depth_slot(slot, fe, sc, depth_out, tri_out, zt, ft, rz, rt):
 
 def _tiles_depth(fe, sc, depth_out, tri_out, zt, ft):
     """rasterize_depth: the nearest depth (+inf: none) and triangle (-1: none) of every pixel; with a
-    tiny path (``zt`` (H,W) not empty: :func:`_tiny_depth`), merged with its nearest depths ``zt`` and
+    tiny path (``zt`` (H,W) not empty: :func:`_tiny_depth_slot`), merged with its nearest depths ``zt`` and
     faces ``ft`` by the same rule (nearer wins, then the smaller face)."""
     W = depth_out.shape[1]
     rz = np.empty((sc[5], fe.tile, W), np.float32)  # the slots' row scratch (see _tiles_depth_slot)
@@ -2193,7 +2212,7 @@ _E2I64 = np.empty((0, 0), dtype=np.int64)
 _E2U64 = np.empty((0, 0), dtype=np.uint64)
 _NO_ZT = np.empty((0, 0), dtype=np.float64)
 _NO_FT = np.empty((0, 0), dtype=np.int32)
-#: rasterize_depth draws the small triangles directly (``_tiny_depth``); False: all through setup
+#: rasterize_depth draws the small triangles directly (``_tiny_depth_slot``); False: all through setup
 #: and the tile pass (the same output; kept for the tests that prove it)
 TINY_PATH = True
 #: the tiny path costs a pass over two (H,W) buffers (clear, merge: ~12 bytes per pixel) and saves the
@@ -2206,7 +2225,7 @@ def _front_end(vp, W, H, verts, fcs, code, near, mask=None, tiny=False):
     """setup + binning: the arrays the tile kernels read. ``mask`` (H,W) bool (or uint8, nonzero: set): bin a piece only
     to the tiles where its bounding box holds a set texel (min-blend's texel mask). ``tiny`` (the
     depth modes): the small triangles go to the tiny path instead of setup; returns (FrontEnd,
-    tiny) with ``tiny`` = (tstart, tface, tlist) for :func:`_tiny_depth` (None without: fewer
+    tiny) with ``tiny`` = (tstart, tface, tlist) for :func:`_tiny_depth_slot` (None without: fewer
     small triangles than ``_TINY_MIN_PER_PIXEL`` per pixel)."""
     F = len(fcs)
     want_tiny = tiny
@@ -2216,12 +2235,13 @@ def _front_end(vp, W, H, verts, fcs, code, near, mask=None, tiny=False):
     chunk = (F + nchunk - 1) // nchunk if F else 1
     ccount = np.zeros(nchunk, dtype=np.int64)
     vs = np.empty((len(verts), 3), dtype=np.float64)
-    _vertex_screen(verts, vp, near, vs)
+    nv = 1 if len(verts) < _SERIAL_VERTICES else nthreads
+    run_slots(_vertex_screen_slot, nv, verts, vp, near, vs, nv)
     keep = np.empty(F, dtype=np.uint8)
     nb = (H + TILE - 1) // TILE if tiny else 0
     tcode = np.empty(F if tiny else 0, dtype=np.int64)
     tcount = np.empty((nchunk, nb), dtype=np.int64)
-    _select(verts, fcs, vp, near, code, vs, chunk, ccount, nthreads, keep, tcode, tcount)
+    run_slots(_select_slot, nthreads, verts, fcs, vp, near, code, vs, chunk, ccount, nthreads, keep, tcode, tcount)
     if tiny and int(tcount.sum()) < _TINY_MIN_PER_PIXEL * W * H:
         # too few small triangles to pay for the tiny path's per-pixel buffers: all go to setup
         keep[keep == 3] = 1
@@ -2243,7 +2263,8 @@ def _front_end(vp, W, H, verts, fcs, code, near, mask=None, tiny=False):
     if U or NT:
         ccount[1:] = np.cumsum(ccount)[:-1]
         ccount[0] = 0
-        _select_fill(chunk, ccount, nthreads, keep, tri, tcode, toff, tface, tlist)
+        ns = 1 if F < _SERIAL_FACES else nthreads
+        run_slots(_select_fill_slot, ns, chunk, ccount, keep, tri, tcode, toff, tface, tlist, ns)
     # one piece slot per front-end triangle, two (u << 1, u << 1 | 1) when a face crosses the near plane
     sh = 1 if U and bool((keep == 2).any()) else 0
     NC = np.empty(U, dtype=np.int32)
@@ -2269,7 +2290,9 @@ def _front_end(vp, W, H, verts, fcs, code, near, mask=None, tiny=False):
         rowbits = _E2I64
         tile_any = _E1U
     use = mask is not None
-    _setup_count(
+    run_slots(
+        _setup_count_slot,
+        nthreads,
         verts,
         fcs,
         tri,
@@ -2293,7 +2316,7 @@ def _front_end(vp, W, H, verts, fcs, code, near, mask=None, tiny=False):
     )
     _bin_offsets(cnt, start)
     bins = np.empty(int(start[-1]), dtype=np.int32)
-    _bin_fill(NC, box, T, ntx, chunk, cnt, bins, nthreads, tile_any, use, sh)
+    run_slots(_bin_fill_slot, nthreads, NC, box, T, ntx, chunk, cnt, bins, nthreads, tile_any, use, sh)
     fe = FrontEnd(vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, normals, rowbits, sh, tri)
     if not want_tiny:
         return fe
@@ -2356,7 +2379,9 @@ def rasterize_depth(view, vertices, faces, cull: str = "none") -> tuple[np.ndarr
         ft = np.empty((H, W), dtype=np.int32)
         nthreads = numba.get_num_threads()
         for phase in (0, 1):
-            _tiny_depth(verts, fcs, vp, near, code, tstart, tface, tlist, phase, nthreads, zt, ft)
+            run_slots(
+                _tiny_depth_slot, nthreads, verts, fcs, vp, near, code, tstart, tface, tlist, phase, nthreads, zt, ft
+            )
     _tiles_depth(fe, _scratch(fe.tile), depth, tri, zt, ft)
     return depth, tri
 
