@@ -4,10 +4,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
-from numba import prange
 
-from .._jit import kernel
+from .._jit import kernel, run_slots
 
 
 @dataclass
@@ -68,16 +68,19 @@ def _row_counts(mask):
     return c
 
 
-@kernel(parallel=True)
-def _gather(position, normal, mask, eye, offs, pts, nrm, idx):
+@kernel(nogil=True, nrt=False)
+def _gather_slot(slot, position, normal, mask, eye, offs, pts, nrm, idx, nslot):
+    """The surface pixels of the slot-th of ``nslot`` contiguous blocks of rows (``run_slots``, one
+    slot per thread): row i's from pts/nrm/idx[offs[i]] on (see :func:`gather_points`)."""
     H, W = mask.shape
-    for i in prange(H):
+    ex, ey, ez = eye[0], eye[1], eye[2]  # read once, not at every surface pixel
+    for i in range(H * slot // nslot, H * (slot + 1) // nslot):
         k = offs[i]
         for j in range(W):
             if mask[i, j]:
                 px, py, pz = position[i, j, 0], position[i, j, 1], position[i, j, 2]
                 nx, ny, nz = normal[i, j, 0], normal[i, j, 1], normal[i, j, 2]
-                if nx * (eye[0] - px) + ny * (eye[1] - py) + nz * (eye[2] - pz) < 0.0:
+                if nx * (ex - px) + ny * (ey - py) + nz * (ez - pz) < 0.0:
                     nx, ny, nz = -nx, -ny, -nz
                 pts[k, 0] = px
                 pts[k, 1] = py
@@ -96,5 +99,6 @@ def gather_points(position, normal, mask, eye):
     pts = np.empty((K, 3), np.float64)
     nrm = np.empty((K, 3), np.float64)
     idx = np.empty(K, np.int64)
-    _gather(position, normal, mask, eye, offs, pts, nrm, idx)
+    nslot = numba.get_num_threads()
+    run_slots(_gather_slot, nslot, position, normal, mask, eye, offs, pts, nrm, idx, nslot)
     return pts, nrm, idx
