@@ -20,9 +20,8 @@ from typing import ClassVar
 
 import numba
 import numpy as np
-from numba import prange
 
-from .._jit import kernel
+from .._jit import kernel, run_slots
 from ..errors import SoftShadowsError
 from ..geometry.light_samples import light_sample_points
 from ..raster import View, light_view, rasterize_depth
@@ -241,15 +240,18 @@ def _slope_tan(depth, i, j, z, texel):
     return min(g / texel, TAN_MAX)
 
 
-@kernel(parallel=True)
-def warp_center(depth, vps, vpc, projective, eps_texels, slope_texels, tx, ty, tz, te, row_lo, row_hi):
+@kernel(nogil=True, nrt=False, noalias=True)
+def warp_center_slot(
+    slot, depth, vps, vpc, projective, eps_texels, slope_texels, tx, ty, tz, te, row_lo, row_hi, nslot
+):
     """Line 5 (WarpCenter): every depth pixel of a sample's image (view ``vps``) to continuous
     pixel coordinates (tx, ty) and depth tz in the light-center view ``vpc``. Parallel views
     (``projective`` False): the planar-light disparity of Eq. 3, dp = -dv / z (in pixels), z
     unchanged; otherwise unproject + project. Also its insertion tolerance te = texel(z) x
     (eps_texels + slope_texels x tan), tan from the depth image's local slope, and the range of
     LDI rows [row_lo, row_hi] the 2x2 splats of each source row touch (for the banded
-    insertion). tx is NaN where no surface."""
+    insertion). tx is NaN where no surface. Run by ``run_slots``: slot ``slot`` of ``nslot`` takes
+    every ``nslot``-th row."""
     Hs, Ws = depth.shape
     Wc, Hc = vpc[18], vpc[19]
     kx = Wc / (vpc[13] - vpc[12])  # LDI pixels per unit of x/z
@@ -260,7 +262,7 @@ def warp_center(depth, vps, vpc, projective, eps_texels, slope_texels, tx, ty, t
     dvy = (vps[0] - vpc[0]) * vpc[6] + (vps[1] - vpc[1]) * vpc[7] + (vps[2] - vpc[2]) * vpc[8]
     ox = (vps[12] - vpc[12]) * kx
     oy = (vpc[15] - vps[15]) * ky
-    for i in prange(Hs):
+    for i in range(slot, Hs, nslot):
         lo = 1 << 30
         hi = -(1 << 30)
         for j in range(Ws):
@@ -286,6 +288,15 @@ def warp_center(depth, vps, vpc, projective, eps_texels, slope_texels, tx, ty, t
             hi = max(hi, r0 + 1)
         row_lo[i] = lo
         row_hi[i] = hi
+
+
+def warp_center(depth, vps, vpc, projective, eps_texels, slope_texels, tx, ty, tz, te, row_lo, row_hi) -> None:
+    """:func:`warp_center_slot` over the whole image, one slot per thread."""
+    nslot = numba.get_num_threads()
+    run_slots(
+        warp_center_slot, nslot, depth, vps, vpc, projective, eps_texels, slope_texels, tx, ty, tz, te,
+        row_lo, row_hi, nslot,
+    )  # fmt: skip
 
 
 # ---- line 6: insert into the LDI --------------------------------------------------------------
@@ -315,18 +326,20 @@ def _insert(p, z, eps, view_id, ldi_depth, ldi_count, ldi_n, stamp):
     return 1, 1 if n == 0 else 0, 0
 
 
-@kernel(parallel=True)
-def insert_ldi(tx, ty, tz, te, row_lo, row_hi, splat, view_id, W, H, band, ldi_depth, ldi_count, ldi_n, stamp):
+@kernel(nogil=True, nrt=False, noalias=True)
+def insert_ldi_slot(
+    slot, tx, ty, tz, te, row_lo, row_hi, splat, view_id, W, H, band, ldi_depth, ldi_count, ldi_n, stamp, out, nslot
+):
     """Line 6 (Insert): every warped pixel into the LDI, with the paper's 2x2 splat (the four
     pixels whose centers surround the warped point) or, without it, the nearest pixel. Parallel
     over bands of ``band`` LDI rows: each band scans the source rows whose splats reach it (from
     row_lo/row_hi) in order, so the result does not depend on the thread count. Tolerance: te
     (from :func:`warp_center`).
-    Returns per band (new layers, new non-empty pixels, dropped splats)."""
+    Per band (new layers, new non-empty pixels, dropped splats) into ``out`` (nb, 3) int64, zeroed.
+    Run by ``run_slots``: slot ``slot`` of ``nslot`` takes every ``nslot``-th band."""
     nb = (H + band - 1) // band
-    out = np.zeros((nb, 3), np.int64)
     P, Hs, Ws = tx.shape
-    for b in prange(nb):
+    for b in range(slot, nb, nslot):
         r0 = b * band
         r1 = min(H, r0 + band)
         for i in range(Hs):
@@ -360,15 +373,30 @@ def insert_ldi(tx, ty, tz, te, row_lo, row_hi, splat, view_id, W, H, band, ldi_d
                             out[b, 0] += a
                             out[b, 1] += e
                             out[b, 2] += d
+
+
+def insert_ldi(tx, ty, tz, te, row_lo, row_hi, splat, view_id, W, H, band, ldi_depth, ldi_count, ldi_n, stamp):
+    """:func:`insert_ldi_slot` over every band, one slot per thread. Returns per band (new layers,
+    new non-empty pixels, dropped splats), (nb, 3) int64."""
+    out = np.zeros(((H + band - 1) // band, 3), np.int64)
+    nslot = numba.get_num_threads()
+    run_slots(
+        insert_ldi_slot, nslot, tx, ty, tz, te, row_lo, row_hi, splat, view_id, W, H, band,
+        ldi_depth, ldi_count, ldi_n, stamp, out, nslot,
+    )  # fmt: skip
     return out
 
 
 # ---- line 7: process the attenuation maps -----------------------------------------------------
-@kernel(parallel=True)
-def sort_layers(ldi_depth, ldi_count, ldi_n):
+@kernel(nogil=True, nrt=False, noalias=True)
+def sort_layers_slot(slot, ldi_depth, ldi_count, ldi_n, nslot):
     """Line 7 (Process Attenuation Maps), storage part: layers of each pixel front to back
-    (insertion sort; a handful of layers). Attenuation = count / samples is read at lookup."""
-    for p in prange(ldi_n.shape[0]):
+    (insertion sort; a handful of layers). Attenuation = count / samples is read at lookup.
+    Run by ``run_slots``: slot ``slot`` of ``nslot`` takes the ``slot``-th contiguous block of pixels
+    (an unsigned index, as a ``prange``'s: no negative-index wraparound, 2x faster)."""
+    npix = ldi_n.shape[0]
+    per = (npix + nslot - 1) // nslot
+    for p in range(np.uint64(slot * per), np.uint64(min(npix, slot * per + per))):
         n = ldi_n[p]
         for k in range(1, n):
             d = ldi_depth[k, p]
@@ -380,6 +408,12 @@ def sort_layers(ldi_depth, ldi_count, ldi_n):
                 m -= 1
             ldi_depth[m + 1, p] = d
             ldi_count[m + 1, p] = c
+
+
+def sort_layers(ldi_depth, ldi_count, ldi_n) -> None:
+    """:func:`sort_layers_slot` over every pixel, one slot per thread."""
+    nslot = numba.get_num_threads()
+    run_slots(sort_layers_slot, nslot, ldi_depth, ldi_count, ldi_n, nslot)
 
 
 def _geometry_digest(flat) -> str:
@@ -563,17 +597,21 @@ def _layer_att(p, z, eps, ldi_depth, ldi_count, ldi_n, inv_samples):
     return 0.0 if best < 0 else ldi_count[best, p] * inv_samples
 
 
-@kernel(parallel=True)
-def lookup_ldi(vp, ldi_depth, ldi_count, ldi_n, inv_samples, pts, nrm, eps_rel, slope_eps_rel, bilinear):
+@kernel(nogil=True, nrt=False, noalias=True)
+def lookup_ldi_slot(
+    slot, vp, ldi_depth, ldi_count, ldi_n, inv_samples, pts, nrm, eps_rel, slope_eps_rel, bilinear, out, nslot
+):
     """Display lines 3-5: each eye point warped to the light-center view (WarpLDI), its nearest
     LDI pixel (or the 2x2 around it, bilinearly weighted, with ``bilinear``), the layer matching
     its depth within eps = depth x (eps_rel + slope_eps_rel x tan(theta)); V = that layer's
-    attenuation, 0 when none matches. A point outside the LDI's frustum is not shadowed (V = 1)."""
+    attenuation, 0 when none matches, into ``out`` (K,) float32. A point outside the LDI's frustum
+    is not shadowed (V = 1). Run by ``run_slots``: slot ``slot`` of ``nslot`` takes the
+    ``slot``-th contiguous block of points (an unsigned index, as a ``prange``'s)."""
     n = pts.shape[0]
     W = int(vp[VP_W])
     H = int(vp[VP_H])
-    out = np.empty(n, np.float32)
-    for k in prange(n):
+    per = (n + nslot - 1) // nslot
+    for k in range(np.uint64(slot * per), np.uint64(min(n, slot * per + per))):
         px, py, pz = pts[k, 0], pts[k, 1], pts[k, 2]
         sx, sy, z = view_project(vp, px, py, pz)
         if not (z > 0.0) or not (np.isfinite(sx) and np.isfinite(sy)) or sx < 0 or sy < 0 or sx >= W or sy >= H:
@@ -601,6 +639,16 @@ def lookup_ldi(vp, ldi_depth, ldi_count, ldi_n, inv_samples, pts, nrm, eps_rel, 
         a10 = _layer_att(i1 * W + j0, z, eps, ldi_depth, ldi_count, ldi_n, inv_samples)
         a11 = _layer_att(i1 * W + j1, z, eps, ldi_depth, ldi_count, ldi_n, inv_samples)
         out[k] = (a00 * (1.0 - fx) + a01 * fx) * (1.0 - fy) + (a10 * (1.0 - fx) + a11 * fx) * fy
+
+
+def lookup_ldi(vp, ldi_depth, ldi_count, ldi_n, inv_samples, pts, nrm, eps_rel, slope_eps_rel, bilinear) -> np.ndarray:
+    """:func:`lookup_ldi_slot` over every point, one slot per thread: V (K,) float32."""
+    out = np.empty(pts.shape[0], np.float32)
+    nslot = numba.get_num_threads()
+    run_slots(
+        lookup_ldi_slot, nslot, vp, ldi_depth, ldi_count, ldi_n, inv_samples, pts, nrm, eps_rel, slope_eps_rel,
+        bilinear, out, nslot,
+    )  # fmt: skip
     return out
 
 
