@@ -18,7 +18,6 @@ from typing import ClassVar
 
 import numba
 import numpy as np
-from numba import prange
 
 from .._jit import kernel, run_slots
 from ..raster.kernels import view_coords, view_coords_to_screen
@@ -85,61 +84,72 @@ def _connected(d1, d2, gapk):
     return abs(d1 - d2) < gapk * min(d1, d2)
 
 
-@kernel(parallel=True)
-def build_quadtrees(D, gapk, offs, MN, MX, CONN):
-    """Min/max quadtrees (leaf intervals widened by the walls to connected neighbours, so the
-    coarse-to-fine overlap test never drops a wall hit) and the connectedness quadtree: a node is
-    connected when all its pixels are non-empty and every 4-adjacent pair inside it is connected."""
+@kernel(nogil=True, nrt=False, noalias=True)
+def build_quadtree_level_slot(slot, D, gapk, offs, MN, MX, CONN, L, nslot):
+    """Level ``L`` of the min/max quadtrees (leaf intervals widened by the walls to connected
+    neighbours, so the coarse-to-fine overlap test never drops a wall hit) and of the connectedness
+    quadtree: a node is connected when all its pixels are non-empty and every 4-adjacent pair
+    inside it is connected. Level ``L`` > 0 reads level ``L - 1``. Run by ``run_slots`` (one call
+    per level, :func:`build_quadtrees`): slot ``slot`` of ``nslot`` takes every ``nslot``-th row."""
     S = D.shape[0]
-    for i in prange(S):
-        for j in range(S):
-            d = np.float64(D[i, j])
-            q = offs[0] + i * S + j
-            if d < np.inf:
-                lo = d
-                hi = d
-                for k in range(4):
-                    ni = i + (1 if k == 0 else (-1 if k == 1 else 0))
-                    nj = j + (1 if k == 2 else (-1 if k == 3 else 0))
-                    if 0 <= ni < S and 0 <= nj < S:
-                        dn = np.float64(D[ni, nj])
-                        if _connected(d, dn, gapk):
-                            lo = min(lo, dn)
-                            hi = max(hi, dn)
-                MN[q] = lo
-                MX[q] = hi
-                CONN[q] = 1
-            else:
-                MN[q] = np.inf
-                MX[q] = -np.inf
-                CONN[q] = 0
-    nlev = offs.shape[0] - 1
-    for L in range(1, nlev):
-        side = S >> L
-        h = 1 << L
-        mid = h >> 1
-        for bi in prange(side):
-            for bj in range(side):
-                q = offs[L] + bi * side + bj
-                cs = side * 2
-                c0 = offs[L - 1] + (2 * bi) * cs + 2 * bj
-                c1 = c0 + 1
-                c2 = c0 + cs
-                c3 = c2 + 1
-                MN[q] = min(min(MN[c0], MN[c1]), min(MN[c2], MN[c3]))
-                MX[q] = max(max(MX[c0], MX[c1]), max(MX[c2], MX[c3]))
-                ok = CONN[c0] == 1 and CONN[c1] == 1 and CONN[c2] == 1 and CONN[c3] == 1
-                if ok:
-                    r0 = bi * h
-                    col0 = bj * h
-                    for t in range(h):
-                        if not _connected(D[r0 + t, col0 + mid - 1], D[r0 + t, col0 + mid], gapk):
-                            ok = False
-                            break
-                        if not _connected(D[r0 + mid - 1, col0 + t], D[r0 + mid, col0 + t], gapk):
-                            ok = False
-                            break
-                CONN[q] = 1 if ok else 0
+    if L == 0:
+        for i in range(slot, S, nslot):
+            for j in range(S):
+                d = np.float64(D[i, j])
+                q = offs[0] + i * S + j
+                if d < np.inf:
+                    lo = d
+                    hi = d
+                    for k in range(4):
+                        ni = i + (1 if k == 0 else (-1 if k == 1 else 0))
+                        nj = j + (1 if k == 2 else (-1 if k == 3 else 0))
+                        if 0 <= ni < S and 0 <= nj < S:
+                            dn = np.float64(D[ni, nj])
+                            if _connected(d, dn, gapk):
+                                lo = min(lo, dn)
+                                hi = max(hi, dn)
+                    MN[q] = lo
+                    MX[q] = hi
+                    CONN[q] = 1
+                else:
+                    MN[q] = np.inf
+                    MX[q] = -np.inf
+                    CONN[q] = 0
+        return
+    side = S >> L
+    h = 1 << L
+    mid = h >> 1
+    for bi in range(slot, side, nslot):
+        for bj in range(side):
+            q = offs[L] + bi * side + bj
+            cs = side * 2
+            c0 = offs[L - 1] + (2 * bi) * cs + 2 * bj
+            c1 = c0 + 1
+            c2 = c0 + cs
+            c3 = c2 + 1
+            MN[q] = min(min(MN[c0], MN[c1]), min(MN[c2], MN[c3]))
+            MX[q] = max(max(MX[c0], MX[c1]), max(MX[c2], MX[c3]))
+            ok = CONN[c0] == 1 and CONN[c1] == 1 and CONN[c2] == 1 and CONN[c3] == 1
+            if ok:
+                r0 = bi * h
+                col0 = bj * h
+                for t in range(h):
+                    if not _connected(D[r0 + t, col0 + mid - 1], D[r0 + t, col0 + mid], gapk):
+                        ok = False
+                        break
+                    if not _connected(D[r0 + mid - 1, col0 + t], D[r0 + mid, col0 + t], gapk):
+                        ok = False
+                        break
+            CONN[q] = 1 if ok else 0
+
+
+def build_quadtrees(D, gapk, offs, MN, MX, CONN) -> None:
+    """Min/max quadtrees and the connectedness quadtree of depth image ``D`` (S, S), level by level
+    (:func:`build_quadtree_level_slot`), one slot per thread; the small coarse levels in one slot."""
+    nthreads = numba.get_num_threads()
+    for L in range(offs.shape[0] - 1):
+        nslot = nthreads if (D.shape[0] >> L) >= 64 else 1
+        run_slots(build_quadtree_level_slot, nslot, D, gapk, offs, MN, MX, CONN, L, nslot)
 
 
 class ReferenceImages:
@@ -539,20 +549,21 @@ def trace_shadow_ray(
     return False, 0.0
 
 
-@kernel(parallel=True)
-def trace_rays(org, dst, vps, D, MN, MX, CONN, offs, gapk, flags, nchunk, blocked, thit, cnt):
+@kernel(nogil=True, noalias=True)
+def trace_rays_slot(slot, org, dst, vps, D, MN, MX, CONN, offs, gapk, flags, nchunk, blocked, thit, cnt, nslot):
     """Trace independent rays org[i] -> dst[i] (for tests and studies): blocked[i], t_hit[i];
-    cnt[chunk] the counters of each chunk of rays."""
+    cnt[chunk] the counters of each chunk of rays. Run by ``run_slots``: slot ``slot`` of ``nslot``
+    takes every ``nslot``-th chunk."""
     n = org.shape[0]
     nref = vps.shape[0]
     nlev = offs.shape[0] - 1
     per = (n + nchunk - 1) // nchunk
-    for c in prange(nchunk):
-        stack = np.empty((4 * nlev + 12, 5))
-        seg = np.empty((nref, 10))
-        order = np.empty(nref, np.int64)
-        hidA = np.empty((MAX_INTERVALS, 2))
-        hidB = np.empty((MAX_INTERVALS, 2))
+    stack = np.empty((4 * nlev + 12, 5))
+    seg = np.empty((nref, 10))
+    order = np.empty(nref, np.int64)
+    hidA = np.empty((MAX_INTERVALS, 2))
+    hidB = np.empty((MAX_INTERVALS, 2))
+    for c in range(slot, nchunk, nslot):
         for i in range(c * per, min(n, (c + 1) * per)):
             b, th = trace_shadow_ray(
                 org[i, 0],
@@ -578,6 +589,14 @@ def trace_rays(org, dst, vps, D, MN, MX, CONN, offs, gapk, flags, nchunk, blocke
             )
             blocked[i] = b
             thit[i] = th
+
+
+def trace_rays(org, dst, vps, D, MN, MX, CONN, offs, gapk, flags, nchunk, blocked, thit, cnt) -> None:
+    """:func:`trace_rays_slot` over every chunk, one slot per thread."""
+    nslot = numba.get_num_threads()
+    run_slots(
+        trace_rays_slot, nslot, org, dst, vps, D, MN, MX, CONN, offs, gapk, flags, nchunk, blocked, thit, cnt, nslot
+    )
 
 
 def trace_ray_batch(refs: ReferenceImages, org: np.ndarray, dst: np.ndarray, flags: int = F_ALL):
