@@ -23,7 +23,6 @@ from typing import ClassVar
 
 import numba
 import numpy as np
-from numba import prange
 
 from .._jit import kernel, run_slots
 from ..geometry.silhouette import Silhouette, cached_adjacency, silhouette_adjacency, silhouette_brute
@@ -539,16 +538,17 @@ def _max_down_row(src, s0, sw, sh, dst, d0, dw, i):
         dst[d0 + i * dw + j] = max(max(a, c), 0.0)
 
 
-@kernel(parallel=True)
-def _pyramid_level1(zp_flat, H, W, data, offs, ws, hs, occ_flat, h, w, pt, pl):
+@kernel(nogil=True, nrt=False, noalias=True)
+def _pyramid_level1_slot(slot, zp_flat, H, W, data, offs, ws, hs, occ_flat, h, w, pt, pl, nslot):
     """Levels 1 and 2 (2x2 max of ``Z_P``, then of level 1) straight from the map, in parallel by
     level-2 rows (each reduces the two level-1 rows it reads, just made). With an occluder map
     ``occ_flat`` (h, w) placed at row ``pt``, column ``pl`` (h > 0), each pair of rows first takes
     the minimum with it in place (as ``np.minimum``: NaN wins), then reduces. Level 2 only where
-    the pyramid has it (more than two levels)."""
+    the pyramid has it (more than two levels). Run by ``run_slots``: slot ``slot`` of ``nslot``
+    takes every ``nslot``-th level-2 row."""
     H1 = hs[1]
     step = 1 + int(len(offs) > 2)  # level-1 rows per iteration: 2 where level 2 exists
-    for k in prange((H1 + step - 1) // step):
+    for k in range(slot, (H1 + step - 1) // step, nslot):
         for i in range(step * k, min(step * k + step, H1)):
             for rr in range(2 * i, min(2 * i + 2, H)):
                 ro = rr - pt
@@ -603,7 +603,8 @@ def build_zmax_pyramid(
     offs, ws, hs = np.array(offs, np.int64), np.array(ws, np.int64), np.array(hs, np.int64)
     if len(offs) > 1:
         zf = zp.reshape(-1) if occluder_depth is not None else np.ascontiguousarray(zp, dtype=np.float32).reshape(-1)
-        _pyramid_level1(zf, h, w, data, offs, ws, hs, occ.reshape(-1), oh, ow, r0, c0)
+        nslot = numba.get_num_threads()
+        run_slots(_pyramid_level1_slot, nslot, zf, h, w, data, offs, ws, hs, occ.reshape(-1), oh, ow, r0, c0, nslot)
         _pyramid_coarser(data, offs, ws, hs)
     return data, offs, ws, hs
 
@@ -677,24 +678,45 @@ def _wedge_zmax(wl, wt, sxs, sys_, tx, ty, ux0, uy0, ux1, uy1, fa, fb, data, off
     return _zmax_bbox(data, offs, ws, hs, xa, ya, xb, yb)
 
 
-@kernel(parallel=True)
-def _cone_reject_kernel(
-    wl, wt, sx_scale, sy_scale, qx, qy, zv, bx, by, z_far, iters, pieces, data, offs, ws, hs, eps, lam, keep
+@kernel(nogil=True, noalias=True)
+def _cone_reject_slot(
+    slot,
+    wl,
+    wt,
+    sx_scale,
+    sy_scale,
+    qx,
+    qy,
+    zv,
+    bx,
+    by,
+    z_far,
+    iters,
+    pieces,
+    data,
+    offs,
+    ws,
+    hs,
+    eps,
+    lam,
+    keep,
+    nslot,
 ):
     """Per cone (row) and base vertex k: lam[i,k] in [0,1] (fraction of the ruling to the far plane
-    that can carry kept fragments); keep[i] false when no triangle of the cone can.
+    that can carry kept fragments); keep[i] false when no triangle of the cone can. Run by
+    ``run_slots``: slot ``slot`` of ``nslot`` takes every ``nslot``-th cone.
 
     A fragment at depth z is kept only if z < Z_P of its texel <= max Z_P under any region of the
     wedge containing it. (1) The whole wedge, truncated at depth z, is bounded ``iters`` times;
     (2) the rest is cut into ``pieces`` slices along the rulings: the wedge ends at the last slice
     whose max Z_P lies behind its nearest depth (and not behind that max)."""
     n, seg = bx.shape
-    for i in prange(n):
+    zlim = np.empty(seg)
+    for i in range(slot, n, nslot):
         iz = 1.0 / zv[i]
         izf = 1.0 / z_far
         tx = qx[i] * iz
         ty = qy[i] * iz
-        zlim = np.empty(seg)
         anyk = False
         for k in range(seg):
             k2 = (k + 1) % seg
@@ -744,7 +766,10 @@ def _reject_cones(view, q, zv, bx, by, z_far, pyr):
     lam = np.ones((n, seg))
     keep = np.ones(n, bool)
     eps = 1e-9 * z_far
-    _cone_reject_kernel(
+    nslot = numba.get_num_threads()
+    run_slots(
+        _cone_reject_slot,
+        nslot,
         l,
         t,
         view.width / (r - l),
@@ -764,6 +789,7 @@ def _reject_cones(view, q, zv, bx, by, z_far, pyr):
         eps,
         lam,
         keep,
+        nslot,
     )
     return lam, keep
 
