@@ -15,7 +15,6 @@ from typing import ClassVar
 
 import numba
 import numpy as np
-from numba import prange
 
 from .._jit import kernel, run_slots
 from ..raster.kernels import view_project
@@ -287,8 +286,8 @@ def _cmp_nearest(depth, sx, sy, zt):
 OCC_CELL = 16
 
 
-@kernel(parallel=True)
-def _occupancy_rows(bits, cell, counts, row_min, cmin, cmax):
+@kernel(nogil=True, noalias=True)
+def _occupancy_rows_slot(slot, bits, cell, counts, row_min, cmin, cmax, nslot):
     """Per grid cell (``cell`` x ``cell`` texels) of a float32 map given as its bits (``bits``: the
     map viewed as int32) the number of finite texels, into ``counts`` (ny + 1, nx + 1) at
     [cy + 1, cx + 1], and the smallest and largest depth (+inf for an empty texel), into ``cmin``
@@ -298,14 +297,21 @@ def _occupancy_rows(bits, cell, counts, row_min, cmin, cmax):
     texel rows first, then the cells from their columns. The column pass compares integer keys
     that order as the floats do (the sign bit flips the other bits; a map holds no NaN): a loop
     of integer selects that vectorizes, which float selects without fast-math did not (1.1 ->
-    0.43 ms a 1024^2 map on one thread). Minima and maxima are values of the map: no rounding."""
+    0.43 ms a 1024^2 map on one thread). Minima and maxima are values of the map: no rounding.
+    Run by ``run_slots``: slot ``slot`` of ``nslot`` takes every ``nslot``-th grid row."""
     H, W = bits.shape
     ny = row_min.shape[0]
     nx = counts.shape[1] - 1
-    for cy in prange(ny):
-        col_n = np.zeros(W, np.int32)
-        col_lo = np.full(W, np.int32(0x7FFFFFFF), np.int32)
-        col_hi = np.full(W, np.int32(-0x80000000), np.int32)
+    col_n = np.empty(W, np.int32)
+    col_lo = np.empty(W, np.int32)
+    col_hi = np.empty(W, np.int32)
+    lo_f = col_lo.view(np.float32)
+    hi_f = col_hi.view(np.float32)
+    for cy in range(slot, ny, nslot):
+        for c in range(W):
+            col_n[c] = 0
+            col_lo[c] = 0x7FFFFFFF
+            col_hi[c] = -0x80000000
         for r in range(cy * cell, min(H, cy * cell + cell)):
             for c in range(W):
                 b = bits[r, c]
@@ -320,8 +326,6 @@ def _occupancy_rows(bits, cell, counts, row_min, cmin, cmax):
             col_lo[c] = lo ^ ((lo >> 31) & np.int32(0x7FFFFFFF))
             hi = col_hi[c]
             col_hi[c] = hi ^ ((hi >> 31) & np.int32(0x7FFFFFFF))
-        lo_f = col_lo.view(np.float32)
-        hi_f = col_hi.view(np.float32)
         m = np.inf
         for cx in range(nx):
             n = 0
@@ -351,7 +355,11 @@ def occupancy_grid(depth: np.ndarray) -> tuple[np.ndarray, float, np.ndarray, np
     row_min = np.empty(ny, np.float64)
     cmin = np.empty((ny, nx), np.float32)
     cmax = np.empty((ny, nx), np.float32)
-    _occupancy_rows(np.ascontiguousarray(depth).view(np.int32), OCC_CELL, counts, row_min, cmin, cmax)
+    nslot = numba.get_num_threads()
+    run_slots(
+        _occupancy_rows_slot, nslot, np.ascontiguousarray(depth).view(np.int32), OCC_CELL, counts, row_min, cmin, cmax,
+        nslot,
+    )  # fmt: skip
     np.cumsum(counts, axis=0, out=counts)
     np.cumsum(counts, axis=1, out=counts)
     return counts, float(row_min.min()) if ny else np.inf, cmin, cmax
