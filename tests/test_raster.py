@@ -718,7 +718,7 @@ def test_small_triangle_rejection_agrees_with_full_setup(ortho):
 @pytest.mark.parametrize("ortho", [True, False])
 def test_tiny_path_is_bit_identical_to_the_tile_pass(ortho, monkeypatch):
     """rasterize_depth draws the small triangles (bounding box of at most 9 pixel centers) directly
-    (``_tiny_depth``) and merges them into the tile pass's output. Both must give what the tile pass
+    (``_tiny_depth_slot``) and merges them into the tile pass's output. Both must give what the tile pass
     alone gives, bit for bit, including the tie rule (equal depth: the smaller face wins): here
     half of the small triangles lie on the plane of two big quads (exact depth ties), with face
     indices before and after the quads', and the others at random depths; culled both ways."""

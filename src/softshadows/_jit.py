@@ -3,8 +3,10 @@
 Every kernel is compiled with the same flags (``FLAGS``): cached on disk, IEEE arithmetic
 (no fastmath, so results do not depend on the compiler's reassociation), NumPy's error model
 (division by zero gives inf/NaN instead of raising, and no zero-checks in hot loops).
-Use ``@kernel``, ``@kernel(parallel=True)``, ``@kernel(inline=True)`` (or ``inline="ir"``; with
-``nrt=False`` for a hot helper that takes arrays) or ``@kernel(parallel=True, nogil=True)``.
+Use ``@kernel``, ``@kernel(inline=True)`` (or ``inline="ir"``; with ``nrt=False`` for a hot
+helper that takes arrays) or ``@kernel(nogil=True)`` (a slot kernel for :func:`run_slots`: every
+parallel loop of the package; ``@kernel(parallel=True)`` still works, but a ``prange`` kernel costs
+about a second more to compile).
 
 ``inline=True`` has LLVM inline the helper into its callers (Numba's ``forceinline``: the helper is
 typed and lowered once, marked ``alwaysinline``, and inlined where its code is linked in);
@@ -267,8 +269,10 @@ def run_slots(fn, nslot: int, *args) -> None:
     Why: Numba compiles a parallel kernel's body twice (the kernel and the gufunc of its prange)
     and LLVM optimises and generates the code of everything the body calls again in each of the
     two, so a large parallel kernel cost about twice its body's compile time
-    (docs/results/cold-start.md). A launch costs a few tens of microseconds more than a prange,
-    so this is for kernels whose call takes milliseconds."""
+    (docs/results/cold-start.md); even a small prange kernel cost about 1 s more compile CPU than
+    the same loop run this way, so every parallel loop of the package is a slot kernel. A launch
+    costs about 20 microseconds more than a prange's: run a loop of a few tens of microseconds as
+    one slot on the calling thread (``fn(0, ..., 1)``) instead."""
     nslot = int(nslot)
     if nslot <= 1:
         fn(0, *args)
