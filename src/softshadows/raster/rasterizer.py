@@ -746,6 +746,8 @@ def _bin_fill_slot(slot, NC, box, T, ntx, chunk, off, bins, nslot, tile_any, use
 _SP_LO, _SP_HI, _SP_EX, _SP_RW, _SP_RN = 0, 1, 2, 3, 4
 # and (min-blend texel lists) SP[_SP_OR + a, b]: the texel bits of tile rows a..b ORed (a <= b)
 _SP_OR = 5
+#: pieces with at most this many pixel centers in a tile are drawn pixel by pixel (_depth_test_pixels)
+_SMALL_PIECE = 16
 _SP_ROWS = _SP_OR + TILE
 
 
@@ -1133,7 +1135,7 @@ def _next_span(scan, hi, j1, e0, e1, e2, r0, r1, r2):
 
 
 @kernel(inline=True)
-def _depth_test_row(zb, tb, t, span, cols, pl, zrow, zr, ortho):
+def _depth_test_row(zb, tb, t, span, cols, pl, zrow, zr, ortho, nz, nzi):
     """Depth test of the fragments of triangle t on ``span`` = (li, klo, khi), the columns klo..khi
     of tile row li, against the tile's nearest depths ``zb`` and triangles ``tb``: the whole tile
     row at once (vectorizes), masked to the span. ``cols`` = (x0, wl, wsx): the tile's first column
@@ -1148,8 +1150,35 @@ def _depth_test_row(zb, tb, t, span, cols, pl, zrow, zr, ortho):
         z = _clamp_depth(_frag_depth(ortho, pl, zrow, xw), zlo, zhi)
         zc = zb[li, k]
         take = (k >= klo) & (k <= khi) & (not (z > far)) & (z < zc)
-        zb[li, k] = z if take else zc
-        tb[li, k] = t if take else tb[li, k]
+        zb[li, k] = z if take else zc + nz
+        tb[li, k] = t if take else tb[li, k] + nzi
+
+
+@kernel(inline=True)
+def _depth_test_pixels(zb, tb, t, prect, y0, x0, vw, pl, zr, e0, e1, e2):
+    """:func:`_depth_test_row` for a small piece (at most ``_SMALL_PIECE`` pixel centers in
+    ``prect``), pixel by pixel: the per-pixel edge test (:func:`_covered`, the test every span
+    search reproduces exactly) and the same depth operations and rule, so the same result as the
+    span and row passes, without their whole-tile vector loops (a piece of a dense mesh's eye view
+    covers one or two pixels)."""
+    _W, _H, ortho, far, wl, wt, wsx, wsy = vw
+    zlo, zhi, _far = zr
+    i0, i1, j0, j1 = prect
+    for i in range(i0, i1 + 1):
+        py = i + 0.5
+        r0 = _edge_row(e0, py)
+        r1 = _edge_row(e1, py)
+        r2 = _edge_row(e2, py)
+        zrow = _row_depth(ortho, pl, wt - py * wsy)
+        li = i - y0
+        for j in range(j0, j1 + 1):
+            if _covered(e0, e1, e2, r0, r1, r2, j):
+                k = j - x0
+                xw = wl + ((x0 + k) + 0.5) * wsx
+                z = _clamp_depth(_frag_depth(ortho, pl, zrow, xw), zlo, zhi)
+                if not (z > far) and z < zb[li, k]:
+                    zb[li, k] = z
+                    tb[li, k] = t
 
 
 @kernel(inline=True)
@@ -1173,7 +1202,7 @@ def _tile_zmax(zb):
 
 
 @kernel(inline=True)
-def _depth_pass(vw, near, tile, rect, start, bins, box, edges, zinfo, planes, zb, tb, SP, sh, tri, face):
+def _depth_pass(vw, near, tile, rect, start, bins, box, edges, zinfo, planes, zb, tb, SP, sh, tri, face, nz):
     """The nearest depth ``zb`` and triangle ``tb`` (-1: none) of every pixel of the tile ``rect`` =
     (y0, y1, x0, x1), from the pieces binned to it (the dense modes: depth and G-buffer). ``tb``
     holds the front-end triangle, or with ``face`` its face ``tri[u]`` (the depth mode's output:
@@ -1181,6 +1210,7 @@ def _depth_pass(vw, near, tile, rect, start, bins, box, edges, zinfo, planes, zb
     W, H, ortho, far, wl, wt, wsx, wsy = vw
     y0, _y1, x0, _x1 = rect
     cols = (x0, wl, wsx)
+    nzi = np.int32(nz)  # 0, unknown to LLVM (see _depth_test_row)
     for li in range(zb.shape[0]):
         for k in range(zb.shape[1]):
             zb[li, k] = np.inf
@@ -1207,6 +1237,11 @@ def _depth_pass(vw, near, tile, rect, start, bins, box, edges, zinfo, planes, zb
         if since == 8:
             tmax = _tile_zmax(zb)
             since = 0
+        if (i1 - i0 + 1) * (j1 - j0 + 1) <= _SMALL_PIECE:
+            _depth_test_pixels(
+                zb, tb, tv, prect, y0, x0, vw, pl, zr, _edge(edges, ct, 0), _edge(edges, ct, 1), _edge(edges, ct, 2)
+            )
+            continue
         e0, e1, e2, scan, nrows = _piece_rows(edges, zinfo, ct, prect, y0, x0, W, H, SP, False)
         for rr in range(nrows):
             li = SP[_SP_RW, rr]
@@ -1217,9 +1252,9 @@ def _depth_pass(vw, near, tile, rect, start, bins, box, edges, zinfo, planes, zb
             while lo <= hi:
                 span = (li, lo - x0, hi - x0)
                 if ortho:
-                    _depth_test_row(zb, tb, tv, span, cols, pl, zrow, zr, True)
+                    _depth_test_row(zb, tb, tv, span, cols, pl, zrow, zr, True, nz, nzi)
                 else:
-                    _depth_test_row(zb, tb, tv, span, cols, pl, zrow, zr, False)
+                    _depth_test_row(zb, tb, tv, span, cols, pl, zrow, zr, False, nz, nzi)
                 lo, hi = _next_span(scan, hi, j1, e0, e1, e2, r0, r1, r2)
 
 
@@ -1634,7 +1669,7 @@ def _tiles_depth_slot(slot, fe, sc, depth_out, tri_out, zt, ft, rz, rt):
     lines far apart per tile, in a loop too short for LLVM's vector loop (about half of the tile
     pass's time on a map that the ground covers); whole rows are a vectorized, sequential copy."""
     vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, _normals, _rowbits, sh, tri = fe
-    zbuf, tbuf, spbuf, _ibuf, _lbuf, nslot = sc
+    zbuf, tbuf, spbuf, _ibuf, _lbuf, nslot, nz = sc
     vw = _view_window(vp)
     W, H = vw[0], vw[1]
     tiny = zt.shape[0] > 0
@@ -1658,7 +1693,7 @@ def _tiles_depth_slot(slot, fe, sc, depth_out, tri_out, zt, ft, rz, rt):
                         trow[k] = -1
                 continue
             _depth_pass(
-                vw, near, tile, rect, start, bins, box, edges, zinfo, planes, zb, tb, SP, sh, tri, np.bool_(True)
+                vw, near, tile, rect, start, bins, box, edges, zinfo, planes, zb, tb, SP, sh, tri, np.bool_(True), nz
             )  # not a literal: one specialisation
             for i in range(y0, y1 + 1):
                 # row views: their indices are known non-negative (no wrap-around selects)
@@ -1707,7 +1742,7 @@ def _tiles_gbuffer_slot(slot, fe, sc, out, rz, rt):
     (T, W) first, and a finished row of tiles is turned into G-buffer rows whole, one image row at
     a time."""
     vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, normals, _rowbits, sh, tri = fe
-    zbuf, tbuf, spbuf, _ibuf, _lbuf, nslot = sc
+    zbuf, tbuf, spbuf, _ibuf, _lbuf, nslot, nz = sc
     vw = _view_window(vp)
     W, H, ortho, _far, wl, wt, wsx, wsy = vw
     frame = _view_frame(vp)
@@ -1722,7 +1757,7 @@ def _tiles_gbuffer_slot(slot, fe, sc, out, rz, rt):
             rect = _tile_rect(ty, tx, T, W, H)
             tile = ty * ntx + tx
             _depth_pass(
-                vw, near, tile, rect, start, bins, box, edges, zinfo, planes, zb, tb, SP, sh, tri, np.bool_(False)
+                vw, near, tile, rect, start, bins, box, edges, zinfo, planes, zb, tb, SP, sh, tri, np.bool_(False), nz
             )
             y0, y1, x0, x1 = rect
             for i in range(y0, y1 + 1):
@@ -1752,7 +1787,7 @@ def _tiles_gbuffer(fe, sc, out):
 def _tiles_count_slot(slot, fe, sc, fcount):
     """Slot ``slot`` of :func:`_tiles_count` (``run_slots``)."""
     vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, _normals, _rowbits, sh, _tri = fe
-    _zbuf, _tbuf, spbuf, _ibuf, _lbuf, nslot = sc
+    _zbuf, _tbuf, spbuf, _ibuf, _lbuf, nslot, _nz = sc
     vw = _view_window(vp)
     W, H, ortho, far, wl, wt, wsx, wsy = vw
     SP = spbuf[slot]
@@ -1798,7 +1833,7 @@ def _tiles_count(fe, sc, fcount):
 def _tiles_fragments_slot(slot, fe, sc, foff, fpix, ftri, fbary, fdepth):
     """Slot ``slot`` of :func:`_tiles_fragments` (``run_slots``)."""
     vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, _normals, _rowbits, sh, tri = fe
-    _zbuf, _tbuf, spbuf, _ibuf, _lbuf, nslot = sc
+    _zbuf, _tbuf, spbuf, _ibuf, _lbuf, nslot, _nz = sc
     W, H, ortho, far, wl, wt, wsx, wsy = _view_window(vp)
     SP = spbuf[slot]
     for ty in range(slot, nty, nslot):
@@ -1946,7 +1981,7 @@ def _make_min_blend_slot(prog):
         """Slot ``slot`` of a min-blend tile pass (``_MIN_BLEND_KERNELS``), on its own thread
         (``run_slots``)."""
         vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, _normals, rowbits, sh, tri = fe
-        zbuf, _tbuf, spbuf, ibuf, lbuf, nslot = sc
+        zbuf, _tbuf, spbuf, ibuf, lbuf, nslot, _nz = sc
         pparams, cattr, img, blend, bstats, split, cull_discarded, tlbuf, list_max, nz = mb
         vw = _view_window(vp)
         W, H, ortho, far, wl, wt, wsx, wsy = vw
@@ -2190,6 +2225,8 @@ class _Scratch(NamedTuple):
     image: np.ndarray  #: (n, T, T) float32: the tile's min-blend input image
     lanes: np.ndarray  #: (n, T) float64: min-blend lane maxima
     nslot: int  #: slots of the tile passes (``run_slots``): one per thread
+    #: -0.0, passed at run time: the depth test stores ``z if take else current + nz`` (see _depth_test_row)
+    nz: float = -0.0
 
 
 class _Blend(NamedTuple):
