@@ -227,6 +227,40 @@ def _noalias_option() -> None:
 
 _noalias_option()
 
+
+def _cache_writes_may_fail() -> None:
+    """A kernel whose on-disk cache cannot be written (a file-size limit, a full disk or quota, a
+    read-only checkout) is used as compiled, with one warning, instead of failing the whole run:
+    Numba raises the write's ``OSError`` from the compile (outside Windows), which reached the user
+    as an unrelated one-line error (e.g. "File too large" before the image was written). The next
+    run compiles the kernel again."""
+    from numba.core import caching
+
+    save = caching.Cache.save_overload
+    if getattr(save, "_softshadows", False):
+        return
+    warned = []
+
+    def save_overload(self, sig, data):
+        try:
+            save(self, sig, data)
+        except OSError as exc:
+            if not warned:
+                warned.append(True)
+                import warnings
+
+                why = exc.strerror or str(exc)
+                warnings.warn(
+                    f"the compiled kernels could not be cached ({why}): they compile again on the next run",
+                    stacklevel=2,
+                )
+
+    save_overload._softshadows = True
+    caching.Cache.save_overload = save_overload
+
+
+_cache_writes_may_fail()
+
 _LINK_ONLY_NUMBA = {(0, 68)}  # Numba versions whose code generation _link_only_helpers was checked on
 LINK_ONLY = _link_only_helpers()  # whether helpers and gufuncs are compiled without machine code
 
