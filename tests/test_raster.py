@@ -546,6 +546,37 @@ def test_nearest_wins_and_ties():
     assert g.mask.sum() > 100 and np.all(g.tri_id[g.mask] == 0)
 
 
+def test_ties_go_to_the_smaller_index_when_drawn_front_to_back():
+    """The depth pass draws a tile's pieces front to back (by nearest corner depth), not in index
+    order, so the tie rule must be explicit. Two triangles on one tilted plane with the same edge
+    vectors (so the same plane coefficients, exact in small integers: their depths are equal bit for
+    bit where they overlap); face 1 lies nearer (smaller corner depths) and is drawn first, face 0
+    must still win every shared pixel, in both dense modes."""
+    W, H = 48, 40
+
+    def tri(dx):
+        xy = np.array([[12, 8], [40, 8], [12, 36]], float) + [dx, 0]
+        return xy, 2.0 + xy[:, 0] / 8.0  # depth grows with the screen x: exact dyadic values
+
+    xa, za = tri(0.0)
+    xb, zb = tri(-8.0)  # face 1: 8 px to the left, nearer by 1.0
+    V, view, F = _screen_scene(np.concatenate([xa, xb]), np.concatenate([za, zb]), W, H, True, 0.5, 20.0)
+    fr = rasterize_fragments(view, V, F)
+    cnt = np.bincount(fr.pixel, minlength=W * H).reshape(H, W)
+    shared = cnt == 2
+    assert shared.sum() > 100
+    d_a = np.full(W * H, np.nan, np.float32)
+    d_b = np.full(W * H, np.nan, np.float32)
+    d_a[fr.pixel[fr.tri == 0]] = fr.depth[fr.tri == 0]
+    d_b[fr.pixel[fr.tri == 1]] = fr.depth[fr.tri == 1]
+    np.testing.assert_array_equal(d_a[shared.ravel()], d_b[shared.ravel()])  # exact ties
+    g = rasterize(view, V, F)
+    d, t = rasterize_depth(view, V, F)
+    assert np.all(g.tri_id[shared] == 0) and np.all(t[shared] == 0)
+    assert np.all(t[cnt == 1] == g.tri_id[cnt == 1]) and (t == 1).sum() > 50
+    np.testing.assert_array_equal(d, g.depth)
+
+
 def test_rasterize_depth_matches_rasterize():
     rng = np.random.default_rng(7)
     Vc, Fc = cube((0, 0.5, 0), 0.5)

@@ -1140,8 +1140,10 @@ def _depth_test_row(zb, tb, t, span, cols, pl, zrow, zr, ortho, nz, nzi):
     of tile row li, against the tile's nearest depths ``zb`` and triangles ``tb``: the whole tile
     row at once (vectorizes), masked to the span. ``cols`` = (x0, wl, wsx): the tile's first column
     and the window x of the image's left side and per pixel; ``zr`` = (zlo, zhi, far): the piece's
-    depth clamp and the far plane. Strictly nearer wins: the bins list a tile's pieces in increasing
-    triangle index, so equal depths go to the smaller index."""
+    depth clamp and the far plane. Nearer wins, and at equal depth the smaller triangle (``tb``
+    holds the winner's index): the result is the lexicographic minimum of (depth, triangle) over
+    the fragments, whatever order the pieces come in (:func:`_depth_pass` draws them front to
+    back)."""
     li, klo, khi = span
     x0, wl, wsx = cols
     zlo, zhi, far = zr
@@ -1149,9 +1151,10 @@ def _depth_test_row(zb, tb, t, span, cols, pl, zrow, zr, ortho, nz, nzi):
         xw = wl + ((x0 + k) + 0.5) * wsx
         z = _clamp_depth(_frag_depth(ortho, pl, zrow, xw), zlo, zhi)
         zc = zb[li, k]
-        take = (k >= klo) & (k <= khi) & (not (z > far)) & (z < zc)
+        tc = tb[li, k]
+        take = (k >= klo) & (k <= khi) & (not (z > far)) & ((z < zc) | ((z == zc) & (t < tc)))
         zb[li, k] = z if take else zc + nz
-        tb[li, k] = t if take else tb[li, k] + nzi
+        tb[li, k] = t if take else tc + nzi
 
 
 @kernel(inline=True)
@@ -1176,7 +1179,8 @@ def _depth_test_pixels(zb, tb, t, prect, y0, x0, vw, pl, zr, e0, e1, e2):
                 k = j - x0
                 xw = wl + ((x0 + k) + 0.5) * wsx
                 z = _clamp_depth(_frag_depth(ortho, pl, zrow, xw), zlo, zhi)
-                if not (z > far) and z < zb[li, k]:
+                zc = zb[li, k]
+                if not (z > far) and (z < zc or (z == zc and t < tb[li, k])):
                     zb[li, k] = z
                     tb[li, k] = t
 
@@ -1202,11 +1206,42 @@ def _tile_zmax(zb):
 
 
 @kernel(inline=True)
+def _front_to_back(bins, a, n, zinfo):
+    """Sort a tile's pieces ``bins[a:a + n]`` in place by their nearest corner depth
+    (``zinfo[ct, Z_MIN]``), then by piece slot (deterministic): a shell sort, as the lists are short
+    (tens) and the scratch-free sort must not allocate."""
+    h = 1
+    while h < n // 3:
+        h = 3 * h + 1
+    while h >= 1:
+        for i in range(a + h, a + n):
+            c = bins[i]
+            kc = zinfo[c, Z_MIN]
+            j = i
+            while j - h >= a:
+                p = bins[j - h]
+                kp = zinfo[p, Z_MIN]
+                if kp > kc or (kp == kc and p > c):
+                    bins[j] = p
+                    j -= h
+                else:
+                    break
+            bins[j] = c
+        h //= 3
+
+
+@kernel(inline=True)
 def _depth_pass(vw, near, tile, rect, start, bins, box, edges, zinfo, planes, zb, tb, SP, sh, tri, face, nz):
     """The nearest depth ``zb`` and triangle ``tb`` (-1: none) of every pixel of the tile ``rect`` =
     (y0, y1, x0, x1), from the pieces binned to it (the dense modes: depth and G-buffer). ``tb``
     holds the front-end triangle, or with ``face`` its face ``tri[u]`` (the depth mode's output:
-    the same winners, as the bins list the faces in increasing order too)."""
+    the same winners, as faces increase with the front-end triangles).
+
+    The tile's pieces are drawn front to back (:func:`_front_to_back`, which reorders the tile's
+    bins in place): once the near pieces have covered the tile, the coarse depth test skips the
+    pieces behind them (on a closed mesh, the back faces; on ``bunny``'s light view 71 % of the
+    (piece, tile) pairs draw no winning pixel). The depth test's rule makes the result independent
+    of the order (see :func:`_depth_test_row`)."""
     W, H, ortho, far, wl, wt, wsx, wsy = vw
     y0, _y1, x0, _x1 = rect
     cols = (x0, wl, wsx)
@@ -1217,6 +1252,7 @@ def _depth_pass(vw, near, tile, rect, start, bins, box, edges, zinfo, planes, zb
             tb[li, k] = -1
     tmax = np.inf
     since = 0
+    _front_to_back(bins, start[tile], start[tile + 1] - start[tile], zinfo)
     for bi in range(start[tile], start[tile + 1]):
         ct = bins[bi]
         t = ct >> sh
@@ -1228,13 +1264,14 @@ def _depth_pass(vw, near, tile, rect, start, bins, box, edges, zinfo, planes, zb
         zlo, zhi = _depth_bounds(zinfo, ct, ortho, near)
         zr = (zlo, zhi, far)
         pl = _plane(planes, t)
-        # coarse depth test: no fragment of the piece is strictly nearer than the tile's farthest
-        # pixel (tmax: its largest depth when last computed; depths only decrease, so it bounds it;
-        # +inf while a pixel is empty: no floor is computed then)
-        if tmax < np.inf and _piece_depth_floor(ortho, pl, prect, vw, zlo, zhi) >= tmax:
+        # coarse depth test: every fragment of the piece is farther than the tile's farthest pixel
+        # (tmax: its largest depth when last computed; depths only decrease, so it bounds it; +inf
+        # while a pixel is empty: no floor is computed then). Strictly farther: at equal depth a
+        # piece drawn later may still win by its smaller index
+        if tmax < np.inf and _piece_depth_floor(ortho, pl, prect, vw, zlo, zhi) > tmax:
             continue
         since += 1
-        if since == 8:
+        if since == 4:
             tmax = _tile_zmax(zb)
             since = 0
         if (i1 - i0 + 1) * (j1 - j0 + 1) <= _SMALL_PIECE:
@@ -2205,7 +2242,9 @@ class FrontEnd(NamedTuple):
     nty: int  #: rows of tiles
     near: float  #: the near plane (perspective: at least _PERSPECTIVE_MIN_NEAR)
     start: np.ndarray  #: (ntiles + 1,) int64: tile k's pieces are bins[start[k]:start[k + 1]]
-    bins: np.ndarray  #: int32 piece slots, per tile in increasing triangle index
+    bins: (
+        np.ndarray
+    )  #: int32 piece slots, per tile in increasing triangle index (the dense modes reorder them, _front_to_back)
     box: np.ndarray  #: (2F, 4) int32 pieces' pixel boxes, columns BOX_*
     edges: np.ndarray  #: (2F, 3, E_WIDTH) float64 pieces' edges, columns E_*
     zinfo: np.ndarray  #: (2F, 3) float64 pieces' depth ranges and robustness, columns Z_*
