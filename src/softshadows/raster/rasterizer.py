@@ -1205,6 +1205,27 @@ def _tile_zmax(zb):
     return m
 
 
+#: _depth_pass prefetches the data of the piece this many places ahead in the tile's list
+_PREFETCH_AHEAD = 2
+
+
+@kernel(inline=True)
+def _prefetch_piece(ct, sh, box, zinfo, edges, planes):
+    """Prefetch piece ``ct``'s box, depth range, edges (240 bytes) and plane (96 bytes): the depth
+    pass's per-piece loads were its largest stalls (cache misses: ~4 MB of piece data per view on
+    ``bunny``, read in depth order)."""
+    c = np.int64(ct)
+    t = c >> sh
+    z = np.int64(0)
+    prefetch(box, (c, z))
+    prefetch(zinfo, (c, z))
+    prefetch(planes, (t, z))
+    prefetch(planes, (t, np.int64(PL_WIDTH - 1)))
+    for k in range(3):
+        prefetch(edges, (c, np.int64(k), z))
+        prefetch(edges, (c, np.int64(k), np.int64(E_WIDTH - 1)))
+
+
 @kernel(inline=True)
 def _front_to_back(bins, a, n, zinfo):
     """Sort a tile's pieces ``bins[a:a + n]`` in place by their nearest corner depth
@@ -1255,6 +1276,8 @@ def _depth_pass(vw, near, tile, rect, start, bins, box, edges, zinfo, planes, zb
     _front_to_back(bins, start[tile], start[tile + 1] - start[tile], zinfo)
     for bi in range(start[tile], start[tile + 1]):
         ct = bins[bi]
+        if bi + _PREFETCH_AHEAD < start[tile + 1]:
+            _prefetch_piece(bins[bi + _PREFETCH_AHEAD], sh, box, zinfo, edges, planes)
         t = ct >> sh
         tv = t + (np.int64(tri[t]) - t) * face  # the value stored in tb (branch-free)
         prect = _piece_rect(box, ct, rect)
