@@ -24,6 +24,7 @@ from numba.extending import intrinsic
 from .._jit import kernel, run_slots
 from ..analytic import atan2_upper, rect_halfplanes_area
 from ..geometry.silhouette import build_adjacency, facing, facing_from_planes
+from ..raster.rasterizer import prefetch
 from ..raster.view import VP_B, VP_FORWARD, VP_L, VP_ORIGIN, VP_R, VP_RIGHT, VP_T, VP_UP, View, light_frame, light_view
 from .base import Method, MethodOutput, Param, register
 from .ground_truth import BOUND_SAFETY, hit_point_at
@@ -161,6 +162,10 @@ def counting_sort(key, n_keys):
     return cnt, order
 
 
+#: sort_samples' gather prefetches the record this many samples ahead (``prefetch``)
+_GATHER_AHEAD = 16
+
+
 @kernel(nogil=True, nrt=False)
 def _sort_slot(w, phase, key, rec, hist, tot, start, order, sx, sy, sp, sd):
     """One slot of :func:`sort_samples` (``run_slots``; C = ``hist.shape[0]`` slots), one phase per
@@ -205,7 +210,13 @@ def _sort_slot(w, phase, key, rec, hist, tot, start, order, sx, sy, sp, sd):
                 order[np.uint64(i)] = k
     else:
         m = order.shape[0]
-        for j in range(w * m // C, (w + 1) * m // C):
+        j1 = (w + 1) * m // C
+        z = np.uint64(0)
+        for j in range(w * m // C, j1):
+            if j + _GATHER_AHEAD < j1:  # the records are read in cell order: a cache miss each
+                kn = np.uint64(order[j + _GATHER_AHEAD])
+                prefetch(rec, (kn, z))
+                prefetch(rec, (kn, np.uint64(5)))
             k = np.uint64(order[j])
             sx[j] = rec[k, 0]
             sy[j] = rec[k, 1]
