@@ -746,8 +746,6 @@ def _bin_fill_slot(slot, NC, box, T, ntx, chunk, off, bins, nslot, tile_any, use
 _SP_LO, _SP_HI, _SP_EX, _SP_RW, _SP_RN = 0, 1, 2, 3, 4
 # and (min-blend texel lists) SP[_SP_OR + a, b]: the texel bits of tile rows a..b ORed (a <= b)
 _SP_OR = 5
-#: pieces with at most this many pixel centers in a tile are drawn pixel by pixel (_depth_test_pixels)
-_SMALL_PIECE = 16
 _SP_ROWS = _SP_OR + TILE
 
 
@@ -1158,34 +1156,6 @@ def _depth_test_row(zb, tb, t, span, cols, pl, zrow, zr, ortho, nz, nzi):
 
 
 @kernel(inline=True)
-def _depth_test_pixels(zb, tb, t, prect, y0, x0, vw, pl, zr, e0, e1, e2):
-    """:func:`_depth_test_row` for a small piece (at most ``_SMALL_PIECE`` pixel centers in
-    ``prect``), pixel by pixel: the per-pixel edge test (:func:`_covered`, the test every span
-    search reproduces exactly) and the same depth operations and rule, so the same result as the
-    span and row passes, without their whole-tile vector loops (a piece of a dense mesh's eye view
-    covers one or two pixels)."""
-    _W, _H, ortho, far, wl, wt, wsx, wsy = vw
-    zlo, zhi, _far = zr
-    i0, i1, j0, j1 = prect
-    for i in range(i0, i1 + 1):
-        py = i + 0.5
-        r0 = _edge_row(e0, py)
-        r1 = _edge_row(e1, py)
-        r2 = _edge_row(e2, py)
-        zrow = _row_depth(ortho, pl, wt - py * wsy)
-        li = i - y0
-        for j in range(j0, j1 + 1):
-            if _covered(e0, e1, e2, r0, r1, r2, j):
-                k = j - x0
-                xw = wl + ((x0 + k) + 0.5) * wsx
-                z = _clamp_depth(_frag_depth(ortho, pl, zrow, xw), zlo, zhi)
-                zc = zb[li, k]
-                if not (z > far) and (z < zc or (z == zc and t < tb[li, k])):
-                    zb[li, k] = z
-                    tb[li, k] = t
-
-
-@kernel(inline=True)
 def _piece_depth_floor(ortho, pl, prect, vw, zlo, zhi):
     """A lower bound of every depth the depth pass computes for the piece of plane ``pl`` at the
     pixel centers of ``prect``, after its clamp to [zlo, zhi] (for the coarse depth test): the
@@ -1297,11 +1267,6 @@ def _depth_pass(vw, near, tile, rect, start, bins, box, edges, zinfo, planes, zb
         if since == 4:
             tmax = _tile_zmax(zb)
             since = 0
-        if (i1 - i0 + 1) * (j1 - j0 + 1) <= _SMALL_PIECE:
-            _depth_test_pixels(
-                zb, tb, tv, prect, y0, x0, vw, pl, zr, _edge(edges, ct, 0), _edge(edges, ct, 1), _edge(edges, ct, 2)
-            )
-            continue
         e0, e1, e2, scan, nrows = _piece_rows(edges, zinfo, ct, prect, y0, x0, W, H, SP, False)
         for rr in range(nrows):
             li = SP[_SP_RW, rr]
