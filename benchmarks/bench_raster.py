@@ -1,6 +1,11 @@
 """Rasterizer micro-benchmark: eye G-buffer 512^2 and shadow maps 1024^2 on the bunny.
 
-python benchmarks/bench_raster.py [nthreads]
+python benchmarks/bench_raster.py [nthreads] [--frame-views]
+
+``--frame-views``: instead of this script's own views (bunny and ground in every view), the two
+that ``hard``'s frame draws on the built-in ``bunny`` scene: the eye G-buffer of ``eye_view`` at
+512^2 (every face) and the 1024^2 depth map of the occluders from ``fit_light_view`` (the bunny
+alone, its front and back faces).
 """
 
 import sys
@@ -37,9 +42,23 @@ def bench(name, fn, n=30):
     return r
 
 
-if len(sys.argv) > 1:
-    numba.set_num_threads(int(sys.argv[1]))
+args = [x for x in sys.argv[1:] if not x.startswith("--")]
+if args:
+    numba.set_num_threads(int(args[0]))
 print("threads", numba.get_num_threads())
+if "--frame-views" in sys.argv:
+    import softshadows as ss
+    from softshadows.api import eye_view
+    from softshadows.methods.shadowmap import fit_light_view
+
+    scene = ss.load_scene("bunny", "rect")
+    flat = scene.flat
+    ev = eye_view(scene, 512, 512)
+    lv = fit_light_view(scene, 1024)
+    occ = flat.faces_where(flat.occluder)
+    bench("hard's eye G-buffer 512x512", lambda: rasterize(ev, flat.vertices, flat.faces))
+    bench("hard's light depth map 1024x1024", lambda: rasterize_depth(lv, flat.vertices, occ))
+    sys.exit(0)
 g = bench("rasterize eye 512x512 (10k+2 tris)", lambda: rasterize(eye, V, F))
 print("   covered", g.mask.mean())
 bench("rasterize eye 512x512 cull=back", lambda: rasterize(eye, V, F, cull="back"))

@@ -1197,32 +1197,41 @@ def _prefetch_piece(ct, sh, box, zinfo, edges, planes):
 
 
 @kernel(inline=True)
-def _front_to_back(bins, a, n, zinfo):
+def _front_to_back(bins, a, n, zinfo, ks):
     """Sort a tile's pieces ``bins[a:a + n]`` in place by their nearest corner depth
-    (``zinfo[ct, Z_MIN]``), then by piece slot (deterministic): a shell sort, as the lists are short
-    (tens) and the scratch-free sort must not allocate."""
+    (``zinfo[ct, Z_MIN]``), then by piece slot (deterministic). The keys and slots are copied to the
+    slot's scratch ``ks`` (2, >= n) first (a comparison then reads no piece data), sorted there by a
+    shell sort (the lists are short: tens of pieces) and written back."""
+    for q in range(n):
+        c = bins[a + q]
+        ks[0, q] = zinfo[c, Z_MIN]
+        ks[1, q] = c
     h = 1
     while h < n // 3:
         h = 3 * h + 1
     while h >= 1:
-        for i in range(a + h, a + n):
-            c = bins[i]
-            kc = zinfo[c, Z_MIN]
+        for i in range(h, n):
+            kc = ks[0, i]
+            c = ks[1, i]
             j = i
-            while j - h >= a:
-                p = bins[j - h]
-                kp = zinfo[p, Z_MIN]
+            while j >= h:
+                kp = ks[0, j - h]
+                p = ks[1, j - h]
                 if kp > kc or (kp == kc and p > c):
-                    bins[j] = p
+                    ks[0, j] = kp
+                    ks[1, j] = p
                     j -= h
                 else:
                     break
-            bins[j] = c
+            ks[0, j] = kc
+            ks[1, j] = c
         h //= 3
+    for q in range(n):
+        bins[a + q] = np.int32(ks[1, q])
 
 
 @kernel(inline=True)
-def _depth_pass(vw, near, tile, rect, start, bins, box, edges, zinfo, planes, zb, tb, SP, sh, tri, face, nz):
+def _depth_pass(vw, near, tile, rect, start, bins, box, edges, zinfo, planes, zb, tb, SP, sh, tri, face, nz, ks):
     """The nearest depth ``zb`` and triangle ``tb`` (-1: none) of every pixel of the tile ``rect`` =
     (y0, y1, x0, x1), from the pieces binned to it (the dense modes: depth and G-buffer). ``tb``
     holds the front-end triangle, or with ``face`` its face ``tri[u]`` (the depth mode's output:
@@ -1243,7 +1252,7 @@ def _depth_pass(vw, near, tile, rect, start, bins, box, edges, zinfo, planes, zb
             tb[li, k] = -1
     tmax = np.inf
     since = 0
-    _front_to_back(bins, start[tile], start[tile + 1] - start[tile], zinfo)
+    _front_to_back(bins, start[tile], start[tile + 1] - start[tile], zinfo, ks)
     for bi in range(start[tile], start[tile + 1]):
         ct = bins[bi]
         if bi + _PREFETCH_AHEAD < start[tile + 1]:
@@ -1687,7 +1696,7 @@ def _blend_list(prog, pparams, TL, qa, qb, prect, full, e0, e1, e2, pl, q, ca, z
 # parfor compiled the body twice, docs/results/cold-start.md); its scratch is indexed by the slot.
 # ----------------------------------------------------------------------------------------------
 @kernel(nogil=True, nrt=False)
-def _tiles_depth_slot(slot, fe, sc, depth_out, tri_out, zt, ft, rz, rt):
+def _tiles_depth_slot(slot, fe, sc, depth_out, tri_out, zt, ft, rz, rt, ks):
     """Slot ``slot`` of :func:`_tiles_depth` (``run_slots``). Each tile's result goes to the slot's
     row scratch ``rz[slot]``, ``rt[slot]`` (T, W) first, and a finished row of tiles to the output in
     whole rows: written tile by tile (16 columns per image row), the stores went to 2 x 16 output
@@ -1718,7 +1727,24 @@ def _tiles_depth_slot(slot, fe, sc, depth_out, tri_out, zt, ft, rz, rt):
                         trow[k] = -1
                 continue
             _depth_pass(
-                vw, near, tile, rect, start, bins, box, edges, zinfo, planes, zb, tb, SP, sh, tri, np.bool_(True), nz
+                vw,
+                near,
+                tile,
+                rect,
+                start,
+                bins,
+                box,
+                edges,
+                zinfo,
+                planes,
+                zb,
+                tb,
+                SP,
+                sh,
+                tri,
+                np.bool_(True),
+                nz,
+                ks[slot],
             )  # not a literal: one specialisation
             for i in range(y0, y1 + 1):
                 # row views: their indices are known non-negative (no wrap-around selects)
@@ -1750,6 +1776,12 @@ def _tiles_depth_slot(slot, fe, sc, depth_out, tri_out, zt, ft, rz, rt):
                 trow[x] = fr[x]
 
 
+def _sort_scratch(fe, nslot) -> np.ndarray:
+    """The slots' scratch of :func:`_front_to_back`: (nslot, 2, the longest tile list) float64."""
+    n = int(np.max(fe.start[1:] - fe.start[:-1])) if len(fe.start) > 1 else 0
+    return np.empty((nslot, 2, max(n, 1)), np.float64)
+
+
 def _tiles_depth(fe, sc, depth_out, tri_out, zt, ft):
     """rasterize_depth: the nearest depth (+inf: none) and triangle (-1: none) of every pixel; with a
     tiny path (``zt`` (H,W) not empty: :func:`_tiny_depth_slot`), merged with its nearest depths ``zt`` and
@@ -1757,11 +1789,11 @@ def _tiles_depth(fe, sc, depth_out, tri_out, zt, ft):
     W = depth_out.shape[1]
     rz = np.empty((sc[5], fe.tile, W), np.float32)  # the slots' row scratch (see _tiles_depth_slot)
     rt = np.empty((sc[5], fe.tile, W), np.int32)
-    run_slots(_tiles_depth_slot, sc[5], fe, sc, depth_out, tri_out, zt, ft, rz, rt)
+    run_slots(_tiles_depth_slot, sc[5], fe, sc, depth_out, tri_out, zt, ft, rz, rt, _sort_scratch(fe, sc[5]))
 
 
 @kernel(nogil=True, nrt=False)
-def _tiles_gbuffer_slot(slot, fe, sc, out, rz, rt):
+def _tiles_gbuffer_slot(slot, fe, sc, out, rz, rt, ks):
     """Slot ``slot`` of :func:`_tiles_gbuffer` (``run_slots``). As in :func:`_tiles_depth_slot`, each
     tile's winners (depth, front-end triangle) go to the slot's row scratch ``rz[slot]``, ``rt[slot]``
     (T, W) first, and a finished row of tiles is turned into G-buffer rows whole, one image row at
@@ -1782,7 +1814,24 @@ def _tiles_gbuffer_slot(slot, fe, sc, out, rz, rt):
             rect = _tile_rect(ty, tx, T, W, H)
             tile = ty * ntx + tx
             _depth_pass(
-                vw, near, tile, rect, start, bins, box, edges, zinfo, planes, zb, tb, SP, sh, tri, np.bool_(False), nz
+                vw,
+                near,
+                tile,
+                rect,
+                start,
+                bins,
+                box,
+                edges,
+                zinfo,
+                planes,
+                zb,
+                tb,
+                SP,
+                sh,
+                tri,
+                np.bool_(False),
+                nz,
+                ks[slot],
             )
             y0, y1, x0, x1 = rect
             for i in range(y0, y1 + 1):
@@ -1805,7 +1854,7 @@ def _tiles_gbuffer(fe, sc, out):
     W = out[0].shape[1]
     rz = np.empty((sc[5], fe.tile, W), np.float64)  # the slots' row scratch (see _tiles_gbuffer_slot)
     rt = np.empty((sc[5], fe.tile, W), np.int32)
-    run_slots(_tiles_gbuffer_slot, sc[5], fe, sc, out, rz, rt)
+    run_slots(_tiles_gbuffer_slot, sc[5], fe, sc, out, rz, rt, _sort_scratch(fe, sc[5]))
 
 
 @kernel(nogil=True, nrt=False)
