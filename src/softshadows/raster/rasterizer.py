@@ -1710,6 +1710,8 @@ def _tiles_depth_slot(slot, fe, sc, depth_out, tri_out, zt, ft, rz, rt, ks):
     zb = zbuf[slot]
     tb = tbuf[slot]
     SP = spbuf[slot]
+    kss = ks[slot]
+    face = np.bool_(True)  # the depth mode's tb holds faces (not a literal: one specialisation)
     rzs = rz[slot]
     rts = rt[slot]
     for ty in range(slot, nty, nslot):  # tile rows dealt round-robin: contiguous output rows
@@ -1727,25 +1729,8 @@ def _tiles_depth_slot(slot, fe, sc, depth_out, tri_out, zt, ft, rz, rt, ks):
                         trow[k] = -1
                 continue
             _depth_pass(
-                vw,
-                near,
-                tile,
-                rect,
-                start,
-                bins,
-                box,
-                edges,
-                zinfo,
-                planes,
-                zb,
-                tb,
-                SP,
-                sh,
-                tri,
-                np.bool_(True),
-                nz,
-                ks[slot],
-            )  # not a literal: one specialisation
+                vw, near, tile, rect, start, bins, box, edges, zinfo, planes, zb, tb, SP, sh, tri, face, nz, kss
+            )
             for i in range(y0, y1 + 1):
                 # row views: their indices are known non-negative (no wrap-around selects)
                 drow = rzs[i - y0, x0 : x1 + 1]
@@ -1806,6 +1791,8 @@ def _tiles_gbuffer_slot(slot, fe, sc, out, rz, rt, ks):
     zb = zbuf[slot]
     tb = tbuf[slot]
     SP = spbuf[slot]
+    kss = ks[slot]
+    face = np.bool_(False)  # the G-buffer's tb holds front-end triangles
     rzs = rz[slot]
     rts = rt[slot]
     cols = (0, wl, wsx)
@@ -1814,24 +1801,7 @@ def _tiles_gbuffer_slot(slot, fe, sc, out, rz, rt, ks):
             rect = _tile_rect(ty, tx, T, W, H)
             tile = ty * ntx + tx
             _depth_pass(
-                vw,
-                near,
-                tile,
-                rect,
-                start,
-                bins,
-                box,
-                edges,
-                zinfo,
-                planes,
-                zb,
-                tb,
-                SP,
-                sh,
-                tri,
-                np.bool_(False),
-                nz,
-                ks[slot],
+                vw, near, tile, rect, start, bins, box, edges, zinfo, planes, zb, tb, SP, sh, tri, face, nz, kss
             )
             y0, y1, x0, x1 = rect
             for i in range(y0, y1 + 1):
