@@ -237,24 +237,33 @@ def test_cli_file_size_limit_one_line_nothing_left(tmp_path):
 def test_a_cache_that_cannot_be_written_does_not_fail_the_run(tmp_path):
     # a cold JIT cache under a file-size limit: the kernel runs as compiled, one warning; before,
     # Numba's EFBIG ended the command with "File too large" (the test above, on a cold cache)
-    (tmp_path / "kmod.py").write_text("from numba import njit\n\n@njit(cache=True)\ndef f(x):\n    return x + 1\n")
+    # a kernel of a module named like the package's (the guard leaves other Numba code alone), and one
+    # of another module, which still raises
+    src = "from numba import njit\n\n@njit(cache=True)\ndef f(x):\n    return x + 1\n"
+    (tmp_path / "softshadows_kmod.py").write_text(src)
+    (tmp_path / "othermod.py").write_text(src)
     code = textwrap.dedent(f"""
         import resource, sys, warnings
         sys.path[:0] = [{SRC!r}, {str(tmp_path)!r}]
         import softshadows._jit
-        import kmod
+        import softshadows_kmod, othermod
         resource.setrlimit(resource.RLIMIT_FSIZE, (64, 64))
         with warnings.catch_warnings(record=True) as w:
             warnings.simplefilter("always")
-            print(kmod.f(1), kmod.f(2.5))
+            print(softshadows_kmod.f(1), softshadows_kmod.f(2.5))
         print(len(w), w[0].message if w else "")
+        try:
+            othermod.f(1)
+        except OSError as exc:
+            print("other:", exc.strerror)
     """)
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"))
     p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, env=env)
     assert p.returncode == 0, p.stderr[-2000:]
-    first, second = p.stdout.splitlines()
+    first, second, third = p.stdout.splitlines()
     assert first == "2 3.5"
     assert second.startswith("1 the compiled kernels could not be cached (File too large)"), second
+    assert third == "other: File too large"
 
 
 def test_bench_and_compare_outputs_checked_first(tmp_path, capsys):

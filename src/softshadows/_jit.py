@@ -233,7 +233,9 @@ def _cache_writes_may_fail() -> None:
     read-only checkout) is used as compiled, with one warning, instead of failing the whole run:
     Numba raises the write's ``OSError`` from the compile (outside Windows), which reached the user
     as an unrelated one-line error (e.g. "File too large" before the image was written). The next
-    run compiles the kernel again."""
+    run compiles the kernel again. Only this package's kernels (and those of a copy of it imported
+    under a name that starts with ``softshadows``): other Numba code in the process is left as it
+    was."""
     from numba.core import caching
 
     save = caching.Cache.save_overload
@@ -245,6 +247,8 @@ def _cache_writes_may_fail() -> None:
         try:
             save(self, sig, data)
         except OSError as exc:
+            if not getattr(getattr(self, "_py_func", None), "__module__", "").startswith("softshadows"):
+                raise
             if not warned:
                 warned.append(True)
                 import warnings
