@@ -7,10 +7,11 @@ between runs of the same base). Checks that V, the image and the stats are the s
 apart from timings a method reports in them (keys ending in ``_s``),
 and prints per method the median frame of each and the median of the per-round ratios new/base.
 
-Whose scene is loaded first matters: with the same code on both sides (``--base HEAD`` on a clean
-tree) the side whose scene was loaded first measured 0.91 (``hard``) and 0.96 (``pcss``) of the
-other on 2026-12-03 (the cause was not found). Run both orders (``--scene-first new`` and
-``--scene-first base``) and report both, or their geometric mean.
+It is biased toward the working tree: with the same code on both sides (``--base HEAD`` on a clean
+tree) it measured 0.88-0.91 for ``hard`` and 0.96 for ``pcss`` on 2026-12-03, whichever scene was
+loaded first (0.96 for ``hard`` at one thread; the cause was not found). Run it both ways round:
+here with ``--base OLD`` (r_new), then from a worktree of OLD with ``--base NEW`` (r_old); the
+estimate of new/old is sqrt(r_new / r_old), the bias sqrt(r_new * r_old).
 
     OMP_WAIT_POLICY=PASSIVE PYTHONPATH=src python benchmarks/package_ab.py --base 6bf3dc4 \\
         --methods hard,pcss,layered-attenuation,irregular --light rect --reps 31
@@ -58,12 +59,6 @@ def main() -> int:
     ap.add_argument("--scene", default="bunny")
     ap.add_argument("--size", type=int, default=512)
     ap.add_argument("--reps", type=int, default=21)
-    ap.add_argument(
-        "--scene-first",
-        default="new",
-        choices=("new", "base"),
-        help="whose scene is loaded first (its frames measured ~5-10%% faster on 2026-12-03: run both)",
-    )
     a = ap.parse_args()
     import numpy as np
 
@@ -72,13 +67,8 @@ def main() -> int:
     base = base_package(a.base)
     new.tune_malloc()  # a benchmark owns its process (softshadows._malloc)
     pkgs = {"new": new, "base": base}
-    scenes = {}
-    for k in ("new", "base") if a.scene_first == "new" else ("base", "new"):
-        scenes[k] = pkgs[k].load_scene(a.scene, a.light)
-    print(
-        f"{a.scene} {a.light} {a.size}^2, new = working tree, base = {a.base}; {a.reps} rounds after warm-up; "
-        f"{a.scene_first}'s scene loaded first"
-    )
+    scenes = {k: pkgs[k].load_scene(a.scene, a.light) for k in pkgs}
+    print(f"{a.scene} {a.light} {a.size}^2, new = working tree, base = {a.base}; {a.reps} rounds after warm-up")
     for m in a.methods.split(","):
         runs = {k: (lambda k=k, m=m: pkgs[k].render(scenes[k], m, a.size, a.size)) for k in pkgs}
         rn, rb = runs["new"](), runs["base"]()  # compile + warm up
