@@ -325,6 +325,16 @@ def run_slots(fn, nslot: int, *args) -> None:
         f.result()
 
 
+def run_threads(fn, *args) -> None:
+    """:func:`run_slots` with one slot per Numba thread, the slot count passed last as well:
+    ``fn(slot, *args, n)`` for slot in ``range(n)``, n = ``numba.get_num_threads()`` (the usual
+    signature of the package's slot kernels)."""
+    import numba
+
+    n = numba.get_num_threads()
+    run_slots(fn, n, *args, n)
+
+
 def frozen(a: np.ndarray) -> np.ndarray:
     """A read-only view of ``a`` (no copy). Numba compiles a separate specialisation of a kernel for
     a read-only and a writable array of the same dtype and layout: an input that comes both ways

@@ -9,11 +9,10 @@ with l = (c - p)/r. Normals are flipped to face the eye (two-sided surfaces). Gr
 
 from __future__ import annotations
 
-import numba
 import numpy as np
 from PIL import Image
 
-from ._jit import kernel, run_slots
+from ._jit import kernel, run_threads
 
 AMBIENT = 0.04
 
@@ -51,10 +50,8 @@ def shade(scene, gbuf, visibility: np.ndarray, shadowed: np.ndarray | None = Non
     use_shadowed = shadowed is not None
     sh = np.asarray(shadowed, np.float64) if use_shadowed else np.zeros((1, 1))
     img = np.empty(visibility.shape + (3,), np.float32)
-    nslot = numba.get_num_threads()
-    run_slots(
+    run_threads(
         _shade_slot,
-        nslot,
         gbuf.position,
         gbuf.normal,
         gbuf.tri_id,
@@ -70,7 +67,6 @@ def shade(scene, gbuf, visibility: np.ndarray, shadowed: np.ndarray | None = Non
         use_shadowed,
         sh,
         img,
-        nslot,
     )
     return img
 

@@ -19,7 +19,7 @@ from typing import ClassVar
 import numba
 import numpy as np
 
-from .._jit import kernel, run_slots
+from .._jit import kernel, run_slots, run_threads
 from ..raster.kernels import view_coords, view_coords_to_screen
 from ..raster.view import VP_B, VP_FAR, VP_L, VP_NEAR, VP_R, VP_T, light_view
 from ..shading import exposure
@@ -593,10 +593,7 @@ def trace_rays_slot(slot, org, dst, vps, D, MN, MX, CONN, offs, gapk, flags, nch
 
 def trace_rays(org, dst, vps, D, MN, MX, CONN, offs, gapk, flags, nchunk, blocked, thit, cnt) -> None:
     """:func:`trace_rays_slot` over every chunk, one slot per thread."""
-    nslot = numba.get_num_threads()
-    run_slots(
-        trace_rays_slot, nslot, org, dst, vps, D, MN, MX, CONN, offs, gapk, flags, nchunk, blocked, thit, cnt, nslot
-    )
+    run_threads(trace_rays_slot, org, dst, vps, D, MN, MX, CONN, offs, gapk, flags, nchunk, blocked, thit, cnt)
 
 
 def trace_ray_batch(refs: ReferenceImages, org: np.ndarray, dst: np.ndarray, flags: int = F_ALL):

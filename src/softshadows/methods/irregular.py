@@ -21,7 +21,7 @@ from llvmlite import ir
 from numba import types
 from numba.extending import intrinsic
 
-from .._jit import kernel, run_slots
+from .._jit import kernel, run_slots, run_threads
 from ..analytic import atan2_upper, rect_halfplanes_area
 from ..geometry.silhouette import build_adjacency, facing, facing_from_planes
 from ..raster.rasterizer import prefetch
@@ -286,8 +286,7 @@ def _column_boxes(start, sp, sd, S):
     box = np.empty((nc, 6))
     dmax = np.zeros(nc)
     occ = np.zeros((nc, 2), np.int64)
-    nslot = numba.get_num_threads()
-    run_slots(_column_boxes_slot, nslot, start, sp, sd, S, box, dmax, occ, nslot)
+    run_threads(_column_boxes_slot, start, sp, sd, S, box, dmax, occ)
     return box, dmax, occ
 
 
@@ -420,8 +419,7 @@ def build_sample_grid(light, pts: np.ndarray, grid: int, bins: int, slices: int)
     near = view.near
     sb = slice_bounds(dlo, dhi, slices)
     rx, ry = cell_numbers(grid, grid, bins, nbx)
-    nslot = numba.get_num_threads()
-    run_slots(_sample_keys_slot, nslot, pts, vp, grid, grid, rx, ry, slices, sb, near, rec, key, nslot)
+    run_threads(_sample_keys_slot, pts, vp, grid, grid, rx, ry, slices, sb, near, rec, key)
     start, order, sx, sy, sp, sd = sort_samples(key, rec, nbx * nby * bins * bins * slices)
     m = len(order)
     cbox, cmax, occ = _column_boxes(start, sp, sd, slices)
@@ -849,10 +847,8 @@ def fold_candidates(flat, counted, lo, hi, center, radius) -> np.ndarray:
     _occ, adj, _sheet, _t, _o = _topology(flat)
     corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])], np.float64)
     out = np.zeros(adj.n_edges, np.bool_)
-    nslot = numba.get_num_threads()
-    run_slots(
+    run_threads(
         _fold_slot,
-        nslot,
         adj.count,
         adj.edges,
         adj.edge_faces,
@@ -865,7 +861,6 @@ def fold_candidates(flat, counted, lo, hi, center, radius) -> np.ndarray:
         float(radius),
         corners,
         out,
-        nslot,
     )
     return out
 
@@ -2418,8 +2413,7 @@ def compose_visibility(grid: SampleGrid, umbra, pen, n_all: int, pixels=None) ->
     samples, or with ``pixels`` (each input sample's flat pixel index) an image of n_all pixels,
     1 where no sample lies (``FrameContext.scatter``'s, without the per-sample array)."""
     out = np.ones(n_all, np.float32)
-    nslot = numba.get_num_threads()
-    run_slots(_compose_slot, nslot, grid.order, np.arange(n_all) if pixels is None else pixels, umbra, pen, out, nslot)
+    run_threads(_compose_slot, grid.order, np.arange(n_all) if pixels is None else pixels, umbra, pen, out)
     return out
 
 
@@ -2497,9 +2491,8 @@ def error_bound_samples(flat, eye, idx, nrm, eps):
     K = len(idx)
     out = np.empty((K, 3))
     bound = np.empty(K)
-    nslot = numba.get_num_threads()
     tri, bary = eye.tri_id.ravel(), eye.bary.reshape(-1, 2)
-    run_slots(_error_bound_samples_slot, nslot, flat.vertices, flat.faces, tri, bary, idx, nrm, eps, out, bound, nslot)
+    run_threads(_error_bound_samples_slot, flat.vertices, flat.faces, tri, bary, idx, nrm, eps, out, bound)
     return out, bound
 
 

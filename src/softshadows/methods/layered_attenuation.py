@@ -21,7 +21,7 @@ from typing import ClassVar
 import numba
 import numpy as np
 
-from .._jit import kernel, run_slots
+from .._jit import kernel, run_slots, run_threads
 from ..errors import SoftShadowsError
 from ..geometry.light_samples import light_sample_points
 from ..raster import View, light_view, rasterize_depth
@@ -412,8 +412,7 @@ def sort_layers_slot(slot, ldi_depth, ldi_count, ldi_n, nslot):
 
 def sort_layers(ldi_depth, ldi_count, ldi_n) -> None:
     """:func:`sort_layers_slot` over every pixel, one slot per thread."""
-    nslot = numba.get_num_threads()
-    run_slots(sort_layers_slot, nslot, ldi_depth, ldi_count, ldi_n, nslot)
+    run_threads(sort_layers_slot, ldi_depth, ldi_count, ldi_n)
 
 
 def _geometry_digest(flat) -> str:

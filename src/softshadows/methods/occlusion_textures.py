@@ -21,7 +21,7 @@ from typing import ClassVar
 import numba
 import numpy as np
 
-from .._jit import kernel, run_slots
+from .._jit import kernel, run_slots, run_threads
 from ..errors import SoftShadowsError
 from ..raster import View, rasterize_fragments
 from ..raster.view import light_frame
@@ -332,8 +332,7 @@ def prefilter_mipmap(tex: np.ndarray):
     total = int(offs[-1] + sizes[-1] ** 2)
     pyr = np.empty((n, total), np.float32)
     sizes = np.asarray(sizes, np.int64)
-    nslot = numba.get_num_threads()
-    run_slots(_mip_build_slot, nslot, tex, pyr, offs, sizes, nslot)
+    run_threads(_mip_build_slot, tex, pyr, offs, sizes)
     return pyr, offs, sizes
 
 
@@ -383,8 +382,7 @@ def prefilter_nbuffers(tex: np.ndarray, levels: int | None = None, bounds: np.nd
     nl = full if levels is None else int(min(max(levels, 0), full))
     nb = np.empty((n, nl + 1, h, w), np.float32)
     bb = occupied_bounds(tex) if bounds is None else np.ascontiguousarray(bounds, dtype=np.float64)
-    nslot = numba.get_num_threads()
-    run_slots(_nbuffer_levels_slot, nslot, tex, nb, bb, nslot)
+    run_threads(_nbuffer_levels_slot, tex, nb, bb)
     return nb
 
 
@@ -410,8 +408,7 @@ def prefilter_sat(tex: np.ndarray) -> np.ndarray:
     if h * w >= 2**31:
         raise SoftShadowsError("method 'occlusion-textures': texture too large for a 32-bit summed-area table")
     sat = np.empty((n, h + 1, w + 1), np.int32)
-    nslot = numba.get_num_threads()
-    run_slots(_sat_build_slot, nslot, tex, sat, nslot)
+    run_threads(_sat_build_slot, tex, sat)
     return sat
 
 
@@ -950,10 +947,8 @@ def occlusion_visibility(
         vis = np.ones(len(pos), np.float64)
         if len(pos) and len(tex_used):
             pyr, offs, sizes, nb, sat = arrays
-            nslot = numba.get_num_threads()
-            run_slots(
+            run_threads(
                 eye_pass,
-                nslot,
                 pos,
                 setup.params(),
                 setup.z_planes,
@@ -969,7 +964,6 @@ def occlusion_visibility(
                 nb,
                 sat,
                 vis,
-                nslot,
             )
 
     l, r, b, t = setup.view.window

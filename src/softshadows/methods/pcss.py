@@ -16,7 +16,7 @@ from typing import ClassVar
 import numba
 import numpy as np
 
-from .._jit import kernel, run_slots
+from .._jit import kernel, run_slots, run_threads
 from ..raster.kernels import view_project
 from ..raster.view import VP_B, VP_FORWARD, VP_H, VP_L, VP_ORIGIN, VP_R, VP_RIGHT, VP_T, VP_UP, VP_W
 from .base import Method, MethodOutput, Param, register
@@ -670,10 +670,8 @@ def blocker_search(smap, eye, offs, light, bias, slope_bias, pattern, disk, rota
     if not np.isfinite(z_near):
         z_near = float(smap.view.near)
     z_near = max(z_near, 1e-9)
-    nslot = numba.get_num_threads()
-    run_slots(
+    run_threads(
         blocker_search_kernel,
-        nslot,
         smap.vp,
         smap.depth,
         eye.position,
@@ -694,7 +692,6 @@ def blocker_search(smap, eye, offs, light, bias, slope_bias, pattern, disk, rota
         avg,
         nblk,
         search,
-        nslot,
     )
     return zr, avg, nblk, search
 
@@ -709,10 +706,8 @@ def filtering(smap, eye, offs, zr, avg, nblk, light, pattern, disk, rotate, seed
     out = np.empty(eye.mask.shape, np.float32)
     wp = np.empty(n, np.float64)
     radius = np.empty(n, np.float64)
-    nslot = numba.get_num_threads()
-    run_slots(
+    run_threads(
         filtering_kernel,
-        nslot,
         smap.vp,
         smap.depth,
         eye.position,
@@ -734,7 +729,6 @@ def filtering(smap, eye, offs, zr, avg, nblk, light, pattern, disk, rotate, seed
         out,
         wp,
         radius,
-        nslot,
     )
     return out, wp, radius
 

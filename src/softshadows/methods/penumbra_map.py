@@ -24,7 +24,7 @@ from typing import ClassVar
 import numba
 import numpy as np
 
-from .._jit import kernel, run_slots
+from .._jit import kernel, run_slots, run_threads
 from ..geometry.silhouette import Silhouette, cached_adjacency, silhouette_adjacency, silhouette_brute
 from ..raster import View, rasterize_depth, rasterize_min_blend
 from ..raster.programs import PROGRAM_PENUMBRA, penumbra_intensity, smoothstep_bernstein  # noqa: F401
@@ -603,8 +603,7 @@ def build_zmax_pyramid(
     offs, ws, hs = np.array(offs, np.int64), np.array(ws, np.int64), np.array(hs, np.int64)
     if len(offs) > 1:
         zf = zp.reshape(-1) if occluder_depth is not None else np.ascontiguousarray(zp, dtype=np.float32).reshape(-1)
-        nslot = numba.get_num_threads()
-        run_slots(_pyramid_level1_slot, nslot, zf, h, w, data, offs, ws, hs, occ.reshape(-1), oh, ow, r0, c0, nslot)
+        run_threads(_pyramid_level1_slot, zf, h, w, data, offs, ws, hs, occ.reshape(-1), oh, ow, r0, c0)
         _pyramid_coarser(data, offs, ws, hs)
     return data, offs, ws, hs
 
@@ -766,10 +765,8 @@ def _reject_cones(view, q, zv, bx, by, z_far, pyr):
     lam = np.ones((n, seg))
     keep = np.ones(n, bool)
     eps = 1e-9 * z_far
-    nslot = numba.get_num_threads()
-    run_slots(
+    run_threads(
         _cone_reject_slot,
-        nslot,
         l,
         t,
         view.width / (r - l),
@@ -789,7 +786,6 @@ def _reject_cones(view, q, zv, bx, by, z_far, pyr):
         eps,
         lam,
         keep,
-        nslot,
     )
     return lam, keep
 

@@ -19,10 +19,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numba
 import numpy as np
 
-from .._jit import kernel, run_slots
+from .._jit import kernel, run_threads
 from ..raster import View, rasterize_depth
 from ..raster.kernels import view_project
 from ..raster.view import VP_L, VP_ORIGIN, VP_ORTHO, VP_R, VP_W, light_view
@@ -176,10 +175,7 @@ def shadow_lookup_slot(slot, vp, depth_map, position, normal, mask, bias, slope_
 def shadow_lookup(vp, depth_map, position, normal, mask, bias, slope_bias, pcf_radius) -> np.ndarray:
     """:func:`shadow_lookup_slot` over the whole image, one slot per thread: V (H,W) float32."""
     out = np.empty(mask.shape, np.float32)
-    nslot = numba.get_num_threads()
-    run_slots(
-        shadow_lookup_slot, nslot, vp, depth_map, position, normal, mask, bias, slope_bias, pcf_radius, out, nslot
-    )
+    run_threads(shadow_lookup_slot, vp, depth_map, position, normal, mask, bias, slope_bias, pcf_radius, out)
     return out
 
 

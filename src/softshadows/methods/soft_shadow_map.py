@@ -23,7 +23,7 @@ import numba
 import numpy as np
 from numba.cpython.unsafe.numbers import trailing_zeros
 
-from .._jit import kernel, py_callable, run_slots
+from .._jit import kernel, py_callable, run_slots, run_threads
 from ..analytic import disk_facing_frame, polygon_disk_area, quad_disk_area_small, quad_disk_area_small32
 from ..errors import SoftShadowsError
 from ..raster import View, rasterize_depth, rasterize_fragments
@@ -447,10 +447,8 @@ def refine_extents_sphere_slot(slot, patches, ext, rho, pyr_vals, pyr_off, pyr_w
 def refine_extents_sphere(patches, ext, rho, pyr_vals, pyr_off, pyr_ws, svp, rounds, z_plane=0.0) -> np.ndarray:
     """:func:`refine_extents_sphere_slot` over every patch, one slot per thread: ``ext``, narrowed
     in place."""
-    nslot = numba.get_num_threads()
-    run_slots(
+    run_threads(
         refine_extents_sphere_slot,
-        nslot,
         patches,
         ext,
         float(rho),
@@ -460,7 +458,6 @@ def refine_extents_sphere(patches, ext, rho, pyr_vals, pyr_off, pyr_ws, svp, rou
         svp,
         int(rounds),
         float(z_plane),
-        nslot,
     )
     return ext
 
@@ -605,8 +602,7 @@ def disk_frames(recv_depth, svp, rho) -> np.ndarray:
     """:func:`disk_frames_slot` over the whole map, one slot per thread: (12,H,W) float64, zeros
     where no receiver."""
     out = np.zeros((12, *recv_depth.shape))
-    nslot = numba.get_num_threads()
-    run_slots(disk_frames_slot, nslot, recv_depth, svp, float(rho), out, nslot)
+    run_threads(disk_frames_slot, recv_depth, svp, float(rho), out)
     return out
 
 
@@ -1306,8 +1302,7 @@ def disk_frames32(recv_depth, svp, rho) -> np.ndarray:
     """:func:`disk_frames32_slot` over the whole map, one slot per thread: (6,H,W) float32, zeros
     where no receiver."""
     out = np.zeros((6, *recv_depth.shape), np.float32)
-    nslot = numba.get_num_threads()
-    run_slots(disk_frames32_slot, nslot, recv_depth, svp, float(rho), out, nslot)
+    run_threads(disk_frames32_slot, recv_depth, svp, float(rho), out)
     return out
 
 
@@ -1577,8 +1572,7 @@ def project_soft_shadow_map(position, tri_id, receiver, svp, ssm) -> tuple[np.nd
     float32, the number of receiver pixels)."""
     out = np.empty(tri_id.shape, np.float32)
     n_row = np.zeros(tri_id.shape[0], np.int64)
-    nslot = numba.get_num_threads()
-    run_slots(project_soft_shadow_map_slot, nslot, position, tri_id, receiver, svp, ssm, out, n_row, nslot)
+    run_threads(project_soft_shadow_map_slot, position, tri_id, receiver, svp, ssm, out, n_row)
     return out, int(n_row.sum())
 
 

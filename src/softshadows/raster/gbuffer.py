@@ -4,10 +4,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numba
 import numpy as np
 
-from .._jit import kernel, run_slots
+from .._jit import kernel, run_threads
 
 
 @dataclass
@@ -99,6 +98,5 @@ def gather_points(position, normal, mask, eye):
     pts = np.empty((K, 3), np.float64)
     nrm = np.empty((K, 3), np.float64)
     idx = np.empty(K, np.int64)
-    nslot = numba.get_num_threads()
-    run_slots(_gather_slot, nslot, position, normal, mask, eye, offs, pts, nrm, idx, nslot)
+    run_threads(_gather_slot, position, normal, mask, eye, offs, pts, nrm, idx)
     return pts, nrm, idx

@@ -25,7 +25,7 @@ from numba.core import cgutils
 from numba.cpython.unsafe.numbers import trailing_zeros
 from numba.extending import intrinsic
 
-from .._jit import frozen, kernel, run_slots
+from .._jit import frozen, kernel, run_slots, run_threads
 from .gbuffer import Fragments, GBuffer
 from .kernels import view_coords, view_coords_to_screen
 from .programs import PROGRAM_ATTRIBUTE, PROGRAM_PENUMBRA, PROGRAMS, discard_depth, run_program, value_lower_bound
@@ -413,8 +413,7 @@ def _tile_row_bits_slot(slot, mask, words, T, ntx, nty, bits, tile_any, nslot):
 
 def _tile_row_bits(mask, words, T, ntx, nty, bits, tile_any) -> None:
     """:func:`_tile_row_bits_slot` over every tile, one slot per thread."""
-    nslot = numba.get_num_threads()
-    run_slots(_tile_row_bits_slot, nslot, mask, words, T, ntx, nty, bits, tile_any, nslot)
+    run_threads(_tile_row_bits_slot, mask, words, T, ntx, nty, bits, tile_any)
 
 
 #: a mesh with fewer vertices (faces) than this runs :func:`_vertex_screen_slot`
