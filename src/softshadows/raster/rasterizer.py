@@ -1694,6 +1694,30 @@ def _blend_list(prog, pparams, TL, qa, qb, prect, full, e0, e1, e2, pl, q, ca, z
 # p + 2n, ... A slot is a serial kernel run on its own thread by ``run_slots`` (not a prange: the
 # parfor compiled the body twice, docs/results/cold-start.md); its scratch is indexed by the slot.
 # ----------------------------------------------------------------------------------------------
+@kernel(inline=True)
+def _tile_to_rows(zb, tb, rz, rt, rect):
+    """A tile's nearest depths ``zb`` and triangles ``tb`` (T, T) into its columns of the slot's row
+    scratch ``rz``, ``rt`` (T, W). A tile of full width is copied TILE lanes a row, a loop of
+    constant trip count that LLVM vectorizes: the copy of a row's x1 - x0 + 1 columns stayed
+    scalar (its vector loop wanted 20 or more), about a fifth of a depth pass over a map that a few
+    large triangles cover."""
+    y0, y1, x0, x1 = rect
+    if x1 - x0 + 1 == TILE:
+        for i in range(y0, y1 + 1):
+            zrow = rz[i - y0, x0 : x0 + TILE]
+            trow = rt[i - y0, x0 : x0 + TILE]
+            for k in range(TILE):
+                zrow[k] = zb[i - y0, k]
+                trow[k] = tb[i - y0, k]
+        return
+    for i in range(y0, y1 + 1):
+        zrow = rz[i - y0, x0 : x1 + 1]
+        trow = rt[i - y0, x0 : x1 + 1]
+        for k in range(zrow.shape[0]):
+            zrow[k] = zb[i - y0, k]
+            trow[k] = tb[i - y0, k]
+
+
 @kernel(nogil=True, nrt=False)
 def _tiles_depth_slot(slot, fe, sc, depth_out, tri_out, zt, ft, rz, rt, ks):
     """Slot ``slot`` of :func:`_tiles_depth` (``run_slots``). Each tile's result goes to the slot's
@@ -1730,11 +1754,11 @@ def _tiles_depth_slot(slot, fe, sc, depth_out, tri_out, zt, ft, rz, rt, ks):
             _depth_pass(
                 vw, near, tile, rect, start, bins, box, edges, zinfo, planes, zb, tb, SP, sh, tri, face, nz, kss
             )
-            for i in range(y0, y1 + 1):
-                # row views: their indices are known non-negative (no wrap-around selects)
-                drow = rzs[i - y0, x0 : x1 + 1]
-                trow = rts[i - y0, x0 : x1 + 1]
-                if tiny:
+            if tiny:
+                for i in range(y0, y1 + 1):
+                    # row views: their indices are known non-negative (no wrap-around selects)
+                    drow = rzs[i - y0, x0 : x1 + 1]
+                    trow = rts[i - y0, x0 : x1 + 1]
                     zrow = zt[i, x0 : x1 + 1]
                     frow = ft[i, x0 : x1 + 1]
                     for k in range(drow.shape[0]):
@@ -1745,10 +1769,8 @@ def _tiles_depth_slot(slot, fe, sc, depth_out, tri_out, zt, ft, rz, rt, ks):
                         take = (zq < z) | ((zq == z) & (fq < f))
                         drow[k] = zq if take else z
                         trow[k] = fq if take else f
-                    continue
-                for k in range(drow.shape[0]):
-                    drow[k] = zb[i - y0, k]
-                    trow[k] = tb[i - y0, k]  # the face (-1: none)
+            else:
+                _tile_to_rows(zb, tb, rzs, rts, rect)  # tb: the faces (-1: none)
         ya = ty * T
         for i in range(ya, min(ya + T, H)):  # the row of tiles to the output, whole rows
             drow = depth_out[i]
@@ -1802,13 +1824,7 @@ def _tiles_gbuffer_slot(slot, fe, sc, out, rz, rt, ks):
             _depth_pass(
                 vw, near, tile, rect, start, bins, box, edges, zinfo, planes, zb, tb, SP, sh, tri, face, nz, kss
             )
-            y0, y1, x0, x1 = rect
-            for i in range(y0, y1 + 1):
-                zrow = rzs[i - y0, x0 : x1 + 1]
-                trow = rts[i - y0, x0 : x1 + 1]
-                for k in range(zrow.shape[0]):
-                    zrow[k] = zb[i - y0, k]
-                    trow[k] = tb[i - y0, k]
+            _tile_to_rows(zb, tb, rzs, rts, rect)
         ya = ty * T
         for i in range(ya, min(ya + T, H)):
             yw = wt - (i + 0.5) * wsy
