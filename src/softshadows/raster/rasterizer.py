@@ -1694,21 +1694,36 @@ def _blend_list(prog, pparams, TL, qa, qb, prect, full, e0, e1, e2, pl, q, ca, z
 # p + 2n, ... A slot is a serial kernel run on its own thread by ``run_slots`` (not a prange: the
 # parfor compiled the body twice, docs/results/cold-start.md); its scratch is indexed by the slot.
 # ----------------------------------------------------------------------------------------------
-@kernel(inline=True)
+@kernel(noalias=True)
 def _tile_to_rows(zb, tb, rz, rt, rect):
     """A tile's nearest depths ``zb`` and triangles ``tb`` (T, T) into its columns of the slot's row
-    scratch ``rz``, ``rt`` (T, W). A tile of full width is copied TILE lanes a row, a loop of
-    constant trip count that LLVM vectorizes: the copy of a row's x1 - x0 + 1 columns stayed
-    scalar (its vector loop wanted 20 or more), about a fifth of a depth pass over a map that a few
-    large triangles cover."""
+    scratch ``rz``, ``rt`` (T, W).
+
+    A whole tile (T x T pixels inside the image) is copied four rows at a time along its columns:
+    Numba runs no SLP vectorizer, and LLVM fully unrolls a loop of TILE short iterations into
+    scalar code (so did a copy row by row, with its TILE-column loop, ~20% of a depth pass over a
+    map that a few large triangles cover); a loop body of four rows is too large to unroll, and the
+    loop vectorizer takes it. The image's last row and column of tiles are copied row by row."""
     y0, y1, x0, x1 = rect
-    if x1 - x0 + 1 == TILE:
-        for i in range(y0, y1 + 1):
-            zrow = rz[i - y0, x0 : x0 + TILE]
-            trow = rt[i - y0, x0 : x0 + TILE]
+    if x1 - x0 + 1 == TILE and y1 - y0 + 1 == TILE:
+        for g in range(0, TILE, 4):
+            z0 = rz[g, x0 : x0 + TILE]
+            z1 = rz[g + 1, x0 : x0 + TILE]
+            z2 = rz[g + 2, x0 : x0 + TILE]
+            z3 = rz[g + 3, x0 : x0 + TILE]
+            f0 = rt[g, x0 : x0 + TILE]
+            f1 = rt[g + 1, x0 : x0 + TILE]
+            f2 = rt[g + 2, x0 : x0 + TILE]
+            f3 = rt[g + 3, x0 : x0 + TILE]
             for k in range(TILE):
-                zrow[k] = zb[i - y0, k]
-                trow[k] = tb[i - y0, k]
+                z0[k] = zb[g, k]
+                z1[k] = zb[g + 1, k]
+                z2[k] = zb[g + 2, k]
+                z3[k] = zb[g + 3, k]
+                f0[k] = tb[g, k]
+                f1[k] = tb[g + 1, k]
+                f2[k] = tb[g + 2, k]
+                f3[k] = tb[g + 3, k]
         return
     for i in range(y0, y1 + 1):
         zrow = rz[i - y0, x0 : x1 + 1]
