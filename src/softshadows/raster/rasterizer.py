@@ -44,7 +44,7 @@ from .view import (
     VP_W,
 )
 
-TILE = 16  #: tile size in pixels (square)
+TILE = 16  #: tile size in pixels (square; a multiple of 4: _tile_to_rows, _tile_zmax)
 SUBPIXEL = 4096.0  #: screen coordinates are snapped to 1/SUBPIXEL px before coverage
 _PERSPECTIVE_MIN_NEAR = 1e-9
 
@@ -1165,13 +1165,27 @@ def _piece_depth_floor(ortho, pl, prect, vw, zlo, zhi):
 
 @kernel(inline=True)
 def _tile_zmax(zb):
-    """The largest depth of the tile's pixels (+inf while one is empty)."""
-    m = -np.inf
+    """The largest depth of the tile's pixels (+inf while one is empty). Four running maxima (columns
+    k mod 4; the tile's width is a multiple of 4), not one: the compiled loop is scalar (a float
+    max reduction does not vectorize without fast-math), and one running maximum made it a chain of
+    256 dependent maxima. The depths hold no NaN, so the order does not change the result."""
+    m0 = -np.inf
+    m1 = -np.inf
+    m2 = -np.inf
+    m3 = -np.inf
     for li in range(zb.shape[0]):
-        for k in range(zb.shape[1]):
-            z = zb[li, k]
-            m = z if z > m else m
-    return m
+        for k in range(0, zb.shape[1], 4):
+            a = zb[li, k]
+            b = zb[li, k + 1]
+            c = zb[li, k + 2]
+            d = zb[li, k + 3]
+            m0 = a if a > m0 else m0
+            m1 = b if b > m1 else m1
+            m2 = c if c > m2 else m2
+            m3 = d if d > m3 else m3
+    m0 = m1 if m1 > m0 else m0
+    m2 = m3 if m3 > m2 else m2
+    return m2 if m2 > m0 else m0
 
 
 #: _depth_pass prefetches the data of the piece this many places ahead in the tile's list
