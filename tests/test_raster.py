@@ -834,8 +834,9 @@ def test_min_blend_texel_lists_equal_row_passes(kind, ortho, monkeypatch):
 
 def test_tile_row_bits_words_equal_bytes():
     """The texel mask's row bits per tile, read 8 texels a word (``_byte_bits``: any nonzero byte,
-    not only 1) and texel by texel, against a loop over the texels; widths that are and are not
-    multiples of 8 and of the tile."""
+    not only 1; ``_bytes_at``: words straddled where a row does not start on a word) and texel by
+    texel, against a loop over the texels; widths that are and are not multiples of 8 and of the
+    tile, mask sizes that are not a multiple of 8 bytes (the last texels read one by one)."""
     from softshadows.raster import rasterizer as R
 
     rng = np.random.default_rng(3)
@@ -845,7 +846,7 @@ def test_tile_row_bits_words_equal_bytes():
         ref = np.zeros((ntx * nty, R.TILE), np.int64)
         for i, j in zip(*np.nonzero(m)):
             ref[(i // R.TILE) * ntx + j // R.TILE, i % R.TILE] |= 1 << (j % R.TILE)
-        for words in ((m.view(np.uint64) if W % 8 == 0 else R._E2U64), R._E2U64):
+        for words in (m.reshape(-1)[: m.size // 8 * 8].view(np.uint64), R._E1U64):
             bits = np.empty_like(ref)
             anyt = np.empty(ntx * nty, np.uint8)
             R._tile_row_bits(m, words, R.TILE, ntx, nty, bits, anyt)

@@ -382,28 +382,44 @@ def _byte_bits(x):
     return np.int64((b * _PACK) >> _PACK_SHIFT)
 
 
+@kernel(inline=True)
+def _bytes_at(words, p):
+    """The 8 bytes of the flat byte buffer viewed as uint64 ``words`` that start at byte p (any p
+    with p + 8 <= 8 * len(words)), as one uint64 (little-endian): one word where p is a multiple of
+    8, else the two words it straddles, shifted together."""
+    q = p >> 3
+    o = np.uint64(8 * (p & 7))
+    lo = words[q]
+    if o == np.uint64(0):
+        return lo
+    return (lo >> o) | (words[q + 1] << (np.uint64(64) - o))
+
+
 @kernel(nogil=True, nrt=False)
 def _tile_row_bits_slot(slot, mask, words, T, ntx, nty, bits, tile_any, nslot):
     """bits[tile, li]: bit k set where texel (li, k) of the tile is set (nonzero) in ``mask`` (H,W)
-    uint8; tile_any[tile]: any of them. ``words``: ``mask`` viewed as (H, W / 8) uint64 where W is a
-    multiple of 8 (8 texels a word, :func:`_byte_bits`), else empty (texel by texel). Run by
-    ``run_slots``: slot ``slot`` of ``nslot`` takes the rows of tiles slot, slot + nslot, ... (whole
-    rows: no two slots read the same mask line)."""
+    uint8; tile_any[tile]: any of them. ``words``: ``mask``'s bytes viewed as uint64 (the first
+    8 * len(words) of them, row-major), read 8 texels at a time (:func:`_bytes_at`,
+    :func:`_byte_bits`) whatever W, empty: texel by texel. Run by ``run_slots``: slot ``slot`` of
+    ``nslot`` takes the rows of tiles slot, slot + nslot, ... (whole rows: no two slots read the
+    same mask line)."""
     H, W = mask.shape
-    nwords = words.shape[1] if words.shape[0] == H else 0
+    nbytes = 8 * words.shape[0]
     for ty in range(slot, nty, nslot):
         for tx in range(ntx):
             tile = ty * ntx + tx
             x0 = tx * T
             nw = min(T, W - x0)
-            nfull = min(nw // 8, nwords - (x0 >> 3)) if nwords > 0 else 0
             a = 0
             for li in range(T):
                 i = ty * T + li
                 b = 0
                 if i < H:
+                    p0 = i * W + x0
+                    # the texels' groups of 8 that lie inside the words, then texel by texel
+                    nfull = min(nw // 8, max(nbytes - p0, 0) // 8)
                     for w in range(nfull):
-                        b |= _byte_bits(words[i, (x0 >> 3) + w]) << (8 * w)
+                        b |= _byte_bits(_bytes_at(words, p0 + 8 * w)) << (8 * w)
                     for k in range(8 * nfull, nw):
                         b |= np.int64(mask[i, x0 + k] != 0) << k
                 bits[tile, li] = b
@@ -2336,7 +2352,7 @@ class _Blend(NamedTuple):
 
 
 _E2I64 = np.empty((0, 0), dtype=np.int64)
-_E2U64 = np.empty((0, 0), dtype=np.uint64)
+_E1U64 = np.empty(0, dtype=np.uint64)
 _NO_ZT = np.empty((0, 0), dtype=np.float64)
 _NO_FT = np.empty((0, 0), dtype=np.int32)
 #: rasterize_depth draws the small triangles directly (``_tiny_depth_slot``); False: all through setup
@@ -2411,7 +2427,8 @@ def _front_end(vp, W, H, verts, fcs, code, near, mask=None, tiny=False):
         rowbits = np.empty((ntx * nty, T), dtype=np.int64)
         tile_any = np.empty(ntx * nty, dtype=np.uint8)
         m8 = np.ascontiguousarray(mask).view(np.uint8)  # bool or uint8
-        words = m8.view(np.uint64) if W % 8 == 0 and m8.ctypes.data % 8 == 0 else _E2U64
+        flat = m8.reshape(-1)  # (row-major bytes; the words need an 8-byte aligned start)
+        words = flat[: flat.size // 8 * 8].view(np.uint64) if m8.ctypes.data % 8 == 0 else _E1U64
         _tile_row_bits(m8, words, T, ntx, nty, rowbits, tile_any)
     else:
         rowbits = _E2I64
