@@ -1,11 +1,14 @@
 """Rasterizer micro-benchmark: eye G-buffer 512^2 and shadow maps 1024^2 on the bunny.
 
-python benchmarks/bench_raster.py [nthreads] [--frame-views]
+python benchmarks/bench_raster.py [nthreads] [--frame-views] [--sphere]
 
 ``--frame-views``: instead of this script's own views (bunny and ground in every view), the two
 that ``hard``'s frame draws on the built-in ``bunny`` scene: the eye G-buffer of ``eye_view`` at
 512^2 (every face) and the 1024^2 depth map of the occluders from ``fit_light_view`` (the bunny
-alone, its front and back faces).
+alone, its front and back faces); with them, ``penumbra-map``'s receiver depth pass (the faces that
+receive but do not occlude, the ground, over its view bordered for the outer penumbra: 1287x1164 on
+``bunny`` with the sphere light), a few large triangles over the whole map. ``--sphere``: the
+sphere light (default: the rectangle).
 """
 
 import sys
@@ -49,15 +52,19 @@ print("threads", numba.get_num_threads())
 if "--frame-views" in sys.argv:
     import softshadows as ss
     from softshadows.api import eye_view
+    from softshadows.methods import penumbra_map as pm
     from softshadows.methods.shadowmap import fit_light_view
 
-    scene = ss.load_scene("bunny", "rect")
+    scene = ss.load_scene("bunny", "sphere" if "--sphere" in sys.argv else "rect")
     flat = scene.flat
     ev = eye_view(scene, 512, 512)
     lv = fit_light_view(scene, 1024)
     occ = flat.faces_where(flat.occluder)
+    _hv, pv, _border, _clipped = pm.penumbra_map_view(scene, 1024, pm.light_radius_of(scene.light))
+    recv = pm._receiver_only_faces(flat)
     bench("hard's eye G-buffer 512x512", lambda: rasterize(ev, flat.vertices, flat.faces))
     bench("hard's light depth map 1024x1024", lambda: rasterize_depth(lv, flat.vertices, occ))
+    bench(f"penumbra-map's receivers {pv.width}x{pv.height}", lambda: rasterize_depth(pv, flat.vertices, recv))
     sys.exit(0)
 g = bench("rasterize eye 512x512 (10k+2 tris)", lambda: rasterize(eye, V, F))
 print("   covered", g.mask.mean())
