@@ -1729,11 +1729,13 @@ def _tile_to_rows(zb, tb, rz, rt, rect):
     """A tile's nearest depths ``zb`` and triangles ``tb`` (T, T) into its columns of the slot's row
     scratch ``rz``, ``rt`` (T, W).
 
-    A whole tile (T x T pixels inside the image) is copied four rows at a time along its columns:
-    Numba runs no SLP vectorizer, and LLVM fully unrolls a loop of TILE short iterations into
-    scalar code (so did a copy row by row, with its TILE-column loop, ~20% of a depth pass over a
-    map that a few large triangles cover); a loop body of four rows is too large to unroll, and the
-    loop vectorizer takes it. The image's last row and column of tiles are copied row by row."""
+    A whole tile (T x T pixels inside the image) is copied four rows at a time along its columns.
+    Row by row, the copy stayed scalar: a loop over the TILE columns is fully unrolled into scalar
+    code (Numba runs no SLP vectorizer), and one over the tile's run-time width (<= TILE) never
+    reached LLVM's vector path (20 or more iterations); either was ~20% of a depth pass over a map
+    that a few large triangles cover. A body of four rows is too large to unroll, and the loop
+    vectorizer takes it (``vcvtpd2ps``). The image's last row and column of tiles are copied row by
+    row."""
     y0, y1, x0, x1 = rect
     if x1 - x0 + 1 == TILE and y1 - y0 + 1 == TILE:
         for g in range(0, TILE, 4):
