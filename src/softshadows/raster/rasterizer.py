@@ -2311,9 +2311,9 @@ class FrontEnd(NamedTuple):
     nty: int  #: rows of tiles
     near: float  #: the near plane (perspective: at least _PERSPECTIVE_MIN_NEAR)
     start: np.ndarray  #: (ntiles + 1,) int64: tile k's pieces are bins[start[k]:start[k + 1]]
-    bins: (
-        np.ndarray
-    )  #: int32 piece slots, per tile in increasing triangle index (the dense modes reorder them, _front_to_back)
+    #: int32 piece slots, per tile in increasing triangle index (the dense modes reorder a tile's
+    #: slots front to back when they draw it: _front_to_back)
+    bins: np.ndarray
     box: np.ndarray  #: (2F, 4) int32 pieces' pixel boxes, columns BOX_*
     edges: np.ndarray  #: (2F, 3, E_WIDTH) float64 pieces' edges, columns E_*
     zinfo: np.ndarray  #: (2F, 3) float64 pieces' depth ranges and robustness, columns Z_*
