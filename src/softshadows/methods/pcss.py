@@ -638,6 +638,34 @@ def filtering_kernel(
             out[i, j] = min(max(v, 0.0), 1.0)
 
 
+@kernel(nogil=True)
+def point_stats(nblk, search, radius, wp, taps):
+    """The frame's statistics over the points in one pass: (points with a blocker, points whose
+    every search tap is a blocker, the blockers' total, the search radii's sum and largest, then
+    over the points with a blocker the filter radii's sum and largest and the penumbra widths'
+    sum). Integer counts are exact; the float sums run in point order."""
+    nh = 0
+    nfull = 0
+    sum_blk = 0
+    s_sum = 0.0
+    s_max = -np.inf
+    r_sum = 0.0
+    r_max = -np.inf
+    w_sum = 0.0
+    for k in range(nblk.shape[0]):
+        b = nblk[k]
+        sum_blk += b
+        nfull += b == taps
+        s_sum += search[k]
+        s_max = max(s_max, search[k])
+        if b > 0:
+            nh += 1
+            r_sum += radius[k]
+            r_max = max(r_max, radius[k])
+            w_sum += wp[k]
+    return nh, nfull, sum_blk, s_sum, s_max, r_sum, r_max, w_sum
+
+
 # ---- the paper's steps (orchestration) ---------------------------------------------------------
 def light_extent(light) -> np.ndarray:
     """Light width along the map's (right, up) axes: rect (|u|, |v|), sphere (2r, 2r)."""
@@ -793,23 +821,22 @@ class PCSS(Method):
                 grid,
             )
         n = max(int(offs[-1]), 1)
-        # (counts and integer sums where they give the same numbers: fewer passes over the points)
-        has = nblk > 0
-        nh = int(np.count_nonzero(has))
-        rh = radius[has]
+        nh, nfull, sum_blk, s_sum, s_max, r_sum, r_max, w_sum = point_stats(nblk, search, radius, wp, len(search_pat))
         stats = {
             "map_size": map_size,
-            "map_coverage": float(np.count_nonzero(smap.tri_id >= 0) / smap.tri_id.size),  # (a count, no float copy)
+            # the map's finite texels, counted by the occupancy grid: a texel is finite where a
+            # triangle covers it (tri_id >= 0), +inf elsewhere
+            "map_coverage": float(grid[0][-1, -1] / smap.tri_id.size),
             "search_taps": int(len(search_pat)),
             "filter_taps": int(len(filter_pat)),
             "light_size": [float(x) for x in light_extent(light)],
             "early_out_fraction": (len(nblk) - nh) / n,
-            "fully_blocked_fraction": float(np.count_nonzero(nblk == len(search_pat)) / n),
-            "mean_blockers": float(nblk.sum(dtype=np.int64) / nh) if nh else 0.0,  # (exact integer sums)
-            "mean_search_radius_texels": float(search.mean()) if len(search) else 0.0,
-            "max_search_radius_texels": float(search.max()) if len(search) else 0.0,
-            "mean_filter_radius_texels": float(rh.mean()) if nh else 0.0,
-            "max_filter_radius_texels": float(rh.max()) if nh else 0.0,
-            "mean_penumbra_width": float(wp[has].mean()) if nh else 0.0,
+            "fully_blocked_fraction": float(nfull / n),
+            "mean_blockers": float(sum_blk / nh) if nh else 0.0,
+            "mean_search_radius_texels": float(s_sum / len(search)) if len(search) else 0.0,
+            "max_search_radius_texels": float(s_max) if len(search) else 0.0,
+            "mean_filter_radius_texels": float(r_sum / nh) if nh else 0.0,
+            "max_filter_radius_texels": float(r_max) if nh else 0.0,
+            "mean_penumbra_width": float(w_sum / nh) if nh else 0.0,
         }
         return MethodOutput(out, stats)
