@@ -50,10 +50,12 @@ import os
 import threading
 
 import numpy as np
-from numba import njit
+from llvmlite import ir
+from numba import njit, types
 from numba.core import codegen as _codegen
 from numba.core import typed_passes as _typed_passes
 from numba.core.registry import CPUDispatcher
+from numba.extending import intrinsic
 from numba.np.ufunc import parallel as _parallel
 from numba.np.ufunc import wrappers as _wrappers
 
@@ -323,6 +325,26 @@ def run_slots(fn, nslot: int, *args) -> None:
             f.exception()  # wait for every slot before anything is raised
     for f in futs:
         f.result()
+
+
+@intrinsic
+def next_item(typingctx, counter):
+    """Atomic ``counter[0] += 1`` (int64, sequentially consistent), returning the old value: a work
+    queue shared by the slots of a ``run_slots`` kernel, each taking the next item until none is
+    left (see :func:`work_counter`). Numba has no atomics; this is one LLVM ``atomicrmw add``."""
+    if not (isinstance(counter, types.Array) and counter.dtype == types.int64 and counter.ndim == 1):
+        return None
+
+    def codegen(context, builder, sig, args):
+        ary = context.make_array(sig.args[0])(context, builder, args[0])
+        return builder.atomic_rmw("add", ary.data, ir.Constant(ir.IntType(64), 1), "seq_cst")
+
+    return types.int64(counter), codegen
+
+
+def work_counter() -> np.ndarray:
+    """A fresh counter for :func:`next_item` (one per launch): items are claimed from 0 on."""
+    return np.zeros(1, np.int64)
 
 
 def run_threads(fn, *args) -> None:

@@ -17,11 +17,8 @@ from typing import ClassVar
 
 import numba
 import numpy as np
-from llvmlite import ir
-from numba import types
-from numba.extending import intrinsic
 
-from .._jit import kernel, run_slots, run_threads
+from .._jit import kernel, next_item, run_slots, run_threads
 from ..analytic import atan2_upper, rect_halfplanes_area
 from ..geometry.silhouette import build_adjacency, facing, facing_from_planes
 from ..raster.rasterizer import prefetch
@@ -605,21 +602,6 @@ def _pairs_by_bin(counts, pair_bin, n_bins):
     item = np.repeat(np.arange(len(counts), dtype=np.int64), counts)
     start, order = counting_sort(pair_bin, n_bins)
     return start, item[order]
-
-
-@intrinsic
-def next_item(typingctx, counter):
-    """Atomic ``counter[0] += 1`` (int64, sequentially consistent), returning the old value: the
-    shared work queue of :func:`bins_by_work`'s consumers. Numba has no atomics; this is one LLVM
-    ``atomicrmw add``."""
-    if not (isinstance(counter, types.Array) and counter.dtype == types.int64 and counter.ndim == 1):
-        return None
-
-    def codegen(context, builder, sig, args):
-        ary = context.make_array(sig.args[0])(context, builder, args[0])
-        return builder.atomic_rmw("add", ary.data, ir.Constant(ir.IntType(64), 1), "seq_cst")
-
-    return types.int64(counter), codegen
 
 
 def bins_by_work(bin_start, g_start, cells_per_bin):

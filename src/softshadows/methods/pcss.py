@@ -16,7 +16,7 @@ from typing import ClassVar
 import numba
 import numpy as np
 
-from .._jit import kernel, run_slots, run_threads
+from .._jit import kernel, next_item, run_slots, run_threads, work_counter
 from ..raster.kernels import view_project
 from ..raster.view import VP_B, VP_FORWARD, VP_H, VP_L, VP_ORIGIN, VP_R, VP_RIGHT, VP_T, VP_UP, VP_W
 from .base import Method, MethodOutput, Param, register
@@ -436,6 +436,7 @@ def blocker_search_kernel(
     avg_out,
     nblk_out,
     search_out,
+    counter,
     nslot=1,
 ):
     """Step 1. Per point: receiver depth (minus bias), average blocker depth and blocker count
@@ -446,14 +447,19 @@ def blocker_search_kernel(
     straight from the image: point k, the k-th surface pixel in row-major order (``offs[i]``: the
     surface pixels above row i), is written at k. The normal's sign does not matter (every use of
     it is odd in it or takes its absolute value, and negation is exact). Run by ``run_slots``, one
-    slot per thread, which takes every ``nslot``-th image row."""
+    slot per thread; each slot takes the next image row from ``counter`` (``next_item``) until none
+    is left, so that a slot whose thread is held up (a shared machine) takes fewer rows. A point's
+    outputs depend on its own inputs only: the same bits whatever slot computes it."""
     h, w = mask.shape
     H, W = depth_map.shape
     S = pattern.shape[0]
     texel1 = (vp[VP_R] - vp[VP_L]) / vp[VP_W]  # texel size at depth 1 (perspective)
     iw = _exact_inverse(vp[VP_W])
     ih = _exact_inverse(vp[VP_H])
-    for i in range(slot, h, nslot):  # rows dealt round-robin to one slot per thread
+    while True:  # the next image row (``counter``: a work queue shared by the slots)
+        i = next_item(counter)
+        if i >= h:
+            break
         k = offs[i] - 1
         for j in range(w):
             if not mask[i, j]:
@@ -560,6 +566,7 @@ def filtering_kernel(
     out,
     wp_out,
     radius_out,
+    counter,
     nslot=1,
 ):
     """Steps 2 and 3 per point: penumbra estimation, then percentage-closer filtering with a
@@ -572,7 +579,10 @@ def filtering_kernel(
     texel1 = (vp[VP_R] - vp[VP_L]) / vp[VP_W]  # texel size at depth 1 (perspective map)
     iw = _exact_inverse(vp[VP_W])
     ih = _exact_inverse(vp[VP_H])
-    for i in range(slot, h, nslot):  # rows dealt round-robin to one slot per thread
+    while True:  # the next image row (``counter``: a work queue shared by the slots)
+        i = next_item(counter)
+        if i >= h:
+            break
         k = offs[i] - 1
         for j in range(w):
             if not mask[i, j]:
@@ -720,6 +730,7 @@ def blocker_search(smap, eye, offs, light, bias, slope_bias, pattern, disk, rota
         avg,
         nblk,
         search,
+        work_counter(),
     )
     return zr, avg, nblk, search
 
@@ -757,6 +768,7 @@ def filtering(smap, eye, offs, zr, avg, nblk, light, pattern, disk, rotate, seed
         out,
         wp,
         radius,
+        work_counter(),
     )
     return out, wp, radius
 

@@ -25,7 +25,7 @@ from numba.core import cgutils
 from numba.cpython.unsafe.numbers import trailing_zeros
 from numba.extending import intrinsic
 
-from .._jit import frozen, kernel, run_slots, run_threads
+from .._jit import frozen, kernel, next_item, run_slots, run_threads, work_counter
 from .gbuffer import Fragments, GBuffer
 from .kernels import view_coords, view_coords_to_screen
 from .programs import PROGRAM_ATTRIBUTE, PROGRAM_PENUMBRA, PROGRAMS, discard_depth, run_program, value_lower_bound
@@ -1766,14 +1766,14 @@ def _tile_to_rows(zb, tb, rz, rt, rect):
 
 
 @kernel(nogil=True, nrt=False)
-def _tiles_depth_slot(slot, fe, sc, depth_out, tri_out, zt, ft, rz, rt, ks):
+def _tiles_depth_slot(slot, fe, sc, depth_out, tri_out, zt, ft, rz, rt, ks, counter):
     """Slot ``slot`` of :func:`_tiles_depth` (``run_slots``). Each tile's result goes to the slot's
     row scratch ``rz[slot]``, ``rt[slot]`` (T, W) first, and a finished row of tiles to the output in
     whole rows: written tile by tile (16 columns per image row), the stores went to 2 x 16 output
     lines far apart per tile, in a loop too short for LLVM's vector loop (about half of the tile
     pass's time on a map that the ground covers); whole rows are a vectorized, sequential copy."""
     vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, _normals, _rowbits, sh, tri = fe
-    zbuf, tbuf, spbuf, _ibuf, _lbuf, nslot, nz = sc
+    zbuf, tbuf, spbuf, _ibuf, _lbuf, _nslot, nz = sc
     vw = _view_window(vp)
     W, H = vw[0], vw[1]
     tiny = zt.shape[0] > 0
@@ -1784,7 +1784,10 @@ def _tiles_depth_slot(slot, fe, sc, depth_out, tri_out, zt, ft, rz, rt, ks):
     face = np.bool_(True)  # the depth mode's tb holds faces (not a literal: one specialisation)
     rzs = rz[slot]
     rts = rt[slot]
-    for ty in range(slot, nty, nslot):  # tile rows dealt round-robin: contiguous output rows
+    while True:  # the next row of tiles (``counter``: see _tiles_depth): contiguous output rows
+        ty = next_item(counter)
+        if ty >= nty:
+            break
         for tx in range(ntx):
             rect = _tile_rect(ty, tx, T, W, H)
             tile = ty * ntx + tx
@@ -1842,17 +1845,18 @@ def _tiles_depth(fe, sc, depth_out, tri_out, zt, ft):
     W = depth_out.shape[1]
     rz = np.empty((sc[5], fe.tile, W), np.float32)  # the slots' row scratch (see _tiles_depth_slot)
     rt = np.empty((sc[5], fe.tile, W), np.int32)
-    run_slots(_tiles_depth_slot, sc[5], fe, sc, depth_out, tri_out, zt, ft, rz, rt, _sort_scratch(fe, sc[5]))
+    ks = _sort_scratch(fe, sc[5])
+    run_slots(_tiles_depth_slot, sc[5], fe, sc, depth_out, tri_out, zt, ft, rz, rt, ks, work_counter())
 
 
 @kernel(nogil=True, nrt=False)
-def _tiles_gbuffer_slot(slot, fe, sc, out, rz, rt, ks):
+def _tiles_gbuffer_slot(slot, fe, sc, out, rz, rt, ks, counter):
     """Slot ``slot`` of :func:`_tiles_gbuffer` (``run_slots``). As in :func:`_tiles_depth_slot`, each
     tile's winners (depth, front-end triangle) go to the slot's row scratch ``rz[slot]``, ``rt[slot]``
     (T, W) first, and a finished row of tiles is turned into G-buffer rows whole, one image row at
     a time."""
     vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, normals, _rowbits, sh, tri = fe
-    zbuf, tbuf, spbuf, _ibuf, _lbuf, nslot, nz = sc
+    zbuf, tbuf, spbuf, _ibuf, _lbuf, _nslot, nz = sc
     vw = _view_window(vp)
     W, H, ortho, _far, wl, wt, wsx, wsy = vw
     frame = _view_frame(vp)
@@ -1864,7 +1868,10 @@ def _tiles_gbuffer_slot(slot, fe, sc, out, rz, rt, ks):
     rzs = rz[slot]
     rts = rt[slot]
     cols = (0, wl, wsx)
-    for ty in range(slot, nty, nslot):
+    while True:  # the next row of tiles (as in _tiles_depth_slot)
+        ty = next_item(counter)
+        if ty >= nty:
+            break
         for tx in range(ntx):
             rect = _tile_rect(ty, tx, T, W, H)
             tile = ty * ntx + tx
@@ -1886,7 +1893,7 @@ def _tiles_gbuffer(fe, sc, out):
     W = out[0].shape[1]
     rz = np.empty((sc[5], fe.tile, W), np.float64)  # the slots' row scratch (see _tiles_gbuffer_slot)
     rt = np.empty((sc[5], fe.tile, W), np.int32)
-    run_slots(_tiles_gbuffer_slot, sc[5], fe, sc, out, rz, rt, _sort_scratch(fe, sc[5]))
+    run_slots(_tiles_gbuffer_slot, sc[5], fe, sc, out, rz, rt, _sort_scratch(fe, sc[5]), work_counter())
 
 
 @kernel(nogil=True, nrt=False)
