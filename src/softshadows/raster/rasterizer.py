@@ -1784,7 +1784,7 @@ def _tiles_depth_slot(slot, fe, sc, depth_out, tri_out, zt, ft, rz, rt, ks, coun
     face = np.bool_(True)  # the depth mode's tb holds faces (not a literal: one specialisation)
     rzs = rz[slot]
     rts = rt[slot]
-    while True:  # the next row of tiles (``counter``: see _tiles_depth): contiguous output rows
+    while True:  # the next row of tiles (see _tiles_depth): contiguous output rows
         ty = next_item(counter)
         if ty >= nty:
             break
@@ -1841,7 +1841,9 @@ def _sort_scratch(fe, nslot) -> np.ndarray:
 def _tiles_depth(fe, sc, depth_out, tri_out, zt, ft):
     """rasterize_depth: the nearest depth (+inf: none) and triangle (-1: none) of every pixel; with a
     tiny path (``zt`` (H,W) not empty: :func:`_tiny_depth_slot`), merged with its nearest depths ``zt`` and
-    faces ``ft`` by the same rule (nearer wins, then the smaller face)."""
+    faces ``ft`` by the same rule (nearer wins, then the smaller face). The slots take the rows of
+    tiles from a shared counter (``next_item`` on ``work_counter()``) until none is left: a slot
+    whose thread the machine holds up takes fewer, and every row's output is its own."""
     W = depth_out.shape[1]
     rz = np.empty((sc[5], fe.tile, W), np.float32)  # the slots' row scratch (see _tiles_depth_slot)
     rt = np.empty((sc[5], fe.tile, W), np.int32)
