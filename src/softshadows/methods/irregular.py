@@ -18,7 +18,7 @@ from typing import ClassVar
 import numba
 import numpy as np
 
-from .._jit import kernel, next_item, run_slots, run_threads
+from .._jit import kernel, next_item, run_slots, run_threads, work_counter
 from ..analytic import atan2_upper, rect_halfplanes_area
 from ..geometry.silhouette import build_adjacency, facing, facing_from_planes
 from ..raster.rasterizer import prefetch
@@ -784,7 +784,7 @@ def count_umbrae(grid: SampleGrid, verts, faces, counted, center) -> tuple[np.nd
         umbra,
         tests,
         bins_by_work(bstart, grid.start, grid.bins * grid.bins * grid.slices),
-        np.zeros(1, np.int64),
+        work_counter(),
         np.empty((nw, max(max_col, 1)), np.int8),
         np.empty((nw, max(max_bin, 1)), np.int64),
     )
@@ -2362,7 +2362,7 @@ def accumulate_penumbrae(
         hits,
         evals,
         bins_by_work(bins[0], grid.start, grid.bins * grid.bins * grid.slices),
-        np.zeros(1, np.int64),
+        work_counter(),
         int(np.diff(grid.start[:: grid.slices]).max()) if n else 0,
         int(np.diff(grid.start[:: grid.bins * grid.bins * grid.slices]).max()) if n else 0,
     )
