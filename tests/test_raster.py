@@ -788,6 +788,32 @@ def test_tiny_path_is_bit_identical_to_the_tile_pass(ortho, monkeypatch):
             assert not ((t1[at_plane] >= q0 + 2) & (t1[at_plane] < n // 2 + 2)).any()
 
 
+@pytest.mark.parametrize("tiny", [True, False])
+def test_depth_only_is_the_same_depth(tiny, monkeypatch):
+    """``rasterize_depth(tri=False)`` writes no faces (None) and the same depths bit for bit as with
+    them: whole tiles and the image's partial last row and column of tiles (70 x 45 pixels), big
+    quads and small triangles (through the tiny path and through setup), both cull modes."""
+    from softshadows.raster import rasterizer as R
+
+    rng = np.random.default_rng(5)
+    W, H, n = 70, 45, 1500
+    c = rng.uniform(-2, W + 2, size=(n, 1, 2))
+    xy = c + rng.uniform(-4.0, 4.0, size=(n, 3, 2))
+    z = rng.uniform(0.6, 2.4, size=(n, 3))
+    quads = np.array([[[-3, -3], [W + 3, -3], [W + 3, H + 3]], [[-3, -3], [W + 3, H + 3], [-3, H + 3]]], float)
+    xy = np.concatenate([quads, xy]).reshape(-1, 2)
+    z = np.concatenate([np.full((2, 3), 2.3), z]).reshape(-1)
+    V, view, F = _screen_scene(xy, z, W, H, False, 0.5, 2.5)
+    monkeypatch.setattr(R, "TINY_PATH", tiny)
+    for cull in ("none", "back"):
+        d1, t1 = rasterize_depth(view, V, F, cull)
+        d0, t0 = rasterize_depth(view, V, F, cull, tri=False)
+        assert t0 is None and t1.shape == (H, W)
+        if cull == "none":  # the quads cover every pixel, the small faces win many
+            assert np.isfinite(d1).all() and (t1 >= 2).sum() > W * H // 4
+        np.testing.assert_array_equal(d0, d1)
+
+
 @pytest.mark.parametrize("kind", ["grid", "axis", "sliver", "huge", "random"])
 @pytest.mark.parametrize("ortho", [True, False])
 def test_min_blend_texel_lists_equal_row_passes(kind, ortho, monkeypatch):

@@ -181,10 +181,10 @@ def render_sample_depth(scene, view: View, one_pass: bool) -> tuple[np.ndarray, 
     faces is the same thing."""
     flat = scene.flat
     if one_pass:
-        return rasterize_depth(view, flat.vertices, flat.faces)[0], None
+        return rasterize_depth(view, flat.vertices, flat.faces, tri=False)[0], None
     occ_faces, rec_faces = _role_faces(flat)
-    d_occ = rasterize_depth(view, flat.vertices, occ_faces)[0] if len(occ_faces) else None
-    d_rec = rasterize_depth(view, flat.vertices, rec_faces)[0] if len(rec_faces) else None
+    d_occ = rasterize_depth(view, flat.vertices, occ_faces, tri=False)[0] if len(occ_faces) else None
+    d_rec = rasterize_depth(view, flat.vertices, rec_faces, tri=False)[0] if len(rec_faces) else None
     if d_occ is None:
         return d_rec, None
     if d_rec is not None:

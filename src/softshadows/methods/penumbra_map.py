@@ -133,10 +133,10 @@ def shadow_map_pass(scene, map_size: int, light_radius: float, base_view: View |
         hv, view, border, clipped = penumbra_map_view(scene, map_size, light_radius, base_view)
     flat = scene.flat
     occ_faces = flat.faces_where(flat.occluder)  # once per geometry
-    d_occ, _ = rasterize_depth(hv, flat.vertices, occ_faces, cull="none")
+    d_occ, _ = rasterize_depth(hv, flat.vertices, occ_faces, cull="none", tri=False)
     recv_faces = flat.cached(("penumbra_map_receiver_only_faces",), lambda: _receiver_only_faces(flat))
     if len(recv_faces):
-        zp, _ = rasterize_depth(view, flat.vertices, recv_faces, cull="none")
+        zp, _ = rasterize_depth(view, flat.vertices, recv_faces, cull="none", tri=False)
     else:
         zp = np.full((view.height, view.width), np.inf, np.float32)
     pl, _, pt, _ = border

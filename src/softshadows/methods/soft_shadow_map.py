@@ -132,8 +132,8 @@ def compute_receiver_depth_map(scene, view: View, mesh: bool = True) -> tuple[np
     ``mesh=False``: the mesh ids are not needed (no mesh of role ``both``: the accumulation never
     reads them), zeros instead."""
     flat = scene.flat
-    depth, tri = rasterize_depth(view, flat.vertices, flat.faces_where(flat.receiver), cull="none")
-    mesh = _mesh_ids(flat, flat.receiver, tri) if mesh else np.zeros(tri.shape, np.int32)
+    depth, tri = rasterize_depth(view, flat.vertices, flat.faces_where(flat.receiver), cull="none", tri=mesh)
+    mesh = _mesh_ids(flat, flat.receiver, tri) if mesh else np.zeros(depth.shape, np.int32)
     return np.ascontiguousarray(depth, dtype=np.float32), mesh
 
 
@@ -173,8 +173,8 @@ def compute_occluder_depth_map(
         )
         depth, tri = d.reshape(view.height, view.width), tri.reshape(view.height, view.width)
     else:
-        depth, tri = rasterize_depth(view, flat.vertices, faces, cull="back" if side == "front" else "none")
-    mesh = _mesh_ids(flat, flat.occluder, tri) if mesh else np.zeros(tri.shape, np.int32)
+        depth, tri = rasterize_depth(view, flat.vertices, faces, cull="back" if side == "front" else "none", tri=mesh)
+    mesh = _mesh_ids(flat, flat.occluder, tri) if mesh else np.zeros(depth.shape, np.int32)
     return np.ascontiguousarray(depth, dtype=np.float32), mesh
 
 

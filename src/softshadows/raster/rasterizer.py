@@ -1725,9 +1725,10 @@ def _blend_list(prog, pparams, TL, qa, qb, prect, full, e0, e1, e2, pl, q, ca, z
 # parfor compiled the body twice, docs/results/cold-start.md); its scratch is indexed by the slot.
 # ----------------------------------------------------------------------------------------------
 @kernel(noalias=True)
-def _tile_to_rows(zb, tb, rz, rt, rect):
+def _tile_to_rows(zb, tb, rz, rt, rect, with_tri):
     """A tile's nearest depths ``zb`` and triangles ``tb`` (T, T) into its columns of the slot's row
-    scratch ``rz``, ``rt`` (T, W).
+    scratch ``rz``, ``rt`` (T, W); the triangles only ``with_tri`` (``rasterize_depth(tri=False)``
+    does not output them).
 
     A whole tile (T x T pixels inside the image) is copied four rows at a time along its columns.
     Row by row, the copy stayed scalar: a loop over the TILE columns is fully unrolled into scalar
@@ -1737,6 +1738,18 @@ def _tile_to_rows(zb, tb, rz, rt, rect):
     vectorizer takes it (``vcvtpd2ps``). The image's last row and column of tiles are copied row by
     row."""
     y0, y1, x0, x1 = rect
+    if x1 - x0 + 1 == TILE and y1 - y0 + 1 == TILE and not with_tri:
+        for g in range(0, TILE, 4):
+            z0 = rz[g, x0 : x0 + TILE]
+            z1 = rz[g + 1, x0 : x0 + TILE]
+            z2 = rz[g + 2, x0 : x0 + TILE]
+            z3 = rz[g + 3, x0 : x0 + TILE]
+            for k in range(TILE):
+                z0[k] = zb[g, k]
+                z1[k] = zb[g + 1, k]
+                z2[k] = zb[g + 2, k]
+                z3[k] = zb[g + 3, k]
+        return
     if x1 - x0 + 1 == TILE and y1 - y0 + 1 == TILE:
         for g in range(0, TILE, 4):
             z0 = rz[g, x0 : x0 + TILE]
@@ -1762,7 +1775,9 @@ def _tile_to_rows(zb, tb, rz, rt, rect):
         trow = rt[i - y0, x0 : x1 + 1]
         for k in range(zrow.shape[0]):
             zrow[k] = zb[i - y0, k]
-            trow[k] = tb[i - y0, k]
+        if with_tri:
+            for k in range(zrow.shape[0]):
+                trow[k] = tb[i - y0, k]
 
 
 @kernel(nogil=True, nrt=False)
@@ -1784,6 +1799,7 @@ def _tiles_depth_slot(slot, fe, sc, depth_out, tri_out, zt, ft, rz, rt, ks, coun
     face = np.bool_(True)  # the depth mode's tb holds faces (not a literal: one specialisation)
     rzs = rz[slot]
     rts = rt[slot]
+    with_tri = tri_out.shape[0] > 0  # an empty tri_out: the depths only
     while True:  # the next row of tiles (see _tiles_depth): contiguous output rows
         ty = next_item(counter)
         if ty >= nty:
@@ -1820,16 +1836,18 @@ def _tiles_depth_slot(slot, fe, sc, depth_out, tri_out, zt, ft, rz, rt, ks, coun
                         drow[k] = zq if take else z
                         trow[k] = fq if take else f
             else:
-                _tile_to_rows(zb, tb, rzs, rts, rect)  # tb: the faces (-1: none)
+                _tile_to_rows(zb, tb, rzs, rts, rect, with_tri)  # tb: the faces (-1: none)
         ya = ty * T
         for i in range(ya, min(ya + T, H)):  # the row of tiles to the output, whole rows
             drow = depth_out[i]
-            trow = tri_out[i]
             zr = rzs[i - ya]
-            fr = rts[i - ya]
             for x in range(W):
                 drow[x] = zr[x]
-                trow[x] = fr[x]
+            if with_tri:
+                trow = tri_out[i]
+                fr = rts[i - ya]
+                for x in range(W):
+                    trow[x] = fr[x]
 
 
 def _sort_scratch(fe, nslot) -> np.ndarray:
@@ -1839,7 +1857,8 @@ def _sort_scratch(fe, nslot) -> np.ndarray:
 
 
 def _tiles_depth(fe, sc, depth_out, tri_out, zt, ft):
-    """rasterize_depth: the nearest depth (+inf: none) and triangle (-1: none) of every pixel; with a
+    """rasterize_depth: the nearest depth (+inf: none) and triangle (-1: none; not written where
+    ``tri_out`` has no rows) of every pixel; with a
     tiny path (``zt`` (H,W) not empty: :func:`_tiny_depth_slot`), merged with its nearest depths ``zt`` and
     faces ``ft`` by the same rule (nearer wins, then the smaller face). The slots take the rows of
     tiles from a shared counter (``next_item`` on ``work_counter()``) until none is left: a slot
@@ -1880,7 +1899,7 @@ def _tiles_gbuffer_slot(slot, fe, sc, out, rz, rt, ks, counter):
             _depth_pass(
                 vw, near, tile, rect, start, bins, box, edges, zinfo, planes, zb, tb, SP, sh, tri, face, nz, kss
             )
-            _tile_to_rows(zb, tb, rzs, rts, rect)
+            _tile_to_rows(zb, tb, rzs, rts, rect, True)
         ya = ty * T
         for i in range(ya, min(ya + T, H)):
             yw = wt - (i + 0.5) * wsy
@@ -2516,16 +2535,21 @@ def rasterize(view, vertices, faces, cull: str = "none") -> GBuffer:
     return GBuffer(position=pos, normal=nrm, depth=depth, tri_id=tri, bary=bary, mask=mask)
 
 
-def rasterize_depth(view, vertices, faces, cull: str = "none") -> tuple[np.ndarray, np.ndarray]:
+def rasterize_depth(
+    view, vertices, faces, cull: str = "none", tri: bool = True
+) -> tuple[np.ndarray, np.ndarray | None]:
     """Depth-only fast path (shadow maps): (depth (H,W) float32, +inf where none; tri_id (H,W) int32,
-    -1 where none). Same coverage, depth and tie rule as :func:`rasterize`."""
+    -1 where none). Same coverage, depth and tie rule as :func:`rasterize`. ``tri=False``: the
+    depths only (tri_id None), for a caller that never reads the faces: the tile pass then neither
+    copies nor writes them (the same depths, bit for bit; ~0.2 ms less a 1160x1095 map that the
+    ground covers, 2 threads)."""
     vp, W, H, verts, fcs, code, near = _prepare(view, vertices, faces, cull)
     if TINY_PATH:
         fe, tiny = _front_end(vp, W, H, verts, fcs, code, near, tiny=True)
     else:
         fe, tiny = _front_end(vp, W, H, verts, fcs, code, near), None
     depth = np.empty((H, W), dtype=np.float32)
-    tri = np.empty((H, W), dtype=np.int32)
+    faces_out = np.empty((H if tri else 0, W), dtype=np.int32)  # no rows: not written
     zt, ft = _NO_ZT, _NO_FT
     if tiny is not None:
         # the small triangles, drawn directly (no setup, no binning), merged by the tile pass
@@ -2537,8 +2561,8 @@ def rasterize_depth(view, vertices, faces, cull: str = "none") -> tuple[np.ndarr
             run_slots(
                 _tiny_depth_slot, nthreads, verts, fcs, vp, near, code, tstart, tface, tlist, phase, nthreads, zt, ft
             )
-    _tiles_depth(fe, _scratch(fe.tile), depth, tri, zt, ft)
-    return depth, tri
+    _tiles_depth(fe, _scratch(fe.tile), depth, faces_out, zt, ft)
+    return depth, (faces_out if tri else None)
 
 
 def _fragments(fe: FrontEnd, W: int, H: int) -> Fragments:
