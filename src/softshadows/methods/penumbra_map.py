@@ -790,8 +790,8 @@ def _reject_cones(view, q, zv, bx, by, z_far, pyr):
     return lam, keep
 
 
-@kernel(nrt=False)
-def _sheet_reject_kernel(sx, sy, zc, z_far, iters, pieces, eps, data, offs, ws, hs, ucut):
+@kernel(nogil=True, nrt=False)
+def _sheet_reject_slot(slot, sx, sy, zc, z_far, iters, pieces, eps, data, offs, ws, hs, ucut, nslot):
     """Per sheet: the fraction ``ucut`` of every ruling (from the edge, u = 0, to the far line,
     u = 1) that can carry kept fragments; 0 drops the sheet. ``sx, sy`` (n, 4) pixel coordinates of
     the corners v0, v1, F1, F0; ``zc`` (n, 2) depths of v0, v1 (F0, F1 lie at ``z_far``).
@@ -799,9 +799,11 @@ def _sheet_reject_kernel(sx, sy, zc, z_far, iters, pieces, eps, data, offs, ws, 
     At fraction u the sheet's depth is (1 - u) Z_v(t) + u z_far >= (1 - u) z_min + u z_far, and
     its footprint between fractions ua < ub lies in the hull of the four ruling points there. As
     for the cones: bound the whole sheet ``iters`` times, then cut it in ``pieces`` slices and end
-    after the last slice whose max Z_P lies behind its nearest depth (and not behind that max)."""
+    after the last slice whose max Z_P lies behind its nearest depth (and not behind that max).
+    Run by ``run_slots``: slot ``slot`` of ``nslot`` takes every ``nslot``-th sheet (each sheet's
+    result is its own: the same whatever the slots)."""
     n = sx.shape[0]
-    for i in range(n):  # serial: ~1k sheets, cheaper than a parallel region
+    for i in range(slot, n, nslot):
         zmin = min(zc[i, 0], zc[i, 1])
         u = 1.0
         for _ in range(iters):
@@ -856,7 +858,8 @@ def _reject_sheets(view, V0, V1, F0, F1, z0, z1, z_far, pyr):
     pts = np.stack([V0, V1, F1, F0], axis=1).reshape(-1, 3)
     sx, sy, _ = view.project(pts)
     ucut = np.ones(len(V0))
-    _sheet_reject_kernel(
+    run_threads(
+        _sheet_reject_slot,
         np.ascontiguousarray(sx.reshape(-1, 4)),
         np.ascontiguousarray(sy.reshape(-1, 4)),
         np.ascontiguousarray(np.stack([z0, z1], 1), dtype=np.float64),
