@@ -1735,7 +1735,10 @@ def _tile_to_rows(zb, tb, rz, rt, rect, with_tri):
     code (Numba runs no SLP vectorizer), and one over the tile's run-time width (<= TILE) never
     reached LLVM's vector path (20 or more iterations); either was ~20% of a depth pass over a map
     that a few large triangles cover. A body of four rows is too large to unroll, and the loop
-    vectorizer takes it (``vcvtpd2ps``). The image's last row and column of tiles are copied row by
+    vectorizer takes it (``vcvtpd2ps``). The depths-only copy is a loop of its own: the depths and
+    triangles copied in two loops of four rows (one under ``if with_tri``) made the G-buffer and
+    depth passes 3-5% slower than this one loop of eight stores (``benchmarks/bench_raster.py 2
+    --frame-views``, trees alternating). The image's last row and column of tiles are copied row by
     row."""
     y0, y1, x0, x1 = rect
     if x1 - x0 + 1 == TILE and y1 - y0 + 1 == TILE and not with_tri:
