@@ -2,13 +2,18 @@
 
     PYTHONPATH=src python benchmarks/bench_raster_ab.py --rev 82e1f56 [--runs 15] [--only gbuffer]
 
-Extracts ``src/softshadows/raster/`` and ``src/softshadows/_jit.py`` of ``--rev`` into a package
-``softshadows_ref`` under ``$TMPDIR/softshadows_ref_<rev>`` (kept, with Numba's cache) (the raster package imports only relative modules), checks that both
-give identical outputs on the timed cases, then times the fill-bound paths of
+Extracts ``src/softshadows/raster/``, ``src/softshadows/geometry/`` (``raster/view.py`` imports
+it), ``_jit.py`` and ``errors.py`` of ``--rev`` into a package ``softshadows_ref`` under
+``$TMPDIR/softshadows_ref_<rev>`` (kept, with Numba's cache; delete it after a failed extraction),
+checks that both give identical outputs on the timed cases, then times the fill-bound paths of
 ``bench_raster_fill.py --bench`` (plus the penumbra program's min-blend with hierarchical culling)
 for both, interleaved run by run after a warm-up (the order alternates between runs), and prints
 the median wall and CPU (process, all threads) time of each and the medians of the per-run ratios
 (this tree / the revision). On a shared, loaded machine the CPU-time ratio is the steadier one.
+
+Read the ratios against an A/A run (``--rev HEAD`` on a clean tree): on 2026-12-03 one gave
+0.84-0.95 wall and 0.89-0.96 CPU, not 1.0 (the extracted copy ran slower; cause not found), and a
+change measured the same against 9ee071c.
 """
 
 from __future__ import annotations
@@ -28,18 +33,22 @@ from softshadows.api import eye_view
 from softshadows.raster.programs import PROGRAM_ATTRIBUTE, PROGRAM_PENUMBRA
 
 shadowmap = importlib.import_module("softshadows.methods.shadowmap")
-_FILES = ("src/softshadows/_jit.py",)
-_PKG = "src/softshadows/raster/"
+_FILES = ("src/softshadows/_jit.py", "src/softshadows/errors.py")
+#: the raster package and what it imports from the package (``raster/view.py``: ``geometry``)
+_PKGS = ("src/softshadows/raster/", "src/softshadows/geometry/")
 
 
 def extract(rev: str, root: Path) -> Path:
-    """Write the raster package of ``rev`` as package ``softshadows_ref`` under ``root``."""
+    """Write the raster package of ``rev`` (and the packages it imports) as package
+    ``softshadows_ref`` under ``root``."""
     repo = Path(__file__).resolve().parents[1]
-    names = subprocess.run(
-        ["git", "ls-tree", "--name-only", rev, _PKG], cwd=repo, check=True, capture_output=True, text=True
-    ).stdout.split()
+    names = []
+    for sub in _PKGS:
+        names += subprocess.run(
+            ["git", "ls-tree", "--name-only", rev, sub], cwd=repo, check=True, capture_output=True, text=True
+        ).stdout.split()
+        (root / "softshadows_ref" / sub.removeprefix("src/softshadows/")).mkdir(parents=True, exist_ok=True)
     pkg = root / "softshadows_ref"
-    (pkg / "raster").mkdir(parents=True)
     (pkg / "__init__.py").write_text("")
     for name in [*names, *_FILES]:
         if not name.endswith(".py"):
