@@ -174,7 +174,7 @@ class ReferenceImages:
         self.kpix = np.array([(v.window[1] - v.window[0]) / v.width for v in views], np.float64)
         self.gapk = gap * self.kpix
         for k, v in enumerate(views):
-            z = build_shadow_map(scene, v).depth.astype(np.float64)
+            z = build_shadow_map(scene, v, tri=False).depth.astype(np.float64)
             # depth (shadow) bias in texels: the stored depth moved away from the light
             self.D[k, :resolution, :resolution] = (z * (1.0 + bias * self.kpix[k])).astype(np.float32)
             build_quadtrees(self.D[k], float(self.gapk[k]), offs, self.MN[k], self.MX[k], self.CONN[k])

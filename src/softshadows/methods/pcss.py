@@ -809,7 +809,7 @@ class PCSS(Method):
         filter_pat = sample_pattern(filter_samples, pattern, disk)
         with ctx.timer.phase("shadow_map"):
             view = fit_light_view(ctx.scene, map_size)
-            smap = build_shadow_map(ctx.scene, view)
+            smap = build_shadow_map(ctx.scene, view, tri=False)  # (the faces are never read)
         with ctx.timer.phase("blocker_search"):
             grid = occupancy_grid(smap.depth)
             zr, avg, nblk, search = blocker_search(
@@ -837,8 +837,8 @@ class PCSS(Method):
         stats = {
             "map_size": map_size,
             # the map's finite texels, counted by the occupancy grid: a texel is finite where a
-            # triangle covers it (tri_id >= 0), +inf elsewhere
-            "map_coverage": float(grid[0][-1, -1] / smap.tri_id.size),
+            # triangle covers it, +inf elsewhere
+            "map_coverage": float(grid[0][-1, -1] / smap.depth.size),
             "search_taps": int(len(search_pat)),
             "filter_taps": int(len(filter_pat)),
             "light_size": [float(x) for x in light_extent(light)],

@@ -32,7 +32,7 @@ from ..scene.types import light_key
 class ShadowMap:
     view: View
     depth: np.ndarray  # (H,W) float32 view depth of the nearest occluder, +inf where none
-    tri_id: np.ndarray  # (H,W) int32 index into the faces that were rasterized
+    tri_id: np.ndarray | None  # (H,W) int32 index into the faces that were rasterized (None: not made)
 
     @property
     def vp(self) -> np.ndarray:
@@ -66,13 +66,16 @@ def fit_light_view(
     return flat.cached(("fit_light_view", light_key(light), size, which, bool(ortho), height, margin), compute)
 
 
-def build_shadow_map(scene, view: View, faces_mask: np.ndarray | None = None, cull: str = "none") -> ShadowMap:
-    """Rasterize the selected faces (default: occluders) into a depth map from ``view``."""
+def build_shadow_map(
+    scene, view: View, faces_mask: np.ndarray | None = None, cull: str = "none", tri: bool = True
+) -> ShadowMap:
+    """Rasterize the selected faces (default: occluders) into a depth map from ``view``; with
+    ``tri=False`` the depths only (``tri_id`` None: ``rasterize_depth(tri=False)``)."""
     flat = scene.flat
     if faces_mask is None:
         faces_mask = flat.occluder
     faces = flat.faces_where(faces_mask)  # cached for the role masks
-    depth, tri = rasterize_depth(view, flat.vertices, faces, cull=cull)
+    depth, tri = rasterize_depth(view, flat.vertices, faces, cull=cull, tri=tri)
     return ShadowMap(view, depth, tri)
 
 
