@@ -694,3 +694,25 @@ def test_median_in_place_is_numpys_median():
             y = x.copy()
             assert median_in_place(y) == want
             assert np.array_equal(np.sort(y), np.sort(x))  # a permutation of x
+
+
+@pytest.mark.parametrize("light", ["rect", "sphere"])
+def test_frame_is_the_same_whatever_the_threads(light):
+    """The whole method (its work queues, the umbra count overlapping the silhouettes and quads on
+    the calling thread, ``start_slots``) gives the same V bits and statistics with one thread as
+    with two, at the defaults on `bunny`."""
+    import numba
+
+    scene = builtin.build("bunny", light)
+    old = numba.get_num_threads()
+    runs = []
+    try:
+        for t in (1, min(2, numba.config.NUMBA_NUM_THREADS)):
+            numba.set_num_threads(t)
+            runs.append(render(scene, "irregular", 96, 72))
+    finally:
+        numba.set_num_threads(old)
+    a, b = runs
+    assert np.array_equal(a.visibility, b.visibility, equal_nan=True)
+    assert (a.visibility < 0.5).any() and ((a.visibility > 0.05) & (a.visibility < 0.95)).any()
+    assert a.stats == b.stats

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._jit import kernel, run_threads
+from .._jit import kernel, next_item, run_threads, work_counter
 
 
 @dataclass
@@ -68,12 +68,29 @@ def _row_counts(mask):
 
 
 @kernel(nogil=True, nrt=False)
-def _gather_slot(slot, position, normal, mask, eye, offs, pts, nrm, idx, nslot):
-    """The surface pixels of the slot-th of ``nslot`` contiguous blocks of rows (``run_slots``, one
-    slot per thread): row i's from pts/nrm/idx[offs[i]] on (see :func:`gather_points`)."""
-    H, W = mask.shape
+def _gather_slot(slot, position, normal, mask, eye, offs, pts, nrm, idx, counter, nslot):
+    """The surface pixels of the image's rows, row i's from pts/nrm/idx[offs[i]] on (see
+    :func:`gather_points`). Run by ``run_slots``, one slot per thread: each slot takes the next run
+    of ``_GATHER_ROWS`` rows (``next_item``) until none is left. Rows hold unequal numbers of surface
+    pixels: with fixed halves of the rows, one thread took 1.5x the other's time on `bunny`."""
+    H = mask.shape[0]
     ex, ey, ez = eye[0], eye[1], eye[2]  # read once, not at every surface pixel
-    for i in range(H * slot // nslot, H * (slot + 1) // nslot):
+    while True:
+        q = next_item(counter) * _GATHER_ROWS
+        if q >= H:
+            break
+        _gather_rows(q, min(q + _GATHER_ROWS, H), position, normal, mask, ex, ey, ez, offs, pts, nrm, idx)
+
+
+#: rows per work item of :func:`_gather_slot`
+_GATHER_ROWS = 16
+
+
+@kernel(inline=True)
+def _gather_rows(i0, i1, position, normal, mask, ex, ey, ez, offs, pts, nrm, idx):
+    """Rows i0 to i1 - 1 of :func:`_gather_slot`."""
+    W = mask.shape[1]
+    for i in range(i0, i1):
         k = offs[i]
         for j in range(W):
             if mask[i, j]:
@@ -98,5 +115,5 @@ def gather_points(position, normal, mask, eye):
     pts = np.empty((K, 3), np.float64)
     nrm = np.empty((K, 3), np.float64)
     idx = np.empty(K, np.int64)
-    run_threads(_gather_slot, position, normal, mask, eye, offs, pts, nrm, idx)
+    run_threads(_gather_slot, position, normal, mask, eye, offs, pts, nrm, idx, work_counter())
     return pts, nrm, idx
