@@ -716,3 +716,43 @@ def test_frame_is_the_same_whatever_the_threads(light):
     assert np.array_equal(a.visibility, b.visibility, equal_nan=True)
     assert (a.visibility < 0.5).any() and ((a.visibility > 0.05) & (a.visibility < 0.95)).any()
     assert a.stats == b.stats
+
+
+@pytest.mark.parametrize("light", ["rect", "sphere"])
+def test_error_bound_extent_is_the_extent_of_its_samples(light):
+    """``error_bound_samples``' extent (folded from its blocks) is ``_extent`` of the samples it
+    returns, the same bits: the grid built from it is the grid built from the samples."""
+    from softshadows.methods.irregular import _extent, error_bound_samples
+
+    scene = builtin.build("bunny", light)
+    view = eye_view(scene, 160, 120)
+    g = rasterize(view, scene.flat.vertices, scene.flat.faces, cull="none")
+    ctx = FrameContext(scene=scene, eye=g, eye_view=view, timer=Timer())
+    _p, nrm, idx = ctx.points()
+    c = np.asarray(scene.light.center, float)
+    pts, _bound, ext = error_bound_samples(ctx.flat, ctx.eye, idx, nrm, 0.0, c)
+    want = _extent(pts, c)
+    assert len(pts) > 1000
+    for a, b in zip(ext, want, strict=True):
+        assert np.array_equal(np.asarray(a), np.asarray(b))
+        assert np.array_equal(np.signbit(a), np.signbit(b))
+
+
+def test_fold_extent_keeps_the_first_of_equal_values():
+    """``fold_extent`` folds its rows in order as one pass over the samples would: of equal values
+    (-0.0 and 0.0) the first is kept, d0 and d1 are the smallest and largest; 1 and 1 without
+    samples."""
+    from softshadows.methods.irregular import fold_extent
+
+    part = np.array(
+        [
+            [0.0, 1.0, -0.0, 2.0, 0.0, 3.0, 5.0, 4.0],
+            [-0.0, 0.5, 0.0, 1.5, -0.0, 4.0, 5.0, 6.0],
+            [np.inf, np.inf, np.inf, np.inf, -np.inf, -np.inf, -np.inf, 0.0],  # an empty run
+        ]
+    )
+    lo, hi, d0, d1 = fold_extent(part, 7)
+    assert lo.tolist() == [0.0, 0.5, 0.0] and not np.signbit(lo[0]) and np.signbit(lo[2])
+    assert hi.tolist() == [0.0, 4.0, 5.0] and not np.signbit(hi[0])
+    assert (d0, d1) == (1.5, 6.0)
+    assert fold_extent(part[2:], 0)[2:] == (1.0, 1.0)

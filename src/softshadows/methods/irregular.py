@@ -370,21 +370,36 @@ def _extent_slot(slot, pts, c, part, nslot):
 
 def _extent(pts, c):
     """(lo (3,), hi (3,), d0, d1): the samples' bounding box and their smallest and largest distance
-    to c, one block of the samples per slot (:func:`_extent_slot`), the slots' rows folded in order."""
+    to c, one block of the samples per slot (:func:`_extent_slot`), the slots' rows folded in order
+    (:func:`fold_extent`)."""
     nslot = numba.get_num_threads()
     part = np.empty((nslot, 8))
     run_slots(_extent_slot, nslot, pts, c, part, nslot)
-    lo = np.full(3, np.inf)
-    hi = np.full(3, -np.inf)
-    d0, d1 = np.inf, 0.0
-    for q in part.tolist():
+    return fold_extent(part, pts.shape[0])
+
+
+@kernel
+def _fold_extent(part, ext):
+    """``ext`` (8,) := the rows of ``part`` (``_extent_slot``'s layout) folded in order."""
+    for i in range(3):
+        ext[i] = np.inf
+        ext[4 + i] = -np.inf
+    ext[3], ext[7] = np.inf, 0.0
+    for q in range(part.shape[0]):
         for i in range(3):
-            lo[i] = min(lo[i], q[i])
-            hi[i] = max(hi[i], q[4 + i])
-        d0, d1 = min(d0, q[3]), max(d1, q[7])
-    if pts.shape[0] == 0:
-        d0, d1 = 1.0, 1.0
-    return lo, hi, d0, d1
+            ext[i] = min(ext[i], part[q, i])
+            ext[4 + i] = max(ext[4 + i], part[q, 4 + i])
+        ext[3], ext[7] = min(ext[3], part[q, 3]), max(ext[7], part[q, 7])
+
+
+def fold_extent(part, n: int):
+    """(lo (3,), hi (3,), d0, d1) of n samples from the rows of ``part`` (nrows, 8: lo xyz, smallest
+    distance, hi xyz, largest distance; of consecutive runs of the samples, in order), folded in
+    order: the bits of one pass over the samples (see above); d0 = d1 = 1 without samples."""
+    ext = np.empty(8)
+    _fold_extent(part, ext)
+    d0, d1 = (float(ext[3]), float(ext[7])) if n else (1.0, 1.0)
+    return ext[0:3].copy(), ext[4:7].copy(), d0, d1
 
 
 @kernel(nogil=True, nrt=False, noalias=True)
@@ -443,11 +458,12 @@ def cell_numbers(gx: int, gy: int, B: int, nbx: int) -> tuple[np.ndarray, np.nda
     return (cx // B) * (B * B) + cx % B, (cy // B) * (nbx * B * B) + (cy % B) * B
 
 
-def build_sample_grid(light, pts: np.ndarray, grid: int, bins: int, slices: int) -> SampleGrid:
+def build_sample_grid(light, pts: np.ndarray, grid: int, bins: int, slices: int, extent=None) -> SampleGrid:
     """Step (a): insert every eye sample into the light-view grid by a counting sort (O(n)) and record
-    each screen bin's maximum receiver distance (used by the coarse penumbra step)."""
+    each screen bin's maximum receiver distance (used by the coarse penumbra step). ``extent``: the
+    samples' :func:`_extent` when the caller has it already (:func:`error_bound_samples`)."""
     n = len(pts)
-    lo, hi, d0, d1 = _extent(pts, np.asarray(light.center, np.float64))
+    lo, hi, d0, d1 = _extent(pts, np.asarray(light.center, np.float64)) if extent is None else extent
     view = fit_grid_view(light, pts, grid, lo, hi)
     vp = view.params()
     nbx = nby = -(-grid // bins)
@@ -2485,15 +2501,19 @@ _EB_BLOCK = 256
 
 
 @kernel(nogil=True, noalias=True)
-def _error_bound_samples_slot(slot, verts, faces, tri_img, bary_img, idx, nrm, eps, out, bound, counter, nslot):
+def _error_bound_samples_slot(
+    slot, verts, faces, tri_img, bary_img, idx, nrm, eps, lc, out, bound, part, counter, nslot
+):
     """Ground truth's ray origins (:func:`ground_truth.hit_point`, float64): p + (BOUND_SAFETY x its
     error bound + eps) n, n the geometric normal turned toward the eye; gathers from the G-buffer.
     By blocks of points: the triangles' vertices and the points' inputs gathered into contiguous
     scratch first, then ``hit_point_at`` in a loop without gathers or branches (it vectorizes), its
     outputs stored contiguous and copied to the rows of ``out`` last: the same arithmetic, the same
-    bits as ``hit_point`` point by point. Run by ``run_slots``: each slot takes the next block
-    (``next_item``) until none is left (its scratch made once): with fixed halves, one thread
-    finished ~0.3 ms after the other on `bunny`."""
+    bits as ``hit_point`` point by point. Also each block's row of ``part`` (``_extent_slot``'s:
+    the block's box and its smallest and largest distance to the light centre ``lc``), for :func:`fold_extent`: the
+    grid's extent without another pass over the samples. Run by ``run_slots``: each slot takes the
+    next block (``next_item``) until none is left (its scratch made once): with fixed halves, one
+    thread finished ~0.3 ms after the other on `bunny`."""
     n = idx.shape[0]
     nblk = (n + _EB_BLOCK - 1) // _EB_BLOCK
     g = np.empty((17, _EB_BLOCK))  # inputs (14 rows), then the result (3)
@@ -2526,8 +2546,19 @@ def _error_bound_samples_slot(slot, verts, faces, tri_img, bary_img, idx, nrm, e
             g[14, i] = px + off * nx
             g[15, i] = py + off * ny
             g[16, i] = pz + off * nz
+        lo0 = lo1 = lo2 = d0 = np.inf
+        hi0 = hi1 = hi2 = -np.inf
+        d1 = 0.0
         for i in range(m):
-            out[k0 + i, 0], out[k0 + i, 1], out[k0 + i, 2] = g[14, i], g[15, i], g[16, i]
+            x, y, z = g[14, i], g[15, i], g[16, i]
+            out[k0 + i, 0], out[k0 + i, 1], out[k0 + i, 2] = x, y, z
+            lo0, lo1, lo2 = min(lo0, x), min(lo1, y), min(lo2, z)
+            hi0, hi1, hi2 = max(hi0, x), max(hi1, y), max(hi2, z)
+            dx, dy, dz = x - lc[0], y - lc[1], z - lc[2]
+            d2 = dx * dx + dy * dy + dz * dz
+            d0, d1 = min(d0, d2), max(d1, d2)
+        part[blk, 0], part[blk, 1], part[blk, 2], part[blk, 3] = lo0, lo1, lo2, np.sqrt(d0)
+        part[blk, 4], part[blk, 5], part[blk, 6], part[blk, 7] = hi0, hi1, hi2, np.sqrt(d1)
 
 
 #: the statistic ``origin_bound_median`` is the median of every ``_BOUND_MEDIAN_STRIDE``-th sample's
@@ -2552,17 +2583,21 @@ def median_in_place(x: np.ndarray) -> float:
     return float(x[k]) if len(x) % 2 else float(0.5 * (x[:k].max() + x[k]))
 
 
-def error_bound_samples(flat, eye, idx, nrm, eps):
-    """(samples (K,3), bound (K,)): the samples at ground truth's ray origins plus ``eps`` along the
-    normal; the same points as ``hit_points`` + ``offset_points``, without their temporaries."""
+def error_bound_samples(flat, eye, idx, nrm, eps, center):
+    """(samples (K,3), bound (K,), extent): the samples at ground truth's ray origins plus ``eps``
+    along the normal (the same points as ``hit_points`` + ``offset_points``, without their
+    temporaries) and their :func:`_extent` about ``center`` (the light's), the same bits."""
     K = len(idx)
     out = np.empty((K, 3))
     bound = np.empty(K)
+    part = np.empty(((K + _EB_BLOCK - 1) // _EB_BLOCK, 8))
     tri, bary = eye.tri_id.ravel(), eye.bary.reshape(-1, 2)
+    c = np.asarray(center, np.float64)
     run_threads(
-        _error_bound_samples_slot, flat.vertices, flat.faces, tri, bary, idx, nrm, eps, out, bound, work_counter()
-    )
-    return out, bound
+        _error_bound_samples_slot, flat.vertices, flat.faces, tri, bary, idx, nrm, eps, c, out, bound, part,
+        work_counter(),
+    )  # fmt: skip
+    return out, bound, fold_extent(part, K)
 
 
 def offset_points(pts, nrm, eps, bound=None):
@@ -2597,13 +2632,15 @@ def irregular_visibility(
     raw=False,
     pixels=None,
     n_pixels=0,
+    extent=None,
 ):
     """V at eye samples (K,) float32 and stats; the steps of Figure 2 in order. Each sample is
     moved along its normal by ``origin_bound`` (per sample, scene units: the ray-origin error bound
     of :func:`ground_truth.hit_points`; none when None) plus ``offset`` x the scene diagonal. With
     ``raw``, also (umbral count, penumbral sum) per input sample (NaN for samples outside the
     grid). With ``pixels`` (the samples' flat pixel indices), V is an image of ``n_pixels`` pixels
-    instead (1 where no sample lies)."""
+    instead (1 where no sample lies). ``extent``: the samples' extent (:func:`error_bound_samples`),
+    used when nothing moves them (no ``origin_bound``, no ``offset``)."""
     import contextlib
 
     def phase(name):
@@ -2616,7 +2653,8 @@ def irregular_visibility(
     stats = {}
     with phase("construction"):
         p = offset_points(pts, nrm, eps, origin_bound)
-        g = build_sample_grid(light, p, grid, bins, slices)
+        moved = origin_bound is not None or eps != 0.0
+        g = build_sample_grid(light, p, grid, bins, slices, None if moved else extent)
     with phase("hard_kernel"):
         fc = facing_and_counted(flat, light.center)
         occ, counted = fc[0], fc[2]
@@ -2729,12 +2767,12 @@ class Irregular(Method):
 
     def run(self, ctx, grid, slices, bins, per_bin, wedge, silhouettes, folds, origin, offset, overdraw_stats):
         pts, nrm, idx = ctx.points()
-        extra = {}
+        extra, extent = {}, None
         if origin == "error-bound":
             with ctx.timer.phase("construction"):
                 lo, hi = ctx.scene.bounds()
                 eps = offset * float(np.linalg.norm(hi - lo))
-                pts, bound = error_bound_samples(ctx.flat, ctx.eye, idx, nrm, eps)
+                pts, bound, extent = error_bound_samples(ctx.flat, ctx.eye, idx, nrm, eps, ctx.scene.light.center)
             # the samples are in place: no further offset
             offset = 0.0
             extra = {"eps": eps, "origin_bound_median": bound_median(bound)}
@@ -2754,6 +2792,7 @@ class Irregular(Method):
             timer=ctx.timer,
             pixels=idx,
             n_pixels=ctx.eye.mask.size,
+            extent=extent,
         )
         stats.update(extra)
         return MethodOutput(v.reshape(ctx.eye.mask.shape), stats)
