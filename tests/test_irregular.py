@@ -719,10 +719,12 @@ def test_frame_is_the_same_whatever_the_threads(light):
 
 
 @pytest.mark.parametrize("light", ["rect", "sphere"])
-def test_error_bound_extent_is_the_extent_of_its_samples(light):
-    """``error_bound_samples``' extent (folded from its blocks) is ``_extent`` of the samples it
-    returns, the same bits: the grid built from it is the grid built from the samples."""
-    from softshadows.methods.irregular import _extent, error_bound_samples
+def test_error_bound_bounds_are_those_of_its_samples(light):
+    """``error_bound_samples``' extent and (rectangle) window, folded from its blocks, are
+    ``_extent``'s and ``_window_of``'s of the samples it returns, the same bits: the grid built from
+    them is the grid built from the samples."""
+    from softshadows.methods.irregular import _extent, _window_of, error_bound_samples
+    from softshadows.raster.view import light_frame
 
     scene = builtin.build("bunny", light)
     view = eye_view(scene, 160, 120)
@@ -730,12 +732,20 @@ def test_error_bound_extent_is_the_extent_of_its_samples(light):
     ctx = FrameContext(scene=scene, eye=g, eye_view=view, timer=Timer())
     _p, nrm, idx = ctx.points()
     c = np.asarray(scene.light.center, float)
-    pts, _bound, ext = error_bound_samples(ctx.flat, ctx.eye, idx, nrm, 0.0, c)
+    pts, _bound, bounds = error_bound_samples(ctx.flat, ctx.eye, idx, nrm, 0.0, scene.light)
     want = _extent(pts, c)
     assert len(pts) > 1000
-    for a, b in zip(ext, want, strict=True):
+    for a, b in zip(bounds.extent, want, strict=True):
         assert np.array_equal(np.asarray(a), np.asarray(b))
         assert np.array_equal(np.signbit(a), np.signbit(b))
+    if light == "sphere":
+        assert bounds.window is None
+        return
+    r, u, f = light_frame(scene.light)
+    lo, hi = want[0], want[1]
+    near = 1e-6 * float(np.linalg.norm(hi - lo))
+    assert bounds.window[6] > near  # every sample beyond the near plane: the window applies
+    assert bounds.window[:6] == _window_of(pts, c, r, u, f, near)
 
 
 def test_fold_extent_keeps_the_first_of_equal_values():
