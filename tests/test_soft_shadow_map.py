@@ -619,3 +619,30 @@ def test_queue_crossings_takes_the_flagged_texels_in_order():
         assert np.array_equal(cols[2:m], want) and np.all(rows[2:m] == 1)
         assert np.array_equal(Q[5, 2:m], rd[1, want].astype(np.float64))
         assert np.all(Q[0, 2:m] == 0.1) and np.all(Q[4, 2:m] == 0.5)
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_bin_patches_by_band_lists_every_patch_of_every_band_in_order(threads):
+    """``bin_patches_by_band`` (offsets in one pass, lists filled by the threads, each its own run
+    of bands): per band, exactly the patches whose extent meets it, in patch order, with one thread
+    or two; empty extents and empty bands included."""
+    import numba
+
+    rng = np.random.default_rng(3)
+    n, rows, band_rows = 3000, 97, 4
+    i0 = rng.integers(0, rows, n)
+    i1 = np.minimum(i0 + rng.integers(-3, 30, n), 59)  # some empty (i0 > i1)
+    i1[i0 >= 60] = -1  # the bands from row 60 on stay empty
+    ext = np.stack([i0, i1, np.zeros(n), np.zeros(n)], 1).astype(np.int32)
+    n_bands = (rows + band_rows - 1) // band_rows
+    old = numba.get_num_threads()
+    numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
+    try:
+        ptr, idx = ssm.bin_patches_by_band(ext, n_bands, band_rows)
+    finally:
+        numba.set_num_threads(old)
+    assert len(ptr) == n_bands + 1 and ptr[0] == 0 and ptr[-1] == len(idx)
+    for b in range(n_bands):
+        want = [k for k in range(n) if i0[k] <= i1[k] and i0[k] // band_rows <= b <= i1[k] // band_rows]
+        assert idx[ptr[b] : ptr[b + 1]].tolist() == want
+    assert ptr[15] == ptr[-1] and ptr[14] < ptr[15]  # bands 15-24 empty, band 14 not

@@ -225,18 +225,26 @@ def _pyramid_section(c_p, h_p, z_p, h_l, z_plane):
     return c_r - half, c_r + half
 
 
-@kernel
 def penumbra_extents(patches, hx, hy, z_plane, svp):
     """Per micro-patch, the SSM texels ``[i0, i1] x [j0, j1]`` (inclusive; empty when i0 > i1)
-    whose centers lie in the patch's penumbra rectangle on the virtual plane at depth ``z_plane``."""
+    whose centers lie in the patch's penumbra rectangle on the virtual plane at depth ``z_plane``:
+    (n, 4) int32, one contiguous block of the patches per thread (:func:`_penumbra_extents_slot`)."""
+    out = np.empty((patches.shape[0], 4), np.int32)
+    run_threads(_penumbra_extents_slot, patches, float(hx), float(hy), float(z_plane), svp, out)
+    return out
+
+
+@kernel(nogil=True, nrt=False)
+def _penumbra_extents_slot(slot, patches, hx, hy, z_plane, svp, out, nslot):
+    """Rows of ``out`` (:func:`penumbra_extents`) of slot ``slot``'s contiguous block of the
+    patches (``run_slots``; each patch's row its own: the same whatever the slot count)."""
     n = patches.shape[0]
-    out = np.empty((n, 4), np.int32)
     l, r, b, t = svp[VP_L], svp[VP_R], svp[VP_B], svp[VP_T]
     W = svp[VP_W]
     H = svp[VP_H]
     dxs = (r - l) / W
     dys = (t - b) / H
-    for k in range(n):
+    for k in range(slot * n // nslot, (slot + 1) * n // nslot):
         z = patches[k, 4]
         out[k, 0] = 1
         out[k, 1] = 0
@@ -265,7 +273,6 @@ def penumbra_extents(patches, hx, hy, z_plane, svp):
         out[k, 1] = int(fi1)
         out[k, 2] = int(fj0)
         out[k, 3] = int(fj1)
-    return out
 
 
 @kernel(inline=True)
@@ -789,10 +796,26 @@ def round_half(x, toward_zero=False):
     return y
 
 
-@kernel
 def bin_patches_by_band(ext, n_bands, band_rows):
     """CSR lists (ptr (n_bands+1,), idx) of the micro-patches whose extent meets each band of
-    ``band_rows`` SSM rows, each list in micro-patch (draw) order."""
+    ``band_rows`` SSM rows, each list in micro-patch (draw) order: the offsets in one serial pass
+    (:func:`_band_offsets`), the lists filled by the threads, each its own run of bands holding
+    about an equal share of the entries (:func:`_band_fill_slot`; the same lists whatever the
+    thread count)."""
+    ptr = _band_offsets(ext, n_bands, band_rows)
+    idx = np.empty(ptr[n_bands], np.int32)
+    fill = ptr[:n_bands].copy()
+    nslot = numba.get_num_threads()
+    split = np.empty(nslot + 1, np.int64)
+    split[0], split[nslot] = 0, n_bands
+    split[1:nslot] = np.searchsorted(ptr, np.arange(1, nslot) * (int(ptr[n_bands]) / nslot))
+    run_slots(_band_fill_slot, nslot, ext, band_rows, idx, fill, split)
+    return ptr, idx
+
+
+@kernel
+def _band_offsets(ext, n_bands, band_rows):
+    """(n_bands + 1,) int64: where each band's list starts in :func:`bin_patches_by_band`'s idx."""
     n = ext.shape[0]
     # counts per band from a difference array (two updates per patch, not one per band it meets):
     # after the first prefix sum cnt[b + 1] is the count of band b, after the second the offsets
@@ -805,14 +828,20 @@ def bin_patches_by_band(ext, n_bands, band_rows):
         cnt[bnd + 1] += cnt[bnd]
     for bnd in range(n_bands):
         cnt[bnd + 1] += cnt[bnd]
-    idx = np.empty(cnt[n_bands], np.int32)
-    fill = cnt[:n_bands].copy()
-    for k in range(n):
+    return cnt[: n_bands + 1].copy()
+
+
+@kernel(nogil=True, nrt=False)
+def _band_fill_slot(slot, ext, band_rows, idx, fill, split):
+    """Slot ``slot``'s bands ``split[slot]`` to ``split[slot + 1] - 1`` of
+    :func:`bin_patches_by_band`'s lists: every patch in order, appended to those of its bands
+    (``fill``: each band's next place; no two slots touch one band). Run by ``run_slots``."""
+    b0, b1 = split[slot], split[slot + 1]
+    for k in range(ext.shape[0]):
         if ext[k, 0] <= ext[k, 1]:
-            for bnd in range(ext[k, 0] // band_rows, ext[k, 1] // band_rows + 1):
+            for bnd in range(max(ext[k, 0] // band_rows, b0), min(ext[k, 1] // band_rows + 1, b1)):
                 idx[fill[bnd]] = k
                 fill[bnd] += 1
-    return cnt[: n_bands + 1], idx
 
 
 @kernel(inline=True, nrt=False)
@@ -1719,7 +1748,10 @@ def compute_soft_shadow_map(
         stats["micro_patches"] += int(len(patches))
         stats["texels_touched"] += int(touched.sum())
         if len(patches) and z_plane > 0:
-            fp16_safe &= bool(np.all(fp16_condition(patches[:, 4], z_plane, hx, ov) | (patches[:, 4] >= z_plane)))
+            # every patch in front of the plane meets the condition iff the nearest one does (1/z_O
+            # decreases with z_O): one test instead of one per patch
+            z_o = float(patches[:, 4].min())
+            fp16_safe &= z_o >= z_plane or bool(fp16_condition(z_o, z_plane, hx, ov))
     with timer.phase("soft_shadow_map"):
         occ = merge_two_pass(passes["front"], passes["back"]) if two_pass else passes["nearest"]
     stats["texels_per_patch"] = stats["texels_touched"] / max(stats["micro_patches"], 1)
