@@ -485,3 +485,27 @@ def test_zmax_pyramid_levels_and_the_occluder_minimum(shape):
         assert lev.shape == (hs[L], ws[L])
         np.testing.assert_array_equal(data[offs[L] : offs[L] + hs[L] * ws[L]].reshape(lev.shape), lev)
     assert P.pyramid_max((data, offs, ws, hs)) == lev.max()
+
+
+@pytest.mark.parametrize("texels", ["read", "all"])
+def test_frame_is_the_same_whatever_the_threads(texels):
+    """The eye lookups on the slot threads while pass 2 builds its cones and sheets on the calling
+    thread alone (``start_eye_lookups``, ``calling_thread_only``) give the same V bits and
+    statistics with one thread as with two (the texel marks are idempotent stores)."""
+    import numba
+
+    from softshadows.scene import builtin
+
+    scene = builtin.build("bunny", "rect")
+    old = numba.get_num_threads()
+    runs = []
+    try:
+        for t in (1, min(2, numba.config.NUMBA_NUM_THREADS)):
+            numba.set_num_threads(t)
+            runs.append(ss.render(scene, "penumbra-map", 128, 96, texels=texels))
+    finally:
+        numba.set_num_threads(old)
+    a, b = runs
+    assert np.array_equal(a.visibility, b.visibility, equal_nan=True)
+    assert ((a.visibility > 0.05) & (a.visibility < 0.95)).any()
+    assert a.stats == b.stats

@@ -24,7 +24,7 @@ from typing import ClassVar
 import numba
 import numpy as np
 
-from .._jit import kernel, run_slots, run_threads
+from .._jit import calling_thread_only, kernel, next_item, run_slots, run_threads, start_slots, work_counter
 from ..geometry.silhouette import Silhouette, cached_adjacency, silhouette_adjacency, silhouette_brute
 from ..raster import View, rasterize_depth, rasterize_min_blend
 from ..raster.programs import PROGRAM_PENUMBRA, penumbra_intensity, smoothstep_bernstein  # noqa: F401
@@ -983,13 +983,17 @@ def render_penumbra_map(
 ) -> PenumbraMap:
     """Pass 2: clear to white, find silhouettes, draw cones and sheets through the fragment program.
     ``needed`` (H,W) uint8 of the map: shade only these texels (the others stay white), e.g. the
-    texels the eye pass reads (:func:`eye_lookups`); None: every texel (the paper)."""
+    texels the eye pass reads (:func:`eye_lookups`); None: every texel (the paper). ``needed`` may
+    also be a function that returns it, called just before the fragment program: until then this
+    runs on the calling thread alone (``calling_thread_only``) while the slot threads do the work
+    the function waits for (:meth:`PenumbraMapMethod.run`: the eye lookups)."""
     phase = timer.phase if timer is not None else (lambda name: nullcontext())
     view = smp.view
     flat = scene.flat
-    with phase("silhouettes"):
+    overlap = calling_thread_only if callable(needed) else nullcontext
+    with overlap(), phase("silhouettes"):
         sil, t_build = find_silhouettes(scene, view.origin, silhouettes)
-    with phase("penumbra_map"):
+    with phase("penumbra_map"), overlap():
         pm = np.ones((view.height, view.width), np.float32)  # clear to white
         zp = smp.surface_depth
         # its last level is the farthest Z_P (shadow_map_pass makes it in its last pass)
@@ -1020,6 +1024,9 @@ def render_penumbra_map(
             view.height,
             False,
         )
+    with phase("penumbra_map"):
+        if callable(needed):
+            needed = needed()
         fst = penumbra_fragment_program(
             rview,
             prims,
@@ -1067,7 +1074,7 @@ _PREFETCH_AHEAD = 32
 
 @kernel(nogil=True, nrt=False)
 def _eye_lookup_slot(
-    slot, vp, d_occ, PW, PH, pad_l, pad_t, position, normal, mask, bias, slope_bias, code, needed, mark, sc, nslot
+    slot, vp, d_occ, PW, PH, pad_l, pad_t, position, normal, mask, bias, slope_bias, code, needed, mark, sc, counter
 ):
     """Per pixel of an image of eye points (``position``, ``normal``: (H,W,3); ``mask``: (H,W) True
     where a surface is): the shadow-map test exactly as ``hard`` (its view ``vp`` and map ``d_occ``;
@@ -1076,12 +1083,16 @@ def _eye_lookup_slot(
     V = 1), in ``code`` (H,W) int32. With ``mark``, the texels read are set in ``needed`` (PH, PW).
 
     Per row, as ``shadowmap.shadow_lookup``: the projections and biased depths of
-    ``shadowmap.biased_light_row`` (vectorized), then the tests. The normal's side does not matter (the bias uses |n.l|). A slot
-    kernel run by ``run_slots`` (rows p, p + nslot, ...; ``sc`` (nslot, 10, W) its scratch): a
-    ``prange`` body compiled in about twice the time."""
+    ``shadowmap.biased_light_row`` (vectorized), then the tests. The normal's side does not
+    matter (the bias uses |n.l|). A slot kernel run by ``run_slots`` or ``start_slots`` (each slot takes the next row, ``next_item``,
+    until none is left; ``sc`` (nslot, 10, W) its scratch): a ``prange`` body compiled in about
+    twice the time. The marks are idempotent stores of 1: the same ``needed`` whoever sets them."""
     Hm, Wm = d_occ.shape
     H, W = mask.shape
-    for i in range(slot, H, nslot):
+    while True:
+        i = next_item(counter)
+        if i >= H:
+            break
         biased_light_row(vp, position, normal, mask, i, bias, slope_bias, sc[slot])
         for j in range(W):
             # the texel _PREFETCH_AHEAD pixels on to the cache meanwhile (the map reads and the
@@ -1166,13 +1177,41 @@ def eye_lookups_image(
     """Pass 3a over an image of eye points (``position``, ``normal``: (H,W,3), the eye G-buffer's;
     ``mask``: (H,W)): the shadow-map test of every surface pixel and the penumbra-map texel each
     reads."""
+    return start_eye_lookups(smp, position, normal, mask, bias, slope_bias, mark).finish()
+
+
+class EyeLookupsLaunch:
+    """:func:`eye_lookups_image` under way (:func:`start_eye_lookups`): ``finish()`` ->
+    :class:`EyeLookups`."""
+
+    def __init__(self, launch, code, needed):
+        self._launch, self._code, self._needed = launch, code, needed
+
+    def finish(self) -> EyeLookups:
+        """Take the rows left on the calling thread, wait for the slot threads."""
+        self._launch.finish()
+        return EyeLookups(self._code, self._needed)
+
+
+def start_eye_lookups(
+    smp: ShadowMapPass,
+    position: np.ndarray,
+    normal: np.ndarray,
+    mask: np.ndarray,
+    bias: float,
+    slope_bias: float,
+    mark: bool = True,
+) -> EyeLookupsLaunch:
+    """:func:`eye_lookups_image` started: its rows taken by the slot threads (``start_slots``) while
+    the calling thread is free for other work until it calls ``finish()``
+    (:meth:`PenumbraMapMethod.run`: pass 2's silhouettes, cones and sheets meanwhile)."""
     H, W = mask.shape
     code = np.empty((H, W), np.int32)
     PH, PW = smp.view.height, smp.view.width
     needed = np.zeros((PH, PW), np.uint8) if mark else np.zeros((0, 0), np.uint8)
     pl, _, pt, _ = smp.border
     nslot = numba.get_num_threads()
-    run_slots(
+    launch = start_slots(
         _eye_lookup_slot,
         nslot,
         smp.hard_view.params(),
@@ -1190,9 +1229,9 @@ def eye_lookups_image(
         needed,
         bool(mark),
         np.empty((nslot, 10, W)),
-        nslot,
+        work_counter(),
     )
-    return EyeLookups(code, needed if mark else None)
+    return EyeLookupsLaunch(launch, code, needed if mark else None)
 
 
 def eye_lookups(
@@ -1327,21 +1366,32 @@ class PenumbraMapMethod(Method):
             smp = shadow_map_pass(scene, map_size, lr)
         with ctx.timer.phase("eye_pass"):  # its lookups first: the texels it will read
             g = ctx.eye
-            look = eye_lookups_image(smp, g.position, g.normal, g.mask, bias, slope_bias, mark=texels == "read")
-        pmap = render_penumbra_map(
-            scene,
-            smp,
-            lr,
-            silhouettes=silhouettes,
-            smoothstep=smoothstep,
-            bias=bias,
-            cone_segments=cone_segments,
-            sheet_tolerance=sheet_tolerance,
-            sheet_max_subdiv=sheet_max_subdiv,
-            early_reject=early_reject,
-            needed=look.needed,
-            timer=ctx.timer,
-        )
+            lookups = start_eye_lookups(smp, g.position, g.normal, g.mask, bias, slope_bias, mark=texels == "read")
+        look = None
+
+        def needed():  # the lookups' texels: the slot threads look up while pass 2 builds its cones
+            nonlocal look
+            look = lookups.finish()
+            return look.needed
+
+        try:
+            pmap = render_penumbra_map(
+                scene,
+                smp,
+                lr,
+                silhouettes=silhouettes,
+                smoothstep=smoothstep,
+                bias=bias,
+                cone_segments=cone_segments,
+                sheet_tolerance=sheet_tolerance,
+                sheet_max_subdiv=sheet_max_subdiv,
+                early_reject=early_reject,
+                needed=needed,
+                timer=ctx.timer,
+            )
+        finally:
+            if look is None:
+                lookups.finish()  # nothing is raised while the slot threads still work for this frame
         with ctx.timer.phase("eye_pass"):
             out, n_umbra, n_penumbra = eye_gather(pmap, look)
         st = dict(pmap.stats)
