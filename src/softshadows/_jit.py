@@ -49,6 +49,7 @@ import contextlib
 import functools
 import os
 import threading
+import time
 
 import numpy as np
 from llvmlite import ir
@@ -328,6 +329,10 @@ def run_slots(fn, nslot: int, *args) -> None:
         f.result()
 
 
+#: how long :class:`SlotLaunch` waits for its slot threads to start (an idle host: ~0.1 ms)
+_START_WAIT_S = 0.0003
+
+
 class SlotLaunch:
     """A :func:`run_slots` launch split in two (:func:`start_slots`): slots 1 to n-1 run on the
     slot threads from the start; :meth:`finish` runs slot 0 on the calling thread and waits for the
@@ -344,11 +349,14 @@ class SlotLaunch:
             fn(s, *args)  # (holds the GIL until the kernel releases it: its dispatch)
 
         self._futs = [_pool(nslot - 1).submit(slot, s) for s in range(1, nslot)] if nslot > 1 else []
-        # wait, without the GIL, until every slot thread has it: a thread that wakes while the
-        # calling thread runs Python would wait for the GIL until the calling thread releases it
-        # (measured: a third of a millisecond on `irregular`'s frame)
+        # wait a little, without the GIL, for the slot threads to take it: a thread that wakes while
+        # the calling thread runs Python would wait for the GIL until the calling thread releases
+        # it (measured: a third of a millisecond on `irregular`'s frame); not longer, so that a slot
+        # thread held up by the host does not hold up the calling thread's work too
+        deadline = time.perf_counter() + _START_WAIT_S
         for _ in self._futs:
-            started.acquire()
+            if not started.acquire(timeout=max(deadline - time.perf_counter(), 0.0)):
+                break
 
     def finish(self) -> None:
         try:
