@@ -104,13 +104,7 @@ def test_same_bits_whatever_the_slots(monkeypatch, light):
     scene = ss.load_scene("bunny", light)
 
     def render(nslot):
-        def run_threads(fn, *a, meanwhile=None):  # as _jit.run_threads, with nslot slots
-            launch = _jit.start_slots(fn, nslot, *a, nslot)
-            if meanwhile is not None:
-                meanwhile()  # (the search's statistics while the other slots filter)
-            launch.finish()
-
-        monkeypatch.setattr(pcss, "run_threads", run_threads)
+        monkeypatch.setattr(pcss, "run_threads", lambda fn, *a: _jit.run_slots(fn, nslot, *a, nslot))
         return ss.render(scene, "pcss", 48, 40)
 
     one, five = render(1), render(5)

@@ -412,23 +412,14 @@ def work_counter() -> np.ndarray:
     return np.zeros(1, np.int64)
 
 
-def run_threads(fn, *args, meanwhile=None) -> None:
+def run_threads(fn, *args) -> None:
     """:func:`run_slots` with one slot per Numba thread, the slot count passed last as well:
     ``fn(slot, *args, n)`` for slot in ``range(n)``, n = ``numba.get_num_threads()`` (the usual
-    signature of the package's slot kernels). ``meanwhile``: a function the calling thread runs
-    after the other slots have started and before it takes slot 0 (:func:`start_slots`), for a
-    kernel whose slots share a work queue (:func:`next_item`): serial work that overlaps it."""
+    signature of the package's slot kernels)."""
     import numba
 
     n = numba.get_num_threads()
-    if meanwhile is None:
-        run_slots(fn, n, *args, n)
-        return
-    launch = start_slots(fn, n, *args, n)
-    try:
-        meanwhile()
-    finally:
-        launch.finish()
+    run_slots(fn, n, *args, n)
 
 
 def frozen(a: np.ndarray) -> np.ndarray:

@@ -649,39 +649,31 @@ def filtering_kernel(
 
 
 @kernel(nogil=True)
-def search_stats(nblk, search, taps):
-    """The blocker search's statistics over the points in one pass: (points with a blocker, points
-    whose every search tap is a blocker, the blockers' total, the search radii's sum and largest).
-    Integer counts are exact; the float sum runs in point order. :meth:`PCSS.run` computes them
-    while the slot threads filter."""
+def point_stats(nblk, search, radius, wp, taps):
+    """The frame's statistics over the points in one pass: (points with a blocker, points whose
+    every search tap is a blocker, the blockers' total, the search radii's sum and largest, then
+    over the points with a blocker the filter radii's sum and largest and the penumbra widths'
+    sum). Integer counts are exact; the float sums run in point order."""
     nh = 0
     nfull = 0
     sum_blk = 0
     s_sum = 0.0
     s_max = -np.inf
+    r_sum = 0.0
+    r_max = -np.inf
+    w_sum = 0.0
     for k in range(nblk.shape[0]):
         b = nblk[k]
         sum_blk += b
         nfull += b == taps
         s_sum += search[k]
         s_max = max(s_max, search[k])
-        nh += b > 0
-    return nh, nfull, sum_blk, s_sum, s_max
-
-
-@kernel
-def filter_stats(nblk, radius, wp):
-    """The filter's statistics over the points with a blocker, in one pass in point order: (filter
-    radii's sum and largest, penumbra widths' sum)."""
-    r_sum = 0.0
-    r_max = -np.inf
-    w_sum = 0.0
-    for k in range(nblk.shape[0]):
-        if nblk[k] > 0:
+        if b > 0:
+            nh += 1
             r_sum += radius[k]
             r_max = max(r_max, radius[k])
             w_sum += wp[k]
-    return r_sum, r_max, w_sum
+    return nh, nfull, sum_blk, s_sum, s_max, r_sum, r_max, w_sum
 
 
 # ---- the paper's steps (orchestration) ---------------------------------------------------------
@@ -743,14 +735,11 @@ def blocker_search(smap, eye, offs, light, bias, slope_bias, pattern, disk, rota
     return zr, avg, nblk, search
 
 
-def filtering(
-    smap, eye, offs, zr, avg, nblk, light, pattern, disk, rotate, seed, bilinear, plane, grid=None, meanwhile=None
-):
+def filtering(smap, eye, offs, zr, avg, nblk, light, pattern, disk, rotate, seed, bilinear, plane, grid=None):
     """Steps 2 + 3 over the surface pixels of ``eye`` (as :func:`blocker_search`) -> (V (h, w)
     float32, 1 where no surface; per point: penumbra width (world, max over axes), filter radius
     (texels, max over axes)). ``grid``: the map's :func:`occupancy_grid` (computed here if not
-    given). ``meanwhile``: serial work for the calling thread while the slot threads start filtering
-    (``run_threads``)."""
+    given)."""
     cmin, cmax = (occupancy_grid(smap.depth) if grid is None else grid)[2:]
     n = int(offs[-1])
     out = np.empty(eye.mask.shape, np.float32)
@@ -780,7 +769,6 @@ def filtering(
         wp,
         radius,
         work_counter(),
-        meanwhile=meanwhile,
     )
     return out, wp, radius
 
@@ -827,11 +815,6 @@ class PCSS(Method):
             zr, avg, nblk, search = blocker_search(
                 smap, ctx.eye, offs, light, bias, slope_bias, search_pat, disk, rotate, ctx.seed, receiver_plane, grid
             )
-        sst = []  # the search's statistics, made while the slot threads filter
-
-        def meanwhile():
-            sst.extend(search_stats(nblk, search, len(search_pat)))
-
         with ctx.timer.phase("filter"):  # penumbra estimation + filtering, one pass over the points
             out, wp, radius = filtering(
                 smap,
@@ -848,11 +831,9 @@ class PCSS(Method):
                 bilinear,
                 receiver_plane,
                 grid,
-                meanwhile,
             )
         n = max(int(offs[-1]), 1)
-        nh, nfull, sum_blk, s_sum, s_max = sst
-        r_sum, r_max, w_sum = filter_stats(nblk, radius, wp)
+        nh, nfull, sum_blk, s_sum, s_max, r_sum, r_max, w_sum = point_stats(nblk, search, radius, wp, len(search_pat))
         stats = {
             "map_size": map_size,
             # the map's finite texels, counted by the occupancy grid: a texel is finite where a
