@@ -85,6 +85,13 @@ def main() -> int:
         print(
             f"  {k:22s} {np.median(v) * 1e3:8.1f} ({np.median(v) / h:.2f}x)  {min(v) * 1e3:8.1f} ({min(v) / hmin:.2f}x)"
         )
+    # paired: each round's new against the same round's base (rendered a few ms apart), so that the
+    # host's slower and faster stretches cancel; the median and quartiles of those ratios
+    for k in methods:
+        if k.endswith("(base)"):
+            q = np.asarray(times[k[:-6] + "(new)"]) / np.asarray(times[k])
+            lo, med, hi = np.percentile(q, [25, 50, 75])
+            print(f"  {k[:-6]}: new / base per round, median {med:.3f} (quartiles {lo:.3f}-{hi:.3f})")
     return 0
 
 
