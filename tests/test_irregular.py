@@ -766,3 +766,27 @@ def test_fold_extent_keeps_the_first_of_equal_values():
     assert hi.tolist() == [0.0, 4.0, 5.0] and not np.signbit(hi[0])
     assert (d0, d1) == (1.5, 6.0)
     assert fold_extent(part[2:], 0)[2:] == (1.0, 1.0)
+
+
+def test_an_error_while_the_umbrae_are_counted_leaves_the_threads_usable(monkeypatch):
+    """An exception in the serial work that overlaps the umbra kernel (``start_umbrae``) reaches the
+    caller as itself, the calling thread's thread count is restored (``calling_thread_only``), and
+    the next frame renders the same V as before (the slot threads are free again)."""
+    import numba
+
+    from softshadows.methods import irregular as ir
+
+    scene = builtin.build("bunny", "rect")
+    want = render(scene, "irregular", 64, 48)
+    threads = numba.get_num_threads()
+
+    def broken(*a, **k):
+        raise RuntimeError("quads")
+
+    monkeypatch.setattr(ir, "build_penumbra_quads", broken)
+    with pytest.raises(RuntimeError, match="quads"):
+        render(scene, "irregular", 64, 48)
+    monkeypatch.undo()
+    assert numba.get_num_threads() == threads
+    again = render(scene, "irregular", 64, 48)
+    assert np.array_equal(again.visibility, want.visibility, equal_nan=True)

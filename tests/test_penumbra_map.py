@@ -509,3 +509,27 @@ def test_frame_is_the_same_whatever_the_threads(texels):
     assert np.array_equal(a.visibility, b.visibility, equal_nan=True)
     assert ((a.visibility > 0.05) & (a.visibility < 0.95)).any()
     assert a.stats == b.stats
+
+
+def test_an_error_while_the_lookups_run_leaves_the_threads_usable(monkeypatch):
+    """An exception while pass 2 builds its cones (the eye lookups running on the slot threads)
+    reaches the caller as itself, the thread count is restored, and the next frame renders the same
+    V as before."""
+    import numba
+
+    from softshadows.scene import builtin
+
+    scene = builtin.build("bunny", "sphere")
+    want = ss.render(scene, "penumbra-map", 64, 48)
+    threads = numba.get_num_threads()
+
+    def broken(*a, **k):
+        raise RuntimeError("cones")
+
+    monkeypatch.setattr(P, "build_cones", broken)
+    with pytest.raises(RuntimeError, match="cones"):
+        ss.render(scene, "penumbra-map", 64, 48)
+    monkeypatch.undo()
+    assert numba.get_num_threads() == threads
+    again = ss.render(scene, "penumbra-map", 64, 48)
+    assert np.array_equal(again.visibility, want.visibility, equal_nan=True)
