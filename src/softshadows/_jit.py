@@ -319,14 +319,7 @@ def run_slots(fn, nslot: int, *args) -> None:
     if nslot <= 1:
         fn(0, *args)
         return
-    futs = [_pool(nslot - 1).submit(fn, s, *args) for s in range(1, nslot)]
-    try:
-        fn(0, *args)
-    finally:
-        for f in futs:
-            f.exception()  # wait for every slot before anything is raised
-    for f in futs:
-        f.result()
+    SlotLaunch(fn, nslot, args, wait_start=False).finish()
 
 
 #: how long :class:`SlotLaunch` waits for its slot threads to start (an idle host: ~0.1 ms)
@@ -338,17 +331,24 @@ class SlotLaunch:
     slot threads from the start; :meth:`finish` runs slot 0 on the calling thread and waits for the
     others. Between the two the calling thread is free for serial work, which then overlaps the
     kernel: for a kernel that takes its items from a shared work queue (:func:`next_item`), the
-    calling thread joins late and takes whatever items are left."""
+    calling thread joins late and takes whatever items are left. ``result``: what ``finish()``
+    returns (a function of no arguments, called once the slots are done)."""
 
-    def __init__(self, fn, nslot: int, args: tuple):
-        self._fn, self._args = fn, args
+    def __init__(self, fn, nslot: int, args: tuple, wait_start: bool = True, result=None):
+        self._fn, self._args, self._result, self._finished = fn, args, result, False
+        if nslot <= 1:
+            self._futs = []
+            return
+        if not wait_start:
+            self._futs = [_pool(nslot - 1).submit(fn, s, *args) for s in range(1, nslot)]
+            return
         started = threading.Semaphore(0)
 
         def slot(s):
             started.release()
             fn(s, *args)  # (holds the GIL until the kernel releases it: its dispatch)
 
-        self._futs = [_pool(nslot - 1).submit(slot, s) for s in range(1, nslot)] if nslot > 1 else []
+        self._futs = [_pool(nslot - 1).submit(slot, s) for s in range(1, nslot)]
         # wait a little, without the GIL, for the slot threads to take it: a thread that wakes while
         # the calling thread runs Python would wait for the GIL until the calling thread releases
         # it (measured: a third of a millisecond on `irregular`'s frame); not longer, so that a slot
@@ -358,22 +358,29 @@ class SlotLaunch:
             if not started.acquire(timeout=max(deadline - time.perf_counter(), 0.0)):
                 break
 
-    def finish(self) -> None:
-        try:
-            self._fn(0, *self._args)
-        finally:
+    def finish(self):
+        """Slot 0 on the calling thread, then wait for every slot (before anything is raised);
+        returns ``result()``. Runs once: a second call only returns the result, so that a caller
+        can finish in a ``finally`` whether or not its overlapping work raised."""
+        if not self._finished:
+            self._finished = True
+            try:
+                self._fn(0, *self._args)
+            finally:
+                for f in self._futs:
+                    f.exception()  # wait for every slot before anything is raised
             for f in self._futs:
-                f.exception()  # wait for every slot before anything is raised
-        for f in self._futs:
-            f.result()
+                f.result()
+        return self._result() if self._result is not None else None
 
 
-def start_slots(fn, nslot: int, *args) -> SlotLaunch:
+def start_slots(fn, nslot: int, *args, result=None) -> SlotLaunch:
     """Start ``fn(slot, *args)`` for slots 1 to nslot-1 on the slot threads and return the launch;
-    its ``finish()`` runs slot 0 on the calling thread and waits (:class:`SlotLaunch`). Until then,
-    the slot threads are busy: the calling thread must not launch other slot kernels on them (it
-    runs them alone, :func:`calling_thread_only`), or they would wait for this one."""
-    return SlotLaunch(fn, int(nslot), args)
+    its ``finish()`` runs slot 0 on the calling thread, waits and returns ``result()``
+    (:class:`SlotLaunch`). Until then, the slot threads are busy: the calling thread must not
+    launch other slot kernels on them (it runs them alone, :func:`calling_thread_only`), or they
+    would wait for this one."""
+    return SlotLaunch(fn, int(nslot), args, result=result)
 
 
 @contextlib.contextmanager

@@ -818,35 +818,11 @@ def count_umbrae(grid: SampleGrid, verts, faces, counted, center) -> tuple[np.nd
     return start_umbrae(grid, verts, faces, counted, center).finish()
 
 
-class UmbraCount:
-    """:func:`count_umbrae` under way (:func:`start_umbrae`): ``finish()`` -> (umbra, stats)."""
-
-    def __init__(self, launch, umbra, valid, counted, pairs, tests):
-        self._launch, self._umbra, self._valid, self._counted, self._pairs, self._tests = (
-            launch,
-            umbra,
-            valid,
-            counted,
-            pairs,
-            tests,
-        )
-
-    def finish(self) -> tuple[np.ndarray, dict]:
-        """Take the bins left on the calling thread, wait for the slot threads: (umbra, stats)."""
-        self._launch.finish()
-        return self._umbra, {
-            "umbra_triangles": int(self._valid.sum()),
-            "umbra_skipped_triangles": int((self._counted & ~self._valid).sum()),
-            "umbra_tri_bin_pairs": int(self._pairs),
-            "umbra_sample_tests": int(self._tests.sum()),
-        }
-
-
-def start_umbrae(grid: SampleGrid, verts, faces, counted, center) -> UmbraCount:
+def start_umbrae(grid: SampleGrid, verts, faces, counted, center):
     """:func:`count_umbrae` started: the triangles' set-up and binning on the calling thread, then
     the kernel's bins taken by the slot threads (``start_slots``) while the calling thread is free
     for other work (the silhouettes and quads of step (c), :func:`irregular_visibility`) until it
-    calls ``finish()`` and takes the bins that are left. Every bin's counts are its own, so the
+    calls the launch's ``finish()``, takes the bins that are left and gets (umbra, stats). Every bin's counts are its own, so the
     result does not depend on who took it."""
     F = len(faces)
     tri2d = np.zeros((F, 6))
@@ -860,7 +836,7 @@ def start_umbrae(grid: SampleGrid, verts, faces, counted, center) -> UmbraCount:
     tests = np.zeros(grid.n_bins, np.int64)
     nw = numba.get_num_threads()
     max_col, max_bin = grid.max_column, grid.max_bin
-    launch = start_slots(
+    return start_slots(
         _umbra_kernel,
         nw,
         grid.start,
@@ -888,8 +864,16 @@ def start_umbrae(grid: SampleGrid, verts, faces, counted, center) -> UmbraCount:
         work_counter(),
         np.empty((nw, max(max_col, 1)), np.int8),
         np.empty((nw, max(max_bin, 1)), np.int64),
+        result=lambda: (
+            umbra,
+            {
+                "umbra_triangles": int(valid.sum()),
+                "umbra_skipped_triangles": int((counted & ~valid).sum()),
+                "umbra_tri_bin_pairs": len(bitems),
+                "umbra_sample_tests": int(tests.sum()),
+            },
+        ),
     )
-    return UmbraCount(launch, umbra, valid, counted, len(bitems), tests)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -2736,10 +2720,8 @@ def irregular_visibility(
                 qd = build_penumbra_quads(g, edges, light, bound_r)
                 bl = bin_penumbra_quads(g, qd, bound_r, per_bin)
                 penumbrae = PenumbraPass(g, edges, qd, bl, light, per_bin, wedge)
-        except BaseException:
-            umbrae.finish()  # nothing is raised while the slot threads still work for this frame
-            raise
-        umbra, st_u = umbrae.finish()
+        finally:  # (if the work above raised: nothing is raised while the slot threads still count)
+            umbra, st_u = umbrae.finish()
         pen, st_p = penumbrae.run()  # step (d): accumulate_penumbrae
         v = compose_visibility(g, umbra, pen, len(pts) if pixels is None else n_pixels, pixels)
     stats.update(

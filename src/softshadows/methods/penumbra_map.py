@@ -1180,19 +1180,6 @@ def eye_lookups_image(
     return start_eye_lookups(smp, position, normal, mask, bias, slope_bias, mark).finish()
 
 
-class EyeLookupsLaunch:
-    """:func:`eye_lookups_image` under way (:func:`start_eye_lookups`): ``finish()`` ->
-    :class:`EyeLookups`."""
-
-    def __init__(self, launch, code, needed):
-        self._launch, self._code, self._needed = launch, code, needed
-
-    def finish(self) -> EyeLookups:
-        """Take the rows left on the calling thread, wait for the slot threads."""
-        self._launch.finish()
-        return EyeLookups(self._code, self._needed)
-
-
 def start_eye_lookups(
     smp: ShadowMapPass,
     position: np.ndarray,
@@ -1201,17 +1188,18 @@ def start_eye_lookups(
     bias: float,
     slope_bias: float,
     mark: bool = True,
-) -> EyeLookupsLaunch:
+):
     """:func:`eye_lookups_image` started: its rows taken by the slot threads (``start_slots``) while
-    the calling thread is free for other work until it calls ``finish()``
-    (:meth:`PenumbraMapMethod.run`: pass 2's silhouettes, cones and sheets meanwhile)."""
+    the calling thread is free for other work (:meth:`PenumbraMapMethod.run`: pass 2's
+    silhouettes, cones and sheets) until it calls the launch's ``finish()``, which returns the
+    :class:`EyeLookups`."""
     H, W = mask.shape
     code = np.empty((H, W), np.int32)
     PH, PW = smp.view.height, smp.view.width
     needed = np.zeros((PH, PW), np.uint8) if mark else np.zeros((0, 0), np.uint8)
     pl, _, pt, _ = smp.border
     nslot = numba.get_num_threads()
-    launch = start_slots(
+    return start_slots(
         _eye_lookup_slot,
         nslot,
         smp.hard_view.params(),
@@ -1230,8 +1218,8 @@ def start_eye_lookups(
         bool(mark),
         np.empty((nslot, 10, W)),
         work_counter(),
+        result=lambda: EyeLookups(code, needed if mark else None),
     )
-    return EyeLookupsLaunch(launch, code, needed if mark else None)
 
 
 def eye_lookups(
@@ -1367,14 +1355,7 @@ class PenumbraMapMethod(Method):
         with ctx.timer.phase("eye_pass"):  # its lookups first: the texels it will read
             g = ctx.eye
             lookups = start_eye_lookups(smp, g.position, g.normal, g.mask, bias, slope_bias, mark=texels == "read")
-        look = None
-
-        def needed():  # the lookups' texels: the slot threads look up while pass 2 builds its cones
-            nonlocal look
-            look = lookups.finish()
-            return look.needed
-
-        try:
+        try:  # the slot threads look up while pass 2 builds its cones; it joins them for the texels
             pmap = render_penumbra_map(
                 scene,
                 smp,
@@ -1386,12 +1367,11 @@ class PenumbraMapMethod(Method):
                 sheet_tolerance=sheet_tolerance,
                 sheet_max_subdiv=sheet_max_subdiv,
                 early_reject=early_reject,
-                needed=needed,
+                needed=lambda: lookups.finish().needed,
                 timer=ctx.timer,
             )
-        finally:
-            if look is None:
-                lookups.finish()  # nothing is raised while the slot threads still work for this frame
+        finally:  # (joined already; if pass 2 raised: nothing is raised while the slot threads still look up)
+            look = lookups.finish()
         with ctx.timer.phase("eye_pass"):
             out, n_umbra, n_penumbra = eye_gather(pmap, look)
         st = dict(pmap.stats)
