@@ -733,8 +733,10 @@ def test_small_triangle_rejection_agrees_with_full_setup(ortho):
         zinfo = np.empty((2, 3))
         planes = np.zeros((1, R.PL_WIDTH))
         normals = np.zeros((1, 3), np.float32)
+        vs = np.empty((len(verts), R._VS_WIDTH))  # the corners' view and snapped screen coordinates
+        R._vertex_screen_slot(0, verts, vp, near, vs, 1)
         for t in dropped:
-            R._setup_one(0, t, verts, fcs, vp, near, code, NC, box, edges, zinfo, planes, normals, 1)
+            R._setup_one(0, t, verts, fcs, vs, vp, near, code, NC, box, edges, zinfo, planes, normals, 1, True)
             for ct in range(NC[0]):  # pieces of a dropped face cover no pixel center (per-pixel test)
                 i0, i1, j0, j1 = box[ct, [R.BOX_I0, R.BOX_I1, R.BOX_J0, R.BOX_J1]]
                 i, j = np.mgrid[i0 : i1 + 1, j0 : j1 + 1]

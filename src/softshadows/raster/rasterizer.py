@@ -155,21 +155,27 @@ def _store_edge(edges, slot, k, ax, ay, bx, by, ext_x, ext_y):
 @kernel
 def _setup_piece(vp, slot, x0, y0, z0, x1, y1, z1, x2, y2, z2, far, box, edges, zinfo):
     """Project, snap, orient one (clipped) triangle; returns 1 if it may cover a pixel center."""
+    if min(z0, min(z1, z2)) > far:
+        return 0
+    sx0, sy0 = view_coords_to_screen(vp, x0, y0, z0)
+    sx1, sy1 = view_coords_to_screen(vp, x1, y1, z1)
+    sx2, sy2 = view_coords_to_screen(vp, x2, y2, z2)
+    return _setup_snapped(
+        vp, slot, z0, z1, z2, _snap(sx0), _snap(sy0), _snap(sx1), _snap(sy1), _snap(sx2), _snap(sy2), far, box, edges,
+        zinfo,
+    )  # fmt: skip
+
+
+@kernel
+def _setup_snapped(vp, slot, z0, z1, z2, sx0, sy0, sx1, sy1, sx2, sy2, far, box, edges, zinfo):
+    """:func:`_setup_piece` from the corners' view depths and snapped screen coordinates: orient the
+    piece, store its box, depth range and edges; returns 1 if it may cover a pixel center."""
     W = vp[VP_W]
     H = vp[VP_H]
     zmin = min(z0, min(z1, z2))
     zmax = max(z0, max(z1, z2))
     if zmin > far:
         return 0
-    sx0, sy0 = view_coords_to_screen(vp, x0, y0, z0)
-    sx1, sy1 = view_coords_to_screen(vp, x1, y1, z1)
-    sx2, sy2 = view_coords_to_screen(vp, x2, y2, z2)
-    sx0 = _snap(sx0)
-    sy0 = _snap(sy0)
-    sx1 = _snap(sx1)
-    sy1 = _snap(sy1)
-    sx2 = _snap(sx2)
-    sy2 = _snap(sy2)
     if not (
         math.isfinite(sx0)
         and math.isfinite(sy0)
@@ -237,8 +243,8 @@ def _face_corners(verts, faces, t):
 
 
 @kernel(inline=True)
-def _world_normal(ax, ay, az, bx, by, bz, cx, cy, cz):
-    """(nx, ny, nz, |n|): the world-space face normal as wound, n = (b - a) x (c - a)."""
+def _world_cross(ax, ay, az, bx, by, bz, cx, cy, cz):
+    """(nx, ny, nz, |n|^2): the world-space face normal as wound, n = (b - a) x (c - a), unnormalised."""
     e1x = bx - ax
     e1y = by - ay
     e1z = bz - az
@@ -248,7 +254,14 @@ def _world_normal(ax, ay, az, bx, by, bz, cx, cy, cz):
     nx = e1y * e2z - e1z * e2y
     ny = e1z * e2x - e1x * e2z
     nz = e1x * e2y - e1y * e2x
-    return nx, ny, nz, math.sqrt(nx * nx + ny * ny + nz * nz)
+    return nx, ny, nz, nx * nx + ny * ny + nz * nz
+
+
+@kernel(inline=True)
+def _world_normal(ax, ay, az, bx, by, bz, cx, cy, cz):
+    """(nx, ny, nz, |n|): :func:`_world_cross` with the length."""
+    nx, ny, nz, n2 = _world_cross(ax, ay, az, bx, by, bz, cx, cy, cz)
+    return nx, ny, nz, math.sqrt(n2)
 
 
 @kernel(inline=True)
@@ -281,50 +294,61 @@ def _view_plane(x0, y0, z0, x1, y1, z1, x2, y2, z2):
 
 
 @kernel
-def _setup_one(u, t, verts, faces, vp, near, cull, NC, box, edges, zinfo, planes, normals, sh):
+def _setup_one(u, t, verts, faces, vs, vp, near, cull, NC, box, edges, zinfo, planes, normals, sh, duals):
     """Face t, stored as front-end triangle u: NC[u] pieces in slots u << sh (and the next one: sh = 1
     when some face crosses the near plane) of box/edges/zinfo; planes[u] plane data; normals[u] unit
-    normal."""
+    normal. The corners' view coordinates and, for a face wholly in front of the near plane, their
+    snapped screen coordinates come from :func:`_vertex_screen_slot`'s ``vs`` (the same operations,
+    once per vertex: the same bits). Without ``duals`` (the depth modes, which read a triangle's
+    plane and nothing else of it) neither the unit normal nor the plane's dual vectors are made:
+    nine divisions and a square root of ~12 per face, the same decisions (|n| > 0 and finite
+    exactly where |n|^2 is)."""
     ortho = vp[VP_ORTHO] != 0.0
     far = vp[VP_FAR]
     NC[u] = 0
     ax, ay, az, bx, by, bz, cx, cy, cz = _face_corners(verts, faces, t)
-    nx, ny, nz, nn = _world_normal(ax, ay, az, bx, by, bz, cx, cy, cz)
-    if not (nn > 0.0 and math.isfinite(nn)):
+    nx, ny, nz, nn2 = _world_cross(ax, ay, az, bx, by, bz, cx, cy, cz)
+    if not (nn2 > 0.0 and math.isfinite(nn2)):
         return  # degenerate or non-finite
     if _culled(vp, ortho, cull, nx, ny, nz, ax, ay, az):
         return
-    normals[u, 0] = nx / nn
-    normals[u, 1] = ny / nn
-    normals[u, 2] = nz / nn
+    if duals:
+        nn = math.sqrt(nn2)
+        normals[u, 0] = nx / nn
+        normals[u, 1] = ny / nn
+        normals[u, 2] = nz / nn
     # view space
-    x0, y0, z0 = view_coords(vp, ax, ay, az)
-    x1, y1, z1 = view_coords(vp, bx, by, bz)
-    x2, y2, z2 = view_coords(vp, cx, cy, cz)
+    ia = faces[t, 0]
+    ib = faces[t, 1]
+    ic = faces[t, 2]
+    x0, y0, z0 = vs[ia, _VS_X], vs[ia, _VS_Y], vs[ia, _VS_Z]
+    x1, y1, z1 = vs[ib, _VS_X], vs[ib, _VS_Y], vs[ib, _VS_Z]
+    x2, y2, z2 = vs[ic, _VS_X], vs[ic, _VS_Y], vs[ic, _VS_Z]
     if min(z0, min(z1, z2)) > far or max(z0, max(z1, z2)) < near:
         return
     # plane n.X = d and dual vectors: b1 = (X - P0).m1, b2 = (X - P0).m2 for X in the plane
     f1x, f1y, f1z, f2x, f2y, f2z, vnx, vny, vnz, n2 = _view_plane(x0, y0, z0, x1, y1, z1, x2, y2, z2)
     if not (n2 > 0.0 and math.isfinite(n2)):
         return
-    m1x = (f2y * vnz - f2z * vny) / n2  # (e2 x n) / |n|^2
-    m1y = (f2z * vnx - f2x * vnz) / n2
-    m1z = (f2x * vny - f2y * vnx) / n2
-    m2x = (vny * f1z - vnz * f1y) / n2  # (n x e1) / |n|^2
-    m2y = (vnz * f1x - vnx * f1z) / n2
-    m2z = (vnx * f1y - vny * f1x) / n2
     planes[u, PL_N] = vnx
     planes[u, PL_N + 1] = vny
     planes[u, PL_N + 2] = vnz
     planes[u, PL_D] = vnx * x0 + vny * y0 + vnz * z0
-    planes[u, PL_M1] = m1x
-    planes[u, PL_M1 + 1] = m1y
-    planes[u, PL_M1 + 2] = m1z
-    planes[u, PL_D1] = m1x * x0 + m1y * y0 + m1z * z0
-    planes[u, PL_M2] = m2x
-    planes[u, PL_M2 + 1] = m2y
-    planes[u, PL_M2 + 2] = m2z
-    planes[u, PL_D2] = m2x * x0 + m2y * y0 + m2z * z0
+    if duals:
+        m1x = (f2y * vnz - f2z * vny) / n2  # (e2 x n) / |n|^2
+        m1y = (f2z * vnx - f2x * vnz) / n2
+        m1z = (f2x * vny - f2y * vnx) / n2
+        m2x = (vny * f1z - vnz * f1y) / n2  # (n x e1) / |n|^2
+        m2y = (vnz * f1x - vnx * f1z) / n2
+        m2z = (vnx * f1y - vny * f1x) / n2
+        planes[u, PL_M1] = m1x
+        planes[u, PL_M1 + 1] = m1y
+        planes[u, PL_M1 + 2] = m1z
+        planes[u, PL_D1] = m1x * x0 + m1y * y0 + m1z * z0
+        planes[u, PL_M2] = m2x
+        planes[u, PL_M2 + 1] = m2y
+        planes[u, PL_M2 + 2] = m2z
+        planes[u, PL_D2] = m2x * x0 + m2y * y0 + m2z * z0
     # near-plane clipping in view space
     in0 = z0 >= near
     in1 = z1 >= near
@@ -332,7 +356,10 @@ def _setup_one(u, t, verts, faces, vp, near, cull, NC, box, edges, zinfo, planes
     nin = int(in0) + int(in1) + int(in2)
     s0 = u << sh
     if nin == 3:
-        NC[u] = _setup_piece(vp, s0, x0, y0, z0, x1, y1, z1, x2, y2, z2, far, box, edges, zinfo)
+        NC[u] = _setup_snapped(
+            vp, s0, z0, z1, z2, vs[ia, _VS_SX], vs[ia, _VS_SY], vs[ib, _VS_SX], vs[ib, _VS_SY], vs[ic, _VS_SX],
+            vs[ic, _VS_SY], far, box, edges, zinfo,
+        )  # fmt: skip
         return
     # rotate the corners (keeping the cyclic order) so that the odd one out comes first
     if nin == 1:
@@ -439,6 +466,12 @@ _SERIAL_VERTICES = 1 << 15
 _SERIAL_FACES = 1 << 17
 
 
+#: the columns of :func:`_vertex_screen_slot`'s ``vs``: a vertex's view depth, snapped screen x and y
+#: (NaN in front of the near plane), view x and y
+_VS_Z, _VS_SX, _VS_SY, _VS_X, _VS_Y = 0, 1, 2, 3, 4
+_VS_WIDTH = 5
+
+
 @kernel(nogil=True, nrt=False)
 def _vertex_screen_slot(slot, verts, vp, near, vs, nslot):
     """Per vertex (once per vertex instead of once per triangle corner):
@@ -450,14 +483,16 @@ def _vertex_screen_slot(slot, verts, vp, near, vs, nslot):
     n = verts.shape[0]
     for v in range(n * slot // nslot, n * (slot + 1) // nslot):
         x, y, z = view_coords(vp, verts[v, 0], verts[v, 1], verts[v, 2])
-        vs[v, 0] = z
+        vs[v, _VS_Z] = z
+        vs[v, _VS_X] = x
+        vs[v, _VS_Y] = y
         if z >= near:
             sx, sy = view_coords_to_screen(vp, x, y, z)
-            vs[v, 1] = _snap(sx)
-            vs[v, 2] = _snap(sy)
+            vs[v, _VS_SX] = _snap(sx)
+            vs[v, _VS_SY] = _snap(sy)
         else:
-            vs[v, 1] = np.nan
-            vs[v, 2] = np.nan
+            vs[v, _VS_SX] = np.nan
+            vs[v, _VS_SY] = np.nan
 
 
 #: the small-triangle rejection tests the pixel centers of a bounding box holding at most this many
@@ -505,20 +540,20 @@ def _classify(t, verts, faces, vp, near, cull, vs):
     ia = faces[t, 0]
     ib = faces[t, 1]
     ic = faces[t, 2]
-    z0 = vs[ia, 0]
-    z1 = vs[ib, 0]
-    z2 = vs[ic, 0]
+    z0 = vs[ia, _VS_Z]
+    z1 = vs[ib, _VS_Z]
+    z2 = vs[ic, _VS_Z]
     if min(z0, min(z1, z2)) > far or max(z0, max(z1, z2)) < near:
         return -1
     if z0 >= near and z1 >= near and z2 >= near:
         W = vp[VP_W]
         H = vp[VP_H]
-        sx0 = vs[ia, 1]
-        sx1 = vs[ib, 1]
-        sx2 = vs[ic, 1]
-        sy0 = vs[ia, 2]
-        sy1 = vs[ib, 2]
-        sy2 = vs[ic, 2]
+        sx0 = vs[ia, _VS_SX]
+        sx1 = vs[ib, _VS_SX]
+        sx2 = vs[ic, _VS_SX]
+        sy0 = vs[ia, _VS_SY]
+        sy1 = vs[ib, _VS_SY]
+        sy2 = vs[ic, _VS_SY]
         fj0 = max(math.ceil(min(sx0, min(sx1, sx2)) - 0.5), 0.0)
         fj1 = min(math.floor(max(sx0, max(sx1, sx2)) - 0.5), W - 1.0)
         fi0 = max(math.ceil(min(sy0, min(sy1, sy2)) - 0.5), 0.0)
@@ -585,7 +620,11 @@ def _select_slot(slot, verts, faces, vp, near, cull, vs, chunk, ccount, nslot, k
                 # 2: the face crosses the near plane (it may be clipped into two pieces)
                 k = (
                     1
-                    if (vs[faces[t, 0], 0] >= near and vs[faces[t, 1], 0] >= near and vs[faces[t, 2], 0] >= near)
+                    if (
+                        vs[faces[t, 0], _VS_Z] >= near
+                        and vs[faces[t, 1], _VS_Z] >= near
+                        and vs[faces[t, 2], _VS_Z] >= near
+                    )
                     else 2
                 )
                 n += 1
@@ -675,6 +714,7 @@ def _setup_count_slot(
     slot,
     verts,
     faces,
+    vs,
     tri,
     vp,
     near,
@@ -693,6 +733,7 @@ def _setup_count_slot(
     tile_any,
     use_bits,
     sh,
+    duals,
 ):
     """Setup of the selected faces ``tri`` (front-end triangle u is face tri[u]; parallel over chunks of
     them, dealt round-robin to ``nslot`` slots: load balance, see docs/rasterizer.md) and per (chunk,
@@ -706,7 +747,7 @@ def _setup_count_slot(
             cnt[c, tt] = 0
         t1 = min(U, (c + 1) * chunk)
         for u in range(c * chunk, t1):
-            _setup_one(u, tri[u], verts, faces, vp, near, cull, NC, box, edges, zinfo, planes, normals, sh)
+            _setup_one(u, tri[u], verts, faces, vs, vp, near, cull, NC, box, edges, zinfo, planes, normals, sh, duals)
             for k in range(NC[u]):
                 ct = (u << sh) + k
                 for ty in range(box[ct, BOX_I0] // T, box[ct, BOX_I1] // T + 1):
@@ -2397,12 +2438,13 @@ _TINY_MIN_PER_PIXEL = 1.0 / 64.0
 _E1U = np.empty(0, dtype=np.uint8)
 
 
-def _front_end(vp, W, H, verts, fcs, code, near, mask=None, tiny=False):
+def _front_end(vp, W, H, verts, fcs, code, near, mask=None, tiny=False, duals=True):
     """setup + binning: the arrays the tile kernels read. ``mask`` (H,W) bool (or uint8, nonzero: set): bin a piece only
     to the tiles where its bounding box holds a set texel (min-blend's texel mask). ``tiny`` (the
     depth modes): the small triangles go to the tiny path instead of setup; returns (FrontEnd,
     tiny) with ``tiny`` = (tstart, tface, tlist) for :func:`_tiny_depth_slot` (None without: fewer
-    small triangles than ``_TINY_MIN_PER_PIXEL`` per pixel)."""
+    small triangles than ``_TINY_MIN_PER_PIXEL`` per pixel). ``duals=False``: the triangles' unit
+    normals and dual vectors are not made (``_setup_one``; the depth modes read neither)."""
     F = len(fcs)
     want_tiny = tiny
     nthreads = numba.get_num_threads()
@@ -2410,7 +2452,7 @@ def _front_end(vp, W, H, verts, fcs, code, near, mask=None, tiny=False):
     nchunk = int(min(max(1, F // 4096), 8 * nthreads))
     chunk = (F + nchunk - 1) // nchunk if F else 1
     ccount = np.zeros(nchunk, dtype=np.int64)
-    vs = np.empty((len(verts), 3), dtype=np.float64)
+    vs = np.empty((len(verts), _VS_WIDTH), dtype=np.float64)
     nv = 1 if len(verts) < _SERIAL_VERTICES else nthreads
     run_slots(_vertex_screen_slot, nv, verts, vp, near, vs, nv)
     keep = np.empty(F, dtype=np.uint8)
@@ -2472,6 +2514,7 @@ def _front_end(vp, W, H, verts, fcs, code, near, mask=None, tiny=False):
         nthreads,
         verts,
         fcs,
+        vs,
         tri,
         vp,
         near,
@@ -2490,6 +2533,7 @@ def _front_end(vp, W, H, verts, fcs, code, near, mask=None, tiny=False):
         tile_any,
         use,
         sh,
+        duals,
     )
     _bin_offsets(cnt, start)
     bins = np.empty(int(start[-1]), dtype=np.int32)
@@ -2548,9 +2592,9 @@ def rasterize_depth(
     ground covers, 2 threads)."""
     vp, W, H, verts, fcs, code, near = _prepare(view, vertices, faces, cull)
     if TINY_PATH:
-        fe, tiny = _front_end(vp, W, H, verts, fcs, code, near, tiny=True)
+        fe, tiny = _front_end(vp, W, H, verts, fcs, code, near, tiny=True, duals=False)
     else:
-        fe, tiny = _front_end(vp, W, H, verts, fcs, code, near), None
+        fe, tiny = _front_end(vp, W, H, verts, fcs, code, near, duals=False), None
     depth = np.empty((H, W), dtype=np.float32)
     faces_out = np.empty((H if tri else 0, W), dtype=np.int32)  # no rows: not written
     zt, ft = _NO_ZT, _NO_FT
