@@ -725,7 +725,6 @@ def _setup_count_slot(
     zinfo,
     planes,
     normals,
-    T,
     ntx,
     chunk,
     cnt,
@@ -750,8 +749,8 @@ def _setup_count_slot(
             _setup_one(u, tri[u], verts, faces, vs, vp, near, cull, NC, box, edges, zinfo, planes, normals, sh, duals)
             for k in range(NC[u]):
                 ct = (u << sh) + k
-                for ty in range(box[ct, BOX_I0] // T, box[ct, BOX_I1] // T + 1):
-                    for tx in range(box[ct, BOX_J0] // T, box[ct, BOX_J1] // T + 1):
+                for ty in range(box[ct, BOX_I0] // TILE, box[ct, BOX_I1] // TILE + 1):
+                    for tx in range(box[ct, BOX_J0] // TILE, box[ct, BOX_J1] // TILE + 1):
                         tile = ty * ntx + tx
                         if use_bits and tile_any[tile] == 0:
                             continue
@@ -775,7 +774,7 @@ def _bin_offsets(cnt, bstart):
 
 
 @kernel(nogil=True, nrt=False)
-def _bin_fill_slot(slot, NC, box, T, ntx, chunk, off, bins, nslot, tile_any, use_bits, sh):
+def _bin_fill_slot(slot, NC, box, ntx, chunk, off, bins, nslot, tile_any, use_bits, sh):
     """The pieces' slots into ``bins``, chunk c of tile t from the offset off[c, t] (advanced in
     place; see :func:`_bin_offsets`): per tile, in chunk order and in face order within a chunk.
     Run by ``run_slots``: slot ``slot`` takes chunks slot, slot + nslot, ..."""
@@ -786,8 +785,8 @@ def _bin_fill_slot(slot, NC, box, T, ntx, chunk, off, bins, nslot, tile_any, use
         for t in range(c * chunk, t1):
             for k in range(NC[t]):
                 ct = (t << sh) + k
-                for ty in range(box[ct, BOX_I0] // T, box[ct, BOX_I1] // T + 1):
-                    for tx in range(box[ct, BOX_J0] // T, box[ct, BOX_J1] // T + 1):
+                for ty in range(box[ct, BOX_I0] // TILE, box[ct, BOX_I1] // TILE + 1):
+                    for tx in range(box[ct, BOX_J0] // TILE, box[ct, BOX_J1] // TILE + 1):
                         tile = ty * ntx + tx
                         if use_bits and tile_any[tile] == 0:
                             continue
@@ -2525,7 +2524,6 @@ def _front_end(vp, W, H, verts, fcs, code, near, mask=None, tiny=False, duals=Tr
         zinfo,
         planes,
         normals,
-        T,
         ntx,
         chunk,
         cnt,
@@ -2537,7 +2535,7 @@ def _front_end(vp, W, H, verts, fcs, code, near, mask=None, tiny=False, duals=Tr
     )
     _bin_offsets(cnt, start)
     bins = np.empty(int(start[-1]), dtype=np.int32)
-    run_slots(_bin_fill_slot, nthreads, NC, box, T, ntx, chunk, cnt, bins, nthreads, tile_any, use, sh)
+    run_slots(_bin_fill_slot, nthreads, NC, box, ntx, chunk, cnt, bins, nthreads, tile_any, use, sh)
     fe = FrontEnd(vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, normals, rowbits, sh, tri)
     if not want_tiny:
         return fe
