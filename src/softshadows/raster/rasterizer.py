@@ -258,13 +258,6 @@ def _world_cross(ax, ay, az, bx, by, bz, cx, cy, cz):
 
 
 @kernel(inline=True)
-def _world_normal(ax, ay, az, bx, by, bz, cx, cy, cz):
-    """(nx, ny, nz, |n|): :func:`_world_cross` with the length."""
-    nx, ny, nz, n2 = _world_cross(ax, ay, az, bx, by, bz, cx, cy, cz)
-    return nx, ny, nz, math.sqrt(n2)
-
-
-@kernel(inline=True)
 def _culled(vp, ortho, cull, nx, ny, nz, ax, ay, az):
     """Whether ``cull`` (0 none, 1 back, 2 front) drops the face of world normal n and first corner a:
     front-facing f < 0, back-facing f > 0; edge-on (f == 0) is dropped by either cull."""
@@ -587,7 +580,7 @@ def _classify(t, verts, faces, vp, near, cull, vs):
     ax = verts[ia, 0]
     ay = verts[ia, 1]
     az = verts[ia, 2]
-    nx, ny, nz, _nn = _world_normal(
+    nx, ny, nz, _nn2 = _world_cross(
         ax, ay, az, verts[ib, 0], verts[ib, 1], verts[ib, 2], verts[ic, 0], verts[ic, 1], verts[ic, 2]
     )
     return -1 if _culled(vp, ortho, cull, nx, ny, nz, ax, ay, az) else 0
@@ -657,7 +650,7 @@ def _select_fill_slot(slot, chunk, coff, keep, tri, tcode, toff, tface, tlist, n
 
 
 @kernel(nogil=True, nrt=False)
-def _tiny_depth_slot(slot, verts, faces, vp, near, cull, bstart, tface, tlist, phase, nslot, zt, ft):
+def _tiny_depth_slot(slot, verts, faces, vs, vp, near, cull, bstart, tface, tlist, phase, nslot, zt, ft):
     """The tiny path of the depth modes: the nearest depth ``zt`` (float64) and face ``ft`` of every
     pixel over the small triangles listed per band of ``TILE`` rows (``bstart``, ``tface``,
     ``tlist``; see :func:`_select_slot`), drawn directly at their few covered pixel centers: the
@@ -680,14 +673,15 @@ def _tiny_depth_slot(slot, verts, faces, vp, near, cull, bstart, tface, tlist, p
             t = tface[e]
             code = tlist[e]
             ax, ay, az, bx, by, bz, cx, cy, cz = _face_corners(verts, faces, t)
-            nx, ny, nz, nn = _world_normal(ax, ay, az, bx, by, bz, cx, cy, cz)
-            if not (nn > 0.0 and math.isfinite(nn)):
-                continue
+            nx, ny, nz, nn2 = _world_cross(ax, ay, az, bx, by, bz, cx, cy, cz)
+            if not (nn2 > 0.0 and math.isfinite(nn2)):
+                continue  # (|n| > 0 and finite exactly where |n|^2 is: _setup_one's decision)
             if _culled(vp, ortho, cull, nx, ny, nz, ax, ay, az):
                 continue
-            x0, y0, z0 = view_coords(vp, ax, ay, az)
-            x1, y1, z1 = view_coords(vp, bx, by, bz)
-            x2, y2, z2 = view_coords(vp, cx, cy, cz)
+            ia, ib, ic = faces[t, 0], faces[t, 1], faces[t, 2]
+            x0, y0, z0 = vs[ia, _VS_X], vs[ia, _VS_Y], vs[ia, _VS_Z]
+            x1, y1, z1 = vs[ib, _VS_X], vs[ib, _VS_Y], vs[ib, _VS_Z]
+            x2, y2, z2 = vs[ic, _VS_X], vs[ic, _VS_Y], vs[ic, _VS_Z]
             _f1x, _f1y, _f1z, _f2x, _f2y, _f2z, vnx, vny, vnz, n2 = _view_plane(x0, y0, z0, x1, y1, z1, x2, y2, z2)
             if not (n2 > 0.0 and math.isfinite(n2)):
                 continue
@@ -2441,7 +2435,7 @@ def _front_end(vp, W, H, verts, fcs, code, near, mask=None, tiny=False, duals=Tr
     """setup + binning: the arrays the tile kernels read. ``mask`` (H,W) bool (or uint8, nonzero: set): bin a piece only
     to the tiles where its bounding box holds a set texel (min-blend's texel mask). ``tiny`` (the
     depth modes): the small triangles go to the tiny path instead of setup; returns (FrontEnd,
-    tiny) with ``tiny`` = (tstart, tface, tlist) for :func:`_tiny_depth_slot` (None without: fewer
+    tiny) with ``tiny`` = (tstart, tface, tlist, vs) for :func:`_tiny_depth_slot` (None without: fewer
     small triangles than ``_TINY_MIN_PER_PIXEL`` per pixel). ``duals=False``: the triangles' unit
     normals and dual vectors are not made (``_setup_one``; the depth modes read neither)."""
     F = len(fcs)
@@ -2539,7 +2533,7 @@ def _front_end(vp, W, H, verts, fcs, code, near, mask=None, tiny=False, duals=Tr
     fe = FrontEnd(vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, normals, rowbits, sh, tri)
     if not want_tiny:
         return fe
-    return fe, ((tstart, tface, tlist) if NT else None)
+    return fe, ((tstart, tface, tlist, vs) if NT else None)
 
 
 def _scratch(T) -> _Scratch:
@@ -2598,13 +2592,27 @@ def rasterize_depth(
     zt, ft = _NO_ZT, _NO_FT
     if tiny is not None:
         # the small triangles, drawn directly (no setup, no binning), merged by the tile pass
-        tstart, tface, tlist = tiny
+        tstart, tface, tlist, vs = tiny
         zt = np.empty((H, W), dtype=np.float64)
         ft = np.empty((H, W), dtype=np.int32)
         nthreads = numba.get_num_threads()
         for phase in (0, 1):
             run_slots(
-                _tiny_depth_slot, nthreads, verts, fcs, vp, near, code, tstart, tface, tlist, phase, nthreads, zt, ft
+                _tiny_depth_slot,
+                nthreads,
+                verts,
+                fcs,
+                vs,
+                vp,
+                near,
+                code,
+                tstart,
+                tface,
+                tlist,
+                phase,
+                nthreads,
+                zt,
+                ft,
             )
     _tiles_depth(fe, _scratch(fe.tile), depth, faces_out, zt, ft)
     return depth, (faces_out if tri else None)
