@@ -467,10 +467,12 @@ _VS_WIDTH = 5
 
 @kernel(nogil=True, nrt=False)
 def _vertex_screen_slot(slot, verts, vp, near, vs, nslot):
-    """Per vertex (once per vertex instead of once per triangle corner):
-    vs[v, 0] = its view depth z and, where z >= near, vs[v, 1], vs[v, 2] = its snapped screen
-    coordinates (NaN elsewhere). The same operations as :func:`_setup_one` / :func:`_setup_piece`
-    on a corner, so the values are theirs bit for bit. Run by ``run_slots``: slot ``slot`` of
+    """Per vertex (once per vertex instead of once per triangle corner), the columns ``_VS_*`` of
+    ``vs[v]``: its view coordinates x, y, z and, where z >= near, its snapped screen coordinates
+    (NaN elsewhere). The small-triangle rejection (:func:`_classify`), the setup
+    (:func:`_setup_one`, which projects only the pieces that clipping makes: :func:`_setup_piece`)
+    and the tiny path read them: the same operations as a projection per corner, so the same bits.
+    Run by ``run_slots``: slot ``slot`` of
     ``nslot`` takes the slot-th of ``nslot`` contiguous blocks of vertices (one slot, all of them,
     below ``_SERIAL_VERTICES``)."""
     n = verts.shape[0]
