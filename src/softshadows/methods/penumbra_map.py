@@ -993,38 +993,38 @@ def render_penumbra_map(
     overlap = calling_thread_only if callable(needed) else nullcontext
     with overlap(), phase("silhouettes"):
         sil, t_build = find_silhouettes(scene, view.origin, silhouettes)
-    with phase("penumbra_map"), overlap():
-        pm = np.ones((view.height, view.width), np.float32)  # clear to white
-        zp = smp.surface_depth
-        # its last level is the farthest Z_P (shadow_map_pass makes it in its last pass)
-        pyr = smp.zmax_pyramid if smp.zmax_pyramid is not None else build_zmax_pyramid(zp)
-        zmax = pyramid_max(pyr)
-        z_far = zmax * (1.0 + 1e-6) if zmax > 0.0 else float(view.far)
-        if not early_reject:
-            pyr = None
-        faces = flat.faces if flat.occluder.all() else flat.faces_where(flat.occluder)  # once per geometry
-        cones = build_cones(view, flat.vertices[sil.vertices], light_radius, z_far, cone_segments, pyr)
-        sheets = build_sheets(
-            view, flat.vertices, faces, sil, light_radius, z_far, sheet_tolerance, sheet_max_subdiv, pyr
-        )
-        nv = len(cones.vertices)
-        verts = np.concatenate([cones.vertices, sheets.vertices])
-        tris = np.concatenate([cones.triangles, sheets.triangles + nv])
-        zattr = np.concatenate([cones.zv, sheets.zv])
-        prims = Primitives(verts, tris, zattr)
-        rview = View(
-            view.origin,
-            view.right,
-            view.up,
-            view.forward,
-            view.window,
-            view.near,
-            max(z_far * (1.0 + 1e-4), view.near * 2),
-            view.width,
-            view.height,
-            False,
-        )
     with phase("penumbra_map"):
+        with overlap():  # (the calling thread alone until the texels are needed)
+            pm = np.ones((view.height, view.width), np.float32)  # clear to white
+            zp = smp.surface_depth
+            # its last level is the farthest Z_P (shadow_map_pass makes it in its last pass)
+            pyr = smp.zmax_pyramid if smp.zmax_pyramid is not None else build_zmax_pyramid(zp)
+            zmax = pyramid_max(pyr)
+            z_far = zmax * (1.0 + 1e-6) if zmax > 0.0 else float(view.far)
+            if not early_reject:
+                pyr = None
+            faces = flat.faces if flat.occluder.all() else flat.faces_where(flat.occluder)  # once per geometry
+            cones = build_cones(view, flat.vertices[sil.vertices], light_radius, z_far, cone_segments, pyr)
+            sheets = build_sheets(
+                view, flat.vertices, faces, sil, light_radius, z_far, sheet_tolerance, sheet_max_subdiv, pyr
+            )
+            nv = len(cones.vertices)
+            verts = np.concatenate([cones.vertices, sheets.vertices])
+            tris = np.concatenate([cones.triangles, sheets.triangles + nv])
+            zattr = np.concatenate([cones.zv, sheets.zv])
+            prims = Primitives(verts, tris, zattr)
+            rview = View(
+                view.origin,
+                view.right,
+                view.up,
+                view.forward,
+                view.window,
+                view.near,
+                max(z_far * (1.0 + 1e-4), view.near * 2),
+                view.width,
+                view.height,
+                False,
+            )
         if callable(needed):
             needed = needed()
         fst = penumbra_fragment_program(

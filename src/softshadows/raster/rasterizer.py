@@ -155,8 +155,6 @@ def _store_edge(edges, slot, k, ax, ay, bx, by, ext_x, ext_y):
 @kernel
 def _setup_piece(vp, slot, x0, y0, z0, x1, y1, z1, x2, y2, z2, far, box, edges, zinfo):
     """Project, snap, orient one (clipped) triangle; returns 1 if it may cover a pixel center."""
-    if min(z0, min(z1, z2)) > far:
-        return 0
     sx0, sy0 = view_coords_to_screen(vp, x0, y0, z0)
     sx1, sy1 = view_coords_to_screen(vp, x1, y1, z1)
     sx2, sy2 = view_coords_to_screen(vp, x2, y2, z2)
