@@ -23,7 +23,7 @@ import numba
 import numpy as np
 from numba.cpython.unsafe.numbers import trailing_zeros
 
-from .._jit import kernel, py_callable, run_slots, run_threads
+from .._jit import kernel, next_item, py_callable, run_slots, run_threads, work_counter
 from ..analytic import disk_facing_frame, polygon_disk_area, quad_disk_area_small, quad_disk_area_small32
 from ..errors import SoftShadowsError
 from ..raster import View, rasterize_depth, rasterize_fragments
@@ -933,17 +933,23 @@ def accumulate_soft_shadow_map_slot(
     ssm,
     touched,
     ramp,
+    counter,
     nslot,
 ):
-    """Slot ``slot`` of :func:`accumulate_soft_shadow_map` (``run_slots``): bands slot, slot + nslot, ..."""
+    """Slot ``slot`` of :func:`accumulate_soft_shadow_map` (``run_slots``): each slot takes the next
+    band from ``counter`` (``next_item``) until none is left. A band's sums are its own (its
+    patches in draw order), so the result is the same whatever slot takes it."""
     H, W = recv_depth.shape
     l, r, b, t = svp[VP_L], svp[VP_R], svp[VP_B], svp[VP_T]
     dxs = (r - l) / W
     dys = (t - b) / H
     n_bands = band_ptr.shape[0] - 1
-    # bands dealt round-robin to the ``nslot`` slots, one per thread (with the shadow in a few
-    # bands, contiguous halves would leave a thread idle)
-    for bnd in range(slot, n_bands, nslot):
+    # bands claimed one at a time (with the shadow in a few bands, contiguous halves would leave a
+    # thread idle, and a fixed deal waits for a thread that the machine holds up)
+    while True:
+        bnd = next_item(counter)
+        if bnd >= n_bands:
+            break
         r0 = bnd * band_rows
         r1 = min(r0 + band_rows, H) - 1
         cnt = 0
@@ -1076,6 +1082,7 @@ def accumulate_soft_shadow_map(
         ssm,
         touched,
         np.arange(recv_depth.shape[1], dtype=np.int32),
+        work_counter(),
         nslot,
     )
     return touched
@@ -1355,9 +1362,12 @@ def accumulate_soft_shadow_map_sphere_slot(
     svp,
     rho,
     touched,
+    counter,
     nslot,
 ):
-    """Slot ``slot`` of :func:`accumulate_soft_shadow_map_sphere` (``run_slots``): bands slot, slot + nslot, ..."""
+    """Slot ``slot`` of :func:`accumulate_soft_shadow_map_sphere` (``run_slots``): each slot takes the
+    next band from ``counter`` (``next_item``) until none is left; a band's sums, crossing queue
+    included, are its own, so the result is the same whatever slot takes it."""
     H, W = recv_depth.shape
     l, r, b, t = svp[VP_L], svp[VP_R], svp[VP_B], svp[VP_T]
     dxs = (r - l) / W
@@ -1390,7 +1400,10 @@ def accumulate_soft_shadow_map_sphere_slot(
     ramp = np.empty(W, np.int32)  # 0, 1, 2, ...: the row pass's column mask
     for j in range(W):
         ramp[j] = j
-    for bnd in range(slot, n_bands, nslot):
+    while True:
+        bnd = next_item(counter)
+        if bnd >= n_bands:
+            break
         r0 = bnd * band_rows
         r1 = min(r0 + band_rows, H) - 1
         cnt = 0
@@ -1545,6 +1558,7 @@ def accumulate_soft_shadow_map_sphere(
         svp,
         rho,
         touched,
+        work_counter(),
         nslot,
     )
     return touched
