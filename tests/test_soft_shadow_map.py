@@ -9,6 +9,8 @@ separable in the two axes. It is computed here, independently of the library.
 
 from __future__ import annotations
 
+import inspect
+
 import numpy as np
 import pytest
 
@@ -646,3 +648,34 @@ def test_bin_patches_by_band_lists_every_patch_of_every_band_in_order(threads):
         want = [k for k in range(n) if i0[k] <= i1[k] and i0[k] // band_rows <= b <= i1[k] // band_rows]
         assert idx[ptr[b] : ptr[b + 1]].tolist() == want
     assert ptr[15] == ptr[-1] and ptr[14] < ptr[15]  # bands 15-24 empty, band 14 not
+
+
+@pytest.mark.parametrize("light", ["rect", "sphere"])
+def test_accumulation_is_the_same_bits_whatever_the_slots(light, monkeypatch):
+    """The accumulation's slots claim bands from a shared counter: each band's sums (its patches in
+    draw order, the sphere's crossing queue included) are its own, so one slot and three slots give
+    the same soft shadow map bit for bit, and every band is summed once (a band taken twice or
+    skipped would change the sums). ``spheres``: several occluders, shadows in many bands."""
+    name = "accumulate_soft_shadow_map_sphere" if light == "sphere" else "accumulate_soft_shadow_map"
+    fn = getattr(ssm, name)
+    seen = {}
+
+    def capture(*args):
+        seen["args"] = args
+        return fn(*args)
+
+    monkeypatch.setattr(ssm, name, capture)
+    ss.render(ss.load_scene("spheres", light=light), "soft-shadow-map", 64, 48)
+    args = seen["args"]
+    ssm_at = list(inspect.signature(fn).parameters).index("ssm")
+    outs = []
+    for nslot in (1, 3):
+        a = list(args)
+        a[ssm_at] = np.zeros_like(args[ssm_at])
+        a[-1] = nslot
+        touched = fn(*a)
+        outs.append((a[ssm_at], touched))
+    (s1, t1), (s3, t3) = outs
+    assert s1.any() and (s1 > 0.99).any()  # a real shadow, umbra included
+    np.testing.assert_array_equal(s1, s3)
+    np.testing.assert_array_equal(t1, t3)
