@@ -93,14 +93,15 @@ def main():
         b = bench("bunny", a.speed_methods, sizes=(512,), repeats=a.repeats, warmup=1, light=light, verbose=False)
         lines.append(f"Frame time, bunny {light} light, 512x512, median of {a.repeats} after warm-up:")
         lines.append("")
-        lines.append("| method | total ms | x hard | slowest phase |")
-        lines.append("|---|---|---|---|")
+        lines.append("| method | total ms | x hard | x hard per round: median (quartiles) | slowest phase |")
+        lines.append("|---|---|---|---|---|")
         for rm in b["results"]:
             ph = {k: v["median"] for k, v in rm["timings"].items() if k != "total"}
             slow = max(ph, key=ph.get) if ph else ""
+            pr = rm["ratio_to_hard_paired"]
             lines.append(
                 f"| {rm['method']} | {rm['timings']['total']['median'] * 1e3:.1f} | {rm['ratio_to_hard']:.2f} | "
-                f"{slow} ({ph.get(slow, 0) * 1e3:.1f} ms) |"
+                f"{pr['median']:.2f} ({pr['q1']:.2f}-{pr['q3']:.2f}) | {slow} ({ph.get(slow, 0) * 1e3:.1f} ms) |"
             )
         lines.append("")
     lines.append(f"(wall time {time.time() - t0:.0f} s)")

@@ -136,8 +136,14 @@ def test_bench_ratio_to_hard_and_table():
     for (_size, m), r in rows.items():
         t = r["timings"]["total"]
         assert t["n"] == 2 and t["min"] <= t["median"] <= t["max"]
+        pr = r["ratio_to_hard_paired"]  # each round's frame against hard's frame of that round
+        assert pr["n"] == 2 and pr["min"] <= pr["q1"] <= pr["median"] <= pr["q3"] <= pr["max"]
         if m == "hard":
             assert r["ratio_to_hard"] == pytest.approx(1.0)
+            assert pr["min"] == pr["max"] == 1.0  # paired with itself, round by round
+        else:  # the two rounds' ratios lie between the extreme ratios of the rounds' totals
+            h = rows[(_size, "hard")]["timings"]["total"]
+            assert t["min"] / h["max"] <= pr["min"] <= pr["max"] <= t["max"] / h["min"]
         assert "shadow_map" in r["timings"]
     assert "blocker_search" in rows[((32, 32), "pcss")]["timings"]
     assert "pcss" in format_table(res)

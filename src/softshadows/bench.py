@@ -127,7 +127,11 @@ def bench(
 
     Returns ``{"scene", "light", "machine", "repeats", "warmup", "skipped", "results": [{"size",
     "method", "params", "timings": {phase: {median, min, max, q1, q3, n}}, "method_time",
-    "ratio_to_hard", "ratio_to_hard_method"}]}`` (seconds)."""
+    "ratio_to_hard", "ratio_to_hard_method", "ratio_to_hard_paired"}]}`` (seconds).
+    ``ratio_to_hard`` is the ratio of the medians; ``ratio_to_hard_paired`` the statistics of the
+    per-round ratios (each frame against ``hard``'s frame of the same round, rendered a few
+    milliseconds apart, so that the host's slower and faster stretches cancel), {median, min, max,
+    q1, q3, n}."""
     from . import render
     from .report import machine_info
 
@@ -161,6 +165,7 @@ def bench(
                         phases.append(k)
             tim = {p: _stats([t.get(p, 0.0) for t in samples[m]]) for p in phases}
             mt = _stats([_method_time(t) for t in samples[m]])
+            paired = _stats([t["total"] / th["total"] for t, th in zip(samples[m], samples["hard"], strict=True)])
             results.append(
                 {
                     "size": [w, h],
@@ -170,6 +175,7 @@ def bench(
                     "method_time": mt,
                     "ratio_to_hard": tim["total"]["median"] / hard_total if hard_total > 0 else float("nan"),
                     "ratio_to_hard_method": mt["median"] / hard_method if hard_method > 0 else float("nan"),
+                    "ratio_to_hard_paired": paired,
                 }
             )
     return {
@@ -188,10 +194,12 @@ def format_table(res: dict) -> str:
     """The printed table: one row per (size, method), milliseconds."""
     lines = [
         f"{res['scene']} ({res['light']} light), {res['repeats']} repeats after {res['warmup']} warm-up frame(s); "
-        f"times in ms: median [min-max]; x hard = ratio of medians (whole frame / method phases only)"
+        f"times in ms: median [min-max]; x hard = ratio of medians (whole frame / method phases only); "
+        f"x round = median of the per-round ratios (each frame against hard's frame of the same round)"
     ]
     lines.append(
-        f"{'size':>10}  {'method':<20}{'total':>10} {'[min-max]':>17} {'x hard':>7} {'x hard*':>8}  phases (median)"
+        f"{'size':>10}  {'method':<20}{'total':>10} {'[min-max]':>17} {'x hard':>7} {'x hard*':>8} {'x round':>8}"
+        f"  phases (median)"
     )
     for r in res["results"]:
         t = r["timings"]
@@ -199,7 +207,7 @@ def format_table(res: dict) -> str:
         lines.append(
             f"{r['size'][0]:>5}x{r['size'][1]:<4}  {r['method']:<20}{t['total']['median'] * 1e3:10.1f} "
             f"{'[' + format(t['total']['min'] * 1e3, '.1f') + '-' + format(t['total']['max'] * 1e3, '.1f') + ']':>17} "
-            f"{r['ratio_to_hard']:7.2f} {r['ratio_to_hard_method']:8.2f}  {ph}"
+            f"{r['ratio_to_hard']:7.2f} {r['ratio_to_hard_method']:8.2f} {r['ratio_to_hard_paired']['median']:8.2f}  {ph}"
         )
     for m, why in res.get("skipped", {}).items():
         lines.append(f"skipped {m}: {why}")
