@@ -111,3 +111,54 @@ def test_same_bits_whatever_the_slots(monkeypatch, light):
     assert np.count_nonzero((one.visibility > 0.0) & (one.visibility < 1.0)) > 20  # a penumbra to compare
     assert np.array_equal(one.visibility, five.visibility, equal_nan=True)
     assert one.stats == five.stats
+
+
+def test_region_decided_against_the_cells_and_the_texels():
+    """``_region_decided`` (the filter's lit/dark test from the occupancy grid's cells, with its
+    shortcut on the cell under the point) against both definitions it stands for, on random maps
+    and boxes: (1) the cells: lit iff every cell under the clamped box has its smallest depth >= hi,
+    dark iff the box lies inside the map and every cell under it has its largest depth < lo;
+    (2) conservative on the texels: lit implies every texel of the box is >= hi (texels outside
+    the map count as lit), dark implies every texel is < lo."""
+    from softshadows._jit import py_callable
+    from softshadows.methods.pcss import OCC_CELL, _region_decided, occupancy_grid
+
+    decided = py_callable(_region_decided)
+    rng = np.random.default_rng(11)
+    H, W = 70, 90  # not multiples of the cell size
+    n_lit = n_dark = 0
+    for trial in range(6):
+        depth = rng.uniform(1.0, 3.0, (H, W)).astype(np.float32)
+        depth[rng.random((H, W)) < 0.3 * trial / 5] = np.inf  # empty texels
+        if trial % 2:  # smooth regions: whole cells decided (cells of 16 texels)
+            depth[:16] = np.float32(5.0)
+            depth[16:, :64] = np.float32(0.5)
+        _sat, _z, cmin, cmax = occupancy_grid(depth)
+        for q in range(400):
+            if q % 2:  # anywhere, partly or wholly off the map
+                sx, sy = rng.uniform(-20, W + 20), rng.uniform(-20, H + 20)
+                ex, ey = rng.uniform(2.0, 30.0), rng.uniform(2.0, 30.0)
+            else:  # small boxes in the dark block
+                sx, sy = rng.uniform(6.0, 58.0), rng.uniform(22.0, 64.0)
+                ex, ey = rng.uniform(2.0, 5.0), rng.uniform(2.0, 5.0)
+            lo = rng.uniform(0.0, 2.0)
+            hi = lo + rng.uniform(0.0, 4.0)
+            lit, dark = decided(cmin, cmax, OCC_CELL, H, W, sx, sy, ex, ey, lo, hi)
+            c0, c1 = int(np.floor(sx - ex)), int(np.floor(sx + ex))
+            r0, r1 = int(np.floor(sy - ey)), int(np.floor(sy + ey))
+            inside = c0 >= 0 and r0 >= 0 and c1 < W and r1 < H
+            a0, a1, b0, b1 = max(c0, 0), min(c1, W - 1), max(r0, 0), min(r1, H - 1)
+            if a0 > a1 or b0 > b1:
+                assert (lit, dark) == (True, False)
+                continue
+            cells = (slice(b0 // OCC_CELL, b1 // OCC_CELL + 1), slice(a0 // OCC_CELL, a1 // OCC_CELL + 1))
+            assert lit == bool((cmin[cells] >= hi).all())
+            assert dark == bool(inside and (cmax[cells] < lo).all())
+            box = depth[b0 : b1 + 1, a0 : a1 + 1]
+            if lit:
+                assert (box >= hi).all()
+                n_lit += 1
+            if dark:
+                assert inside and (box < lo).all()
+                n_dark += 1
+    assert n_lit > 50 and n_dark > 20  # both outcomes were exercised

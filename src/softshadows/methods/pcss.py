@@ -403,6 +403,13 @@ def _region_decided(cmin, cmax, cell, H, W, sx, sy, ex, ey, lo, hi):
     r1 = min(r1, H - 1)
     if c0 > c1 or r0 > r1:
         return True, False
+    # the cell under (sx, sy) first (it is under the box when inside the map): where it holds both
+    # a possible blocker and a possibly lit texel, as in most of the penumbra, neither can hold
+    xc, yc = int(np.floor(sx)), int(np.floor(sy))
+    if 0 <= xc < W and 0 <= yc < H:
+        gc, gr = xc // cell, yc // cell
+        if not (cmin[gr, gc] >= hi) and not (cmax[gr, gc] < lo):
+            return False, False
     lit = True
     for gy in range(r0 // cell, r1 // cell + 1):
         for gx in range(c0 // cell, c1 // cell + 1):
