@@ -652,10 +652,10 @@ def test_bin_patches_by_band_lists_every_patch_of_every_band_in_order(threads):
 
 @pytest.mark.parametrize("light", ["rect", "sphere"])
 def test_accumulation_is_the_same_bits_whatever_the_slots(light, monkeypatch):
-    """The accumulation's slots claim bands from a shared counter: each band's sums (its patches in
-    draw order, the sphere's crossing queue included) are its own, so one slot and three slots give
-    the same soft shadow map bit for bit, and every band is summed once (a band taken twice or
-    skipped would change the sums). ``spheres``: several occluders, shadows in many bands."""
+    """Each band's sums (its patches in draw order, the sphere's crossing queue included) are its
+    own, whichever slot sums it, so one slot and three slots give the same soft shadow map bit for
+    bit, and every band is summed once (a band taken twice or skipped would change the sums).
+    ``spheres``: several occluders, shadows in many bands."""
     name = "accumulate_soft_shadow_map_sphere" if light == "sphere" else "accumulate_soft_shadow_map"
     fn = getattr(ssm, name)
     seen = {}

@@ -23,7 +23,7 @@ import numba
 import numpy as np
 from numba.cpython.unsafe.numbers import trailing_zeros
 
-from .._jit import kernel, next_item, py_callable, run_slots, run_threads, work_counter
+from .._jit import kernel, py_callable, run_slots, run_threads
 from ..analytic import disk_facing_frame, polygon_disk_area, quad_disk_area_small, quad_disk_area_small32
 from ..errors import SoftShadowsError
 from ..raster import View, rasterize_depth, rasterize_fragments
@@ -412,9 +412,7 @@ def _rect_max(vals, off, ws, i0, i1, j0, j1):
 
 
 @kernel(nogil=True, nrt=False)
-def refine_extents_sphere_slot(
-    slot, patches, ext, rho, pyr_vals, pyr_off, pyr_ws, svp, rounds, z_plane, counter, nslot
-):
+def refine_extents_sphere_slot(slot, patches, ext, rho, pyr_vals, pyr_off, pyr_ws, svp, rounds, z_plane, nslot):
     """Narrow :func:`penumbra_extents_sphere`'s ranges in place, ``rounds`` times: a texel p that the
     patch shadows lies in its current range R, so (1) its receiver depth is at most the largest one
     in R (:func:`_rect_max`, instead of the deepest receiver of the whole map) and (2) its facing
@@ -424,49 +422,33 @@ def refine_extents_sphere_slot(
     without receivers deeper than the patch becomes empty. ``z_plane`` > 0: ``ext``'s rows are
     first set to :func:`penumbra_extents_sphere`'s ranges for receivers up to that depth (the same
     arithmetic, in this parallel pass instead of a serial pass of its own). Run by ``run_slots``:
-    each slot takes the next run of ``_REFINE_RUN`` patches from ``counter`` (``next_item``) until
-    none is left (a patch's range is its own: the same whatever slot refines it; with contiguous
-    halves one thread finished ~0.4 ms after the other on `bunny`)."""
+    slot ``slot`` of ``nslot`` takes the ``slot``-th of ``nslot`` contiguous runs of patches."""
     l, r, b, t = svp[VP_L], svp[VP_R], svp[VP_B], svp[VP_T]
     dxs = (r - l) / svp[VP_W]
     dys = (t - b) / svp[VP_H]
     n = patches.shape[0]
-    while True:
-        q = next_item(counter) * _REFINE_RUN
-        if q >= n:
-            break
-        for k in range(q, min(q + _REFINE_RUN, n)):
-            _refine_patch(patches, k, ext, rho, pyr_vals, pyr_off, pyr_ws, svp, rounds, z_plane, l, t, dxs, dys)
-
-
-#: patches per work item of :func:`refine_extents_sphere_slot`
-_REFINE_RUN = 512
-
-
-@kernel(inline=True)
-def _refine_patch(patches, k, ext, rho, pyr_vals, pyr_off, pyr_ws, svp, rounds, z_plane, l, t, dxs, dys):
-    """Patch k of :func:`refine_extents_sphere_slot`: its range narrowed ``rounds`` times."""
-    if z_plane > 0.0:
-        _patch_sphere_extent(patches, k, rho, z_plane, svp, ext)
-    for _ in range(rounds):
-        i0, i1, j0, j1 = ext[k, 0], ext[k, 1], ext[k, 2], ext[k, 3]
-        if i0 > i1 or j0 > j1:
-            break
-        z_max = np.float64(_rect_max(pyr_vals, pyr_off, pyr_ws, i0, i1, j0, j1))
-        ux = max(abs(l + (j0 + 0.5) * dxs), abs(l + (j1 + 0.5) * dxs))
-        uy = max(abs(t - (i0 + 0.5) * dys), abs(t - (i1 + 0.5) * dys))
-        u2 = ux * ux + uy * uy
-        lzb = rho * math.sqrt(u2 / (1.0 + u2))
-        fi0, fi1, fj0, fj1 = _sphere_extent(
-            patches[k, 0], patches[k, 1], patches[k, 2], patches[k, 3], patches[k, 4], rho, lzb, z_max, svp
-        )
-        n0 = max(int(fi0), i0) if fi0 <= fi1 else 1
-        n1 = min(int(fi1), i1) if fi0 <= fi1 else 0
-        m0 = max(int(fj0), j0) if fj0 <= fj1 else 1
-        m1 = min(int(fj1), j1) if fj0 <= fj1 else 0
-        if n0 > n1 or m0 > m1:
-            n0, n1, m0, m1 = 1, 0, 1, 0
-        ext[k, 0], ext[k, 1], ext[k, 2], ext[k, 3] = n0, n1, m0, m1
+    for k in range(slot * n // nslot, (slot + 1) * n // nslot):
+        if z_plane > 0.0:
+            _patch_sphere_extent(patches, k, rho, z_plane, svp, ext)
+        for _ in range(rounds):
+            i0, i1, j0, j1 = ext[k, 0], ext[k, 1], ext[k, 2], ext[k, 3]
+            if i0 > i1 or j0 > j1:
+                break
+            z_max = np.float64(_rect_max(pyr_vals, pyr_off, pyr_ws, i0, i1, j0, j1))
+            ux = max(abs(l + (j0 + 0.5) * dxs), abs(l + (j1 + 0.5) * dxs))
+            uy = max(abs(t - (i0 + 0.5) * dys), abs(t - (i1 + 0.5) * dys))
+            u2 = ux * ux + uy * uy
+            lzb = rho * math.sqrt(u2 / (1.0 + u2))
+            fi0, fi1, fj0, fj1 = _sphere_extent(
+                patches[k, 0], patches[k, 1], patches[k, 2], patches[k, 3], patches[k, 4], rho, lzb, z_max, svp
+            )
+            n0 = max(int(fi0), i0) if fi0 <= fi1 else 1
+            n1 = min(int(fi1), i1) if fi0 <= fi1 else 0
+            m0 = max(int(fj0), j0) if fj0 <= fj1 else 1
+            m1 = min(int(fj1), j1) if fj0 <= fj1 else 0
+            if n0 > n1 or m0 > m1:
+                n0, n1, m0, m1 = 1, 0, 1, 0
+            ext[k, 0], ext[k, 1], ext[k, 2], ext[k, 3] = n0, n1, m0, m1
 
 
 def refine_extents_sphere(patches, ext, rho, pyr_vals, pyr_off, pyr_ws, svp, rounds, z_plane=0.0) -> np.ndarray:
@@ -483,7 +465,6 @@ def refine_extents_sphere(patches, ext, rho, pyr_vals, pyr_off, pyr_ws, svp, rou
         svp,
         int(rounds),
         float(z_plane),
-        work_counter(),
     )
     return ext
 
@@ -952,23 +933,17 @@ def accumulate_soft_shadow_map_slot(
     ssm,
     touched,
     ramp,
-    counter,
     nslot,
 ):
-    """Slot ``slot`` of :func:`accumulate_soft_shadow_map` (``run_slots``): each slot takes the next
-    band from ``counter`` (``next_item``) until none is left. A band's sums are its own (its
-    patches in draw order), so the result is the same whatever slot takes it."""
+    """Slot ``slot`` of :func:`accumulate_soft_shadow_map` (``run_slots``): bands slot, slot + nslot, ..."""
     H, W = recv_depth.shape
     l, r, b, t = svp[VP_L], svp[VP_R], svp[VP_B], svp[VP_T]
     dxs = (r - l) / W
     dys = (t - b) / H
     n_bands = band_ptr.shape[0] - 1
-    # bands claimed one at a time (with the shadow in a few bands, contiguous halves would leave a
-    # thread idle, and a fixed deal waits for a thread that the machine holds up)
-    while True:
-        bnd = next_item(counter)
-        if bnd >= n_bands:
-            break
+    # bands dealt round-robin to the ``nslot`` slots, one per thread (with the shadow in a few
+    # bands, contiguous halves would leave a thread idle)
+    for bnd in range(slot, n_bands, nslot):
         r0 = bnd * band_rows
         r1 = min(r0 + band_rows, H) - 1
         cnt = 0
@@ -1101,7 +1076,6 @@ def accumulate_soft_shadow_map(
         ssm,
         touched,
         np.arange(recv_depth.shape[1], dtype=np.int32),
-        work_counter(),
         nslot,
     )
     return touched
@@ -1381,12 +1355,9 @@ def accumulate_soft_shadow_map_sphere_slot(
     svp,
     rho,
     touched,
-    counter,
     nslot,
 ):
-    """Slot ``slot`` of :func:`accumulate_soft_shadow_map_sphere` (``run_slots``): each slot takes the
-    next band from ``counter`` (``next_item``) until none is left; a band's sums, crossing queue
-    included, are its own, so the result is the same whatever slot takes it."""
+    """Slot ``slot`` of :func:`accumulate_soft_shadow_map_sphere` (``run_slots``): bands slot, slot + nslot, ..."""
     H, W = recv_depth.shape
     l, r, b, t = svp[VP_L], svp[VP_R], svp[VP_B], svp[VP_T]
     dxs = (r - l) / W
@@ -1419,10 +1390,7 @@ def accumulate_soft_shadow_map_sphere_slot(
     ramp = np.empty(W, np.int32)  # 0, 1, 2, ...: the row pass's column mask
     for j in range(W):
         ramp[j] = j
-    while True:
-        bnd = next_item(counter)
-        if bnd >= n_bands:
-            break
+    for bnd in range(slot, n_bands, nslot):
         r0 = bnd * band_rows
         r1 = min(r0 + band_rows, H) - 1
         cnt = 0
@@ -1577,7 +1545,6 @@ def accumulate_soft_shadow_map_sphere(
         svp,
         rho,
         touched,
-        work_counter(),
         nslot,
     )
     return touched
@@ -1591,7 +1558,7 @@ def merge_two_pass(front: np.ndarray, back: np.ndarray) -> np.ndarray:
 
 # ---- 9. projection onto the eye view -----------------------------------------------------------
 @kernel(nogil=True)
-def project_soft_shadow_map_slot(slot, position, tri_id, receiver, svp, ssm, out, n_row, counter, nslot):
+def project_soft_shadow_map_slot(slot, position, tri_id, receiver, svp, ssm, out, n_row, nslot):
     """V (H,W) float32 of the eye view into ``out``, straight from its G-buffer image (``position``
     (H,W,3), ``tri_id`` (H,W), -1 where no surface; ``receiver``: per triangle, whether it is a
     receiver): receivers read the SSM (bilinear) at their projection from the light; V = 1 -
@@ -1599,17 +1566,13 @@ def project_soft_shadow_map_slot(slot, position, tri_id, receiver, svp, ssm, out
     V = 1. Per row, the projections first (one float64 array per coordinate, no branch: LLVM
     vectorizes it), then the lookups; ``n_row[i]``: row i's number of receiver pixels.
 
-    Run by ``run_slots``: each slot takes the next row from ``counter`` (``next_item``) until none
-    is left (in row order the upper half of an eye image is often sky, no surface, nothing to look
-    up: contiguous runs of rows left one thread idle for most of the pass; with every other row,
-    the slot thread, which starts later, finished ~0.7 ms after the calling thread on `bunny`)."""
+    Run by ``run_slots``: slot ``slot`` of ``nslot`` takes every ``nslot``-th row (in row order
+    the upper half of an eye image is often sky, no surface, nothing to look up: contiguous runs
+    of rows left one thread idle for most of the pass)."""
     H, W = tri_id.shape
     Hs, Ws = ssm.shape
     sc = np.empty((3, W))
-    while True:
-        i = next_item(counter)
-        if i >= H:
-            break
+    for i in range(slot, H, nslot):
         for j in range(W):
             sx, sy, z = view_project(
                 svp, np.float64(position[i, j, 0]), np.float64(position[i, j, 1]), np.float64(position[i, j, 2])
@@ -1638,7 +1601,7 @@ def project_soft_shadow_map(position, tri_id, receiver, svp, ssm) -> tuple[np.nd
     float32, the number of receiver pixels)."""
     out = np.empty(tri_id.shape, np.float32)
     n_row = np.zeros(tri_id.shape[0], np.int64)
-    run_threads(project_soft_shadow_map_slot, position, tri_id, receiver, svp, ssm, out, n_row, work_counter())
+    run_threads(project_soft_shadow_map_slot, position, tri_id, receiver, svp, ssm, out, n_row)
     return out, int(n_row.sum())
 
 
