@@ -265,7 +265,7 @@ def test_vectorized_disk_terms_equal_the_scalar_path_bit_for_bit():
     of them nonzero that the comparison means something."""
     from numba import njit
 
-    from softshadows.methods.irregular import _ROW, disk_edge_terms, sample_edge_term, sample_row
+    from softshadows.methods.irregular import _ROW, _TERM_ROWS, disk_edge_terms, sample_edge_term, sample_row
 
     @njit
     def both(pts, center, radius, ea, eb, tv_start, tv):
@@ -276,19 +276,15 @@ def test_vectorized_disk_terms_equal_the_scalar_path_bit_for_bit():
         cp = np.ascontiguousarray(pts.T)
         z = np.zeros(3)
         buf = np.zeros((4, 8))
-        sc = np.empty((16, n))
-        sel = np.empty(n, np.int64)
+        sc = np.empty((_TERM_ROWS, n))
         for j in range(n):
             sample_row(1, center, z, pts, j, rw, j)
         for e in range(ea.shape[0]):
             for j in range(n):
                 scalar[e, j] = sample_edge_term(1, rw, j, z, z, radius, 0.0, 0.0, e, ea, eb, tv_start, tv, buf)
-            cand = np.arange(n)
-            out = np.empty(n)
-            k = disk_edge_terms(cp, n, center, radius, e, ea, eb, tv_start, tv, sc, sel, cand, out)
-            batch[e] = 0.0  # every term not returned is an exact zero
-            for t in range(k):
-                batch[e, cand[t]] = out[t]
+            out = np.full(n, np.nan)
+            disk_edge_terms(cp, n, center, radius, e, ea, eb, tv_start, tv, sc, out)
+            batch[e] = out  # every term, the early exits' exact zeros included
         return scalar, batch
 
     rng = np.random.default_rng(3)
@@ -311,7 +307,7 @@ def _rect_terms_both_paths(pts, center, nrm, lu, lv, hu, hv, ea, eb, tv_start, t
     """(scalar ``sample_edge_term``, ``rect_edge_terms``) of every edge at every point."""
     from numba import njit
 
-    from softshadows.methods.irregular import _ROW, rect_edge_terms, sample_edge_term, sample_row
+    from softshadows.methods.irregular import _ROW, _TERM_ROWS, rect_edge_terms, sample_edge_term, sample_row
 
     @njit
     def both(pts, center, nrm, lu, lv, hu, hv, ea, eb, tv_start, tv):
@@ -321,18 +317,16 @@ def _rect_terms_both_paths(pts, center, nrm, lu, lv, hu, hv, ea, eb, tv_start, t
         rw = np.empty((_ROW, n))
         cp = np.ascontiguousarray(pts.T)
         buf = np.zeros((4, 8))
-        sc = np.empty((16, n))
-        sel = np.empty(n, np.int64)
+        sc = np.empty((_TERM_ROWS, n))
         out = np.empty(n)
         for j in range(n):
             sample_row(0, center, nrm, pts, j, rw, j)
         for e in range(ea.shape[0]):
             for j in range(n):
                 scalar[e, j] = sample_edge_term(0, rw, j, lu, lv, 0.0, hu, hv, e, ea, eb, tv_start, tv, buf)
-            cand = np.arange(n)
-            k = rect_edge_terms(cp, n, center, nrm, lu, lv, hu, hv, e, ea, eb, tv_start, tv, sc, sel, cand, out)
-            batch[e] = 0.0
-            batch[e, cand[:k]] = out[:k]
+            out[:] = np.nan
+            rect_edge_terms(cp, n, center, nrm, lu, lv, hu, hv, e, ea, eb, tv_start, tv, sc, out)
+            batch[e] = out  # every term, the early exits' exact zeros included
         return scalar, batch
 
     return both(pts, center, nrm, lu, lv, hu, hv, ea, eb, tv_start, tv)

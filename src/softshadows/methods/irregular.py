@@ -1842,18 +1842,19 @@ _DD, _DW0, _DW1 = 0, 1, 2
 
 
 @kernel(inline=True)
-def disk_edge_terms(cp, m, center, radius, e, ea, eb, tv_start, tv, sc, sel, cand, out):
-    """``sample_edge_term`` for the disk (``shape == 1``) at the m samples ``cand[:m]`` whose
-    positions are ``cp[:, :m]`` (copied contiguous when the candidates are compacted), for one edge
-    with one or two counted triangles: the same arithmetic in the same order (``sample_row``'s
-    c - p, L and w included), every early exit made a select, so that the loops run branch-free on
-    contiguous data and vectorize. Bit for bit the values of the scalar path. In three passes
-    through the scratch ``sc`` (rows ``_D*``): the term is one long chain of dependent square roots
-    and divisions, which kept a single loop waiting on their latencies (its body too long for the
-    core to overlap two iterations); the exits and the clipped segment first, then, for the
-    survivors only (compacted, as :func:`rect_edge_terms`: 43% of the sphere's candidates on
-    ``bunny`` exit there), Eq. 3. Returns n: the terms that can be nonzero are ``out[:n]``, at the
-    samples ``cand[:n]`` (compacted in place; every other term is an exact 0)."""
+def disk_edge_terms(cp, m, center, radius, e, ea, eb, tv_start, tv, sc, out):
+    """``sample_edge_term`` for the disk (``shape == 1``) at the m candidate samples whose positions
+    are ``cp[:, :m]`` (copied contiguous), for one edge with one or two counted triangles, into
+    ``out[:m]``: the same arithmetic in the same order (``sample_row``'s c - p, L and w included),
+    every early exit made a select, so that the loops run branch-free on contiguous data and
+    vectorize. Bit for bit the values of the scalar path (an early exit gives an exact 0). In three
+    passes through the scratch ``sc`` (rows ``_D*``): the term is one long chain of dependent
+    square roots and divisions, which kept a single loop waiting on their latencies (its body too
+    long for the core to overlap two iterations); the exits and the clipped segment first, then
+    Eq. 3 at every candidate, the exits' values discarded by a select. The survivors are not
+    compacted first: ``drop_cancelling`` has already dropped most of the early exits, and
+    compacting the rest cost more than their areas (the penumbra pass 0.95 of its time before,
+    2026-12-04)."""
     rr = radius * radius
     ax, ay, az, bx, by, bz = ea[e, 0], ea[e, 1], ea[e, 2], eb[e, 0], eb[e, 1], eb[e, 2]
     k1 = tv_start[e]
@@ -1919,38 +1920,33 @@ def disk_edge_terms(cp, m, center, radius, e, ea, eb, tv_start, tv, sc, sel, can
         ok &= w1 > w0
         sc[_DD, i], sc[_DW0, i], sc[_DW1, i] = d, w0, w1
         sc[_DOK, i] = 1.0 if ok else 0.0
-    n = 0
-    for i in range(m):
-        sel[np.uint64(n)] = i  # unsigned: no wrap-around code
-        n += sc[_DOK, i] != 0.0
-    for t in range(n):
-        i = sel[t]  # >= t: compacted in place
-        cand[t] = cand[i]
-        sc[_DD, t], sc[_DW0, t], sc[_DW1, t], sc[_DF, t] = sc[_DD, i], sc[_DW0, i], sc[_DW1, i], sc[_DF, i]
-    for t in range(n):
-        out[t] = sc[_DF, t] * segment_area(sc[_DD, t], sc[_DW0, t], sc[_DW1, t])
-    return n
+    for i in range(m):  # (an exit's segment may be NaN: the select discards it)
+        a = sc[_DF, i] * segment_area(sc[_DD, i], sc[_DW0, i], sc[_DW1, i])
+        out[i] = a if sc[_DOK, i] != 0.0 else 0.0
 
 
 #: rows of :func:`rect_edge_terms`' scratch: the first half-plane (beyond the edge's line), the two
-#: through the centre (inside the angle), the term's sign and weight (0: an exact zero); twice
+#: through the centre (inside the angle), the term's sign and weight (0: an exact zero)
 _RH1, _RH2, _RH3, _RF, _RSC = 0, 3, 5, 7, 8
+#: rows of the edge terms' scratch (:func:`disk_edge_terms`' are more)
+_TERM_ROWS = max(_RSC, _DOK + 1)
 
 
 @kernel(nrt=False)
-def rect_edge_terms(cp, m, center, nrm_l, lu, lv, hu, hv, e, ea, eb, tv_start, tv, sc, sel, cand, out):
-    """``sample_edge_term`` for the rectangle (``shape == 0``) at the m samples ``cand[:m]`` whose
-    positions are ``cp[:, :m]``, for one edge with one or two counted triangles: the twin of
+def rect_edge_terms(cp, m, center, nrm_l, lu, lv, hu, hv, e, ea, eb, tv_start, tv, sc, out):
+    """``sample_edge_term`` for the rectangle (``shape == 0``) at the m candidate samples whose
+    positions are ``cp[:, :m]``, for one edge with one or two counted triangles, into ``out[:m]``
+    (an early exit gives an exact 0): the twin of
     :func:`disk_edge_terms` (``sample_row``'s rectangle part, every early exit a select, branch-free
     on contiguous data: it vectorizes). ``_rect_term``'s Sutherland-Hodgman clipping (data-dependent
     vertex counts) is replaced by the same region's area from its boundary
     (:func:`softshadows.analytic.rect_halfplanes_area`): not the same bits as the scalar path, the
-    same values to rounding (tests/test_irregular.py). In two passes, since most candidates exit
-    early (85% on ``bunny``): every exit test and the region's half-planes into the scratch ``sc``
-    (rows ``_R*``), then the area only at the survivors (their indices compacted into ``sel``, their
-    rows gathered into ``sc``'s second half). Returns n: the terms that can be nonzero are
-    ``out[:n]``, at the samples ``cand[:n]`` (compacted in place; every other term is an exact 0),
-    so that the caller's accumulation skips the early exits. A function of its own, like
+    same values to rounding (tests/test_irregular.py). In two passes: every exit test and the
+    region's half-planes into the scratch ``sc`` (rows ``_R*``), then the area at every candidate,
+    an exit's discarded by a select. The survivors are not compacted first: ``drop_cancelling`` has
+    already dropped nearly every early exit (of `bunny`'s 1.10M candidates 568k reach this
+    function and 539k survive its exits), and compacting cost more than the few areas it spared
+    (the penumbra pass 0.91-0.93 of its time before, 2026-12-04). A function of its own, like
     ``scalar_edge_terms`` (inlined into ``_penumbra_kernel`` it added 4.5 s to that kernel's compile
     time), without reference counting (it allocates nothing)."""
     ax, ay, az, bx, by, bz = ea[e, 0], ea[e, 1], ea[e, 2], eb[e, 0], eb[e, 1], eb[e, 2]
@@ -2015,32 +2011,20 @@ def rect_edge_terms(cp, m, center, nrm_l, lu, lv, hu, hv, e, ea, eb, tv_start, t
         sc[_RH2, i], sc[_RH2 + 1, i], sc[_RH3, i], sc[_RH3 + 1, i] = -sw * day, sw * dax, sw * dby, -sw * dbx
         f = -so * wsum
         sc[_RF, i] = f if ok else 0.0
-    n = 0
     for i in range(m):
-        sel[np.uint64(n)] = i
-        n += sc[_RF, i] != 0.0
-    for t in range(n):
-        i = sel[t]
-        for r in range(_RSC):
-            sc[_RSC + r, t] = sc[r, i]
-    g = _RSC
-    for t in range(n):
         area = rect_halfplanes_area(
             hu,
             hv,
-            sc[g + _RH1, t],
-            sc[g + _RH1 + 1, t],
-            sc[g + _RH1 + 2, t],
-            sc[g + _RH2, t],
-            sc[g + _RH2 + 1, t],
-            sc[g + _RH3, t],
-            sc[g + _RH3 + 1, t],
+            sc[_RH1, i],
+            sc[_RH1 + 1, i],
+            sc[_RH1 + 2, i],
+            sc[_RH2, i],
+            sc[_RH2 + 1, i],
+            sc[_RH3, i],
+            sc[_RH3 + 1, i],
         )
-        sc[g + _RF, t] = sc[g + _RF, t] * (abs(area) * norm)
-    for t in range(n):
-        cand[t] = cand[sel[t]]  # sel[t] >= t
-        out[t] = sc[g + _RF, t]
-    return n
+        f = sc[_RF, i]
+        out[i] = 0.0 if f == 0.0 else f * (abs(area) * norm)  # (an exit's area may be NaN)
 
 
 @kernel(nrt=False)
@@ -2143,7 +2127,7 @@ def _penumbra_kernel(
     cand = np.empty(max_bin, np.int64)
     cval = np.empty(max_bin)
     cp = np.empty((3, max_bin))  # the candidates' positions, contiguous
-    rsc = np.empty((2 * _RSC, max_bin))  # rect_edge_terms' scratch
+    rsc = np.empty((_TERM_ROWS, max_bin))  # the edge terms' scratch
     sel = np.empty(max_bin, np.int64)
     keep = np.empty(max_col, np.int8)
     rw = np.empty((_ROW, max_bin))  # the current bin's sample rows (one row per field) and 1 / distance
@@ -2333,11 +2317,9 @@ def _penumbra_kernel(
                 if nt_e == 2:  # (both lights: the same first two exits as either terms' loop)
                     m = drop_cancelling(cp, np.int64(m), center, e, ea, eb, tv_start, tv, sel, cand)
                 if shape == 1:
-                    m = disk_edge_terms(cp, np.int64(m), center, radius, e, ea, eb, tv_start, tv, rsc, sel, cand, cval)
+                    disk_edge_terms(cp, np.int64(m), center, radius, e, ea, eb, tv_start, tv, rsc, cval)
                 else:
-                    m = rect_edge_terms(
-                        cp, np.int64(m), center, nrm_l, u, v, hu, hv, e, ea, eb, tv_start, tv, rsc, sel, cand, cval
-                    )
+                    rect_edge_terms(cp, np.int64(m), center, nrm_l, u, v, hu, hv, e, ea, eb, tv_start, tv, rsc, cval)
             else:
                 scalar_edge_terms(
                     shape,
