@@ -1853,8 +1853,8 @@ def disk_edge_terms(cp, m, center, radius, e, ea, eb, tv_start, tv, sc, out):
     long for the core to overlap two iterations); the exits and the clipped segment first, then
     Eq. 3 at every candidate, the exits' values discarded by a select. The survivors are not
     compacted first: ``drop_cancelling`` has already dropped most of the early exits, and
-    compacting the rest cost more than their areas (the penumbra pass 0.95 of its time before,
-    2026-12-04)."""
+    compacting the rest cost more than their areas (of `bunny`'s 602k candidates that reach it
+    568k survive; the penumbra pass 0.95-0.98 of its time before, 2026-12-04)."""
     rr = radius * radius
     ax, ay, az, bx, by, bz = ea[e, 0], ea[e, 1], ea[e, 2], eb[e, 0], eb[e, 1], eb[e, 2]
     k1 = tv_start[e]
