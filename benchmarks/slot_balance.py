@@ -6,10 +6,11 @@ frames, and the time lost to the slowest slot (its end minus the mean end, per l
     PYTHONPATH=src python benchmarks/slot_balance.py irregular --light sphere --frames 31 --min-lost 0
 
 Frame-level A/B runs on a shared host resolve a few per cent at best; a slot that idles while the
-other finishes is a direct measurement: `soft-shadow-map`'s accumulation with bands dealt
-round-robin left one of two slots idle for 5.8 ms of a 23 ms launch (rectangle light), unseen in
-whole-frame A/Bs (docs/results/speed-targets.md, 2026-12-04). Launches started with
-``start_slots`` (a calling thread that joins late on purpose) are not timed.
+other finishes is a direct measurement, taken inside real frames: a replay of `soft-shadow-map`'s
+accumulation on saved inputs had shown one of two slots idle for 5.8 ms (it had zeroed the receiver
+depths along with the map it reset), where this script measured at most ~0.3 ms
+(docs/results/speed-targets.md, 2026-12-04). Launches started with ``start_slots`` (a calling
+thread that joins late on purpose) are not timed.
 """
 
 from __future__ import annotations
