@@ -3,7 +3,9 @@
 
     python benchmarks/bench_foundation.py [--size 512] [--samples 64] [--repeats 5] [--light rect|sphere]
 
-All numbers are medians after JIT warm-up, measured in this one process.
+All numbers are medians after JIT warm-up, measured in this one process. Ground truth and the raw
+call alternate in rounds (``--repeats`` // 2 of them, each side first in turn); the ratio is given
+both from the two sides' medians and as the median of each round's ratio.
 """
 
 from __future__ import annotations
@@ -108,11 +110,14 @@ def main():
 
     ss.render(scene, "ground-truth", 32, 32, samples=a.samples)
     gts, raw = [], []
-    for _ in range(max(1, a.repeats // 2)):
-        gts.append(ss.render(scene, "ground-truth", n, n, samples=a.samples))
-        t0 = time.perf_counter()
-        gtm.run_on_threads(nthreads, len(batches), trace)
-        raw.append(time.perf_counter() - t0)
+    for r in range(max(1, a.repeats // 2)):  # rounds: the method and the raw call side by side,
+        for side in ("method", "raw") if r % 2 == 0 else ("raw", "method"):  # in turn first
+            if side == "method":
+                gts.append(ss.render(scene, "ground-truth", n, n, samples=a.samples))
+            else:
+                t0 = time.perf_counter()
+                gtm.run_on_threads(nthreads, len(batches), trace)
+                raw.append(time.perf_counter() - t0)
     pg = med_phases(gts)
     rays = gts[0].stats["rays"]
     method_time = pg["rays"]  # generation, tracing and reduction on every core
@@ -127,10 +132,15 @@ def main():
         + f"  (raw trace: {statistics.median(raw) * nthreads / rays * 1e9:.2f}ns)"
     )
     raw_t = statistics.median(raw)
+    # each round's ratio (the two sides a fraction of a second apart): the host's speed, which moves
+    # between rounds on a shared machine, cancels in it
+    paired = sorted(rw / g.timings["rays"] for rw, g in zip(raw, gts))
+    q1, q3 = (paired[0], paired[-1]) if len(paired) < 4 else statistics.quantiles(paired, n=4)[::2]
     print(
         f"rays: {rays}  chunks: {len(batches)}  threads: {nthreads}  ground-truth method: "
         f"{rays / method_time / 1e6:.2f} Mrays/s   raw Embree ({nthreads} threads): {rays / raw_t / 1e6:.2f} Mrays/s"
-        f"   ratio {raw_t / method_time:.2f} (target >= 0.85)"
+        f"   ratio {raw_t / method_time:.2f}; per round: median {statistics.median(paired):.2f}"
+        f" (quartiles {q1:.2f}-{q3:.2f}, {len(paired)} rounds) (target >= 0.85)"
     )
 
 
