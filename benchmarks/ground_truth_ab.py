@@ -15,6 +15,7 @@ import argparse
 import importlib.util
 import itertools
 import pathlib
+import re
 import statistics
 import subprocess
 import sys
@@ -42,9 +43,8 @@ def load_old(rev: str):
         capture_output=True,
         text=True,
     ).stdout
-    src = src.replace("from .._jit import", "from softshadows._jit import")
-    src = src.replace("from ..shading import", "from softshadows.shading import")
-    src = src.replace("from .base import", "from softshadows.methods.base import").replace("\n@register\n", "\n")
+    src = re.sub(r"^from \.\.(\w)", r"from softshadows.\1", src, flags=re.M)
+    src = re.sub(r"^from \.(\w)", r"from softshadows.methods.\1", src, flags=re.M).replace("\n@register\n", "\n")
     path = pathlib.Path(tempfile.mkdtemp()) / f"ground_truth_{rev}.py"
     path.write_text(src)
     spec = importlib.util.spec_from_file_location(path.stem, path)
