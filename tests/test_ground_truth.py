@@ -293,6 +293,24 @@ def test_fast_ray_paths_match_the_per_sample_path(light):
     assert np.array_equal(g0 < 0, blocked)
     assert np.array_equal(o0, o1) and np.array_equal(l0, l1) and np.array_equal(d0, d1)
     assert np.all(g0[~blocked] == 0.0) and np.all(g1[~blocked] >= 0.0)
+    # a traced ray runs from its origin to its light sample (direction not normalized, length
+    # RAY_END): origin + direction lies on the light, within the float32 roundings of the two
+    # (coordinates of a few units: ~1e-6); a blocked ray has length 0
+    assert np.all(l0[blocked] == 0.0) and np.all(l0[~blocked] == np.float32(gtm.RAY_END))
+    end = (o0.astype(np.float64) + d0.astype(np.float64))[~blocked]
+    q = end - center
+    tol = 1e-5
+    if shape == 0:
+        n = np.cross(u, v) / np.linalg.norm(np.cross(u, v))
+        assert np.abs(q @ n).max() < tol  # in the rectangle's plane
+        for e in (u, v):  # and inside it
+            assert np.abs(q @ e / (e @ e)).max() <= 0.5 + tol
+    else:
+        p = np.repeat(pts, S, axis=0)[~blocked]
+        w = (p - center) / np.linalg.norm(p - center, axis=1)[:, None]
+        assert np.abs(np.sum(q * w, axis=1)).max() < tol  # in the disk facing its point
+        assert np.linalg.norm(q, axis=1).max() <= radius * (1.0 + gtm.DISK_SLACK) + tol
+    assert np.linalg.norm(d0[~blocked], axis=1).min() > 0.5  # not unit vectors: the scene's size
 
 
 def test_concentric_map_is_the_exact_map_within_float32_rounding():

@@ -124,6 +124,9 @@ def jitter_pair(key, sample):
     return _salted_pair(key, salt_a, salt_b)
 
 
+#: a traced segment's end: the ray's direction runs from its origin to its light sample, and the
+#: segment stops 1e-6 of that length short of the light (generate_light_rays)
+RAY_END = 1.0 - 1e-6
 #: unit roundoff of float32 (Embree's arithmetic) and float64 (our hit points)
 U32 = 2.0**-24
 U64 = 2.0**-53
@@ -313,6 +316,10 @@ def generate_light_rays(
     at row k*S+s). geo = cos_p * cos_l / r^2 when ``need_geo`` (the physical mode), else 0. ``pix``: global pixel ids
     seeding the jitter.
 
+    A ray's direction is the vector from its origin to its light sample, not normalized, and its
+    length :data:`RAY_END` (Embree measures t in units of the direction): the segment ends 1e-6 of
+    its length before the light, without a square root and a division per ray.
+
     Ray origins (pbrt's ``OffsetRayOrigin``, :func:`_ray_origin`): ``p + off[k] n``, n the normal on
     the side the ray leaves to, rounded to float32 away from the surface. ``off``: the error bound of
     :func:`hit_points`. A ray that leaves the surface on the side the eye does not see
@@ -407,18 +414,15 @@ def generate_light_rays(
             # with interleaved stores into the rows Embree's wrapper reads
             ub = np.uint64(3 * base)
             for s in range(S):
-                rx, ry, rz = sx[s] - ox32, sy[s] - oy32, sz[s] - oz32
-                rl = np.sqrt(rx * rx + ry * ry + rz * rz)
-                ri = 1.0 / rl
-                dist[base + s] = rl * (1.0 - 1e-6)
+                dist[base + s] = RAY_END
                 geo[base + s] = 0.0
                 q = ub + np.uint64(3) * np.uint64(s)
                 orgf[q] = ox32
                 orgf[q + np.uint64(1)] = oy32
                 orgf[q + np.uint64(2)] = oz32
-                dirf[q] = rx * ri
-                dirf[q + np.uint64(1)] = ry * ri
-                dirf[q + np.uint64(2)] = rz * ri
+                dirf[q] = sx[s] - ox32
+                dirf[q + np.uint64(1)] = sy[s] - oy32
+                dirf[q + np.uint64(2)] = sz[s] - oz32
             continue
         check = own_blocks[k] and cls != 1
         g = grazing[k]
@@ -436,13 +440,12 @@ def generate_light_rays(
                 _blocked_ray(dirs, dist, geo, q, nx, ny, nz)
                 continue
             rx, ry, rz = sx[s] - ox32, sy[s] - oy32, sz[s] - oz32
-            rl = np.sqrt(rx * rx + ry * ry + rz * rz)
-            ri = 1.0 / rl
-            dirs[q, 0] = rx * ri
-            dirs[q, 1] = ry * ri
-            dirs[q, 2] = rz * ri
-            dist[q] = rl * (1.0 - 1e-6)
+            dirs[q, 0] = rx
+            dirs[q, 1] = ry
+            dirs[q, 2] = rz
+            dist[q] = RAY_END
             if need_geo:
+                ri = 1.0 / np.sqrt(rx * rx + ry * ry + rz * rz)
                 cl = -(lnx * rx + lny * ry + lnz * rz) * ri
                 geo[q] = max(cp, 0.0) * max(cl, 0.0) * ri * ri
             else:
