@@ -19,6 +19,7 @@ import numpy as np
 
 import softshadows as ss
 from softshadows.api import eye_view
+from softshadows.bench import summary_stats
 from softshadows.methods import ground_truth as gtm
 from softshadows.raster import rasterize
 from softshadows.shading import facing_normals
@@ -134,13 +135,12 @@ def main():
     raw_t = statistics.median(raw)
     # each round's ratio (the two sides a fraction of a second apart): the host's speed, which moves
     # between rounds on a shared machine, cancels in it
-    paired = sorted(rw / g.timings["rays"] for rw, g in zip(raw, gts))
-    q1, q3 = (paired[0], paired[-1]) if len(paired) < 4 else statistics.quantiles(paired, n=4)[::2]
+    paired = summary_stats([rw / g.timings["rays"] for rw, g in zip(raw, gts, strict=True)])
     print(
         f"rays: {rays}  chunks: {len(batches)}  threads: {nthreads}  ground-truth method: "
         f"{rays / method_time / 1e6:.2f} Mrays/s   raw Embree ({nthreads} threads): {rays / raw_t / 1e6:.2f} Mrays/s"
-        f"   ratio {raw_t / method_time:.2f}; per round: median {statistics.median(paired):.2f}"
-        f" (quartiles {q1:.2f}-{q3:.2f}, {len(paired)} rounds) (target >= 0.85)"
+        f"   ratio {raw_t / method_time:.2f}; per round: median {paired['median']:.2f}"
+        f" (quartiles {paired['q1']:.2f}-{paired['q3']:.2f}, {paired['n']} rounds) (target >= 0.85)"
     )
 
 

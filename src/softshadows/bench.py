@@ -66,7 +66,8 @@ ICOSPHERE = "icosphere"
 ICOSPHERE_LEVELS = [4, 6, 8]
 
 
-def _stats(x) -> dict:
+def summary_stats(x) -> dict:
+    """{median, min, max, q1, q3, n} of the values ``x`` (quartiles: NumPy's linear percentiles)."""
     a = np.asarray(x, float)
     q1, med, q3 = np.percentile(a, [25, 50, 75])
     return {
@@ -163,9 +164,11 @@ def bench(
                 for k in t:
                     if k not in phases:
                         phases.append(k)
-            tim = {p: _stats([t.get(p, 0.0) for t in samples[m]]) for p in phases}
-            mt = _stats([_method_time(t) for t in samples[m]])
-            paired = _stats([t["total"] / th["total"] for t, th in zip(samples[m], samples["hard"], strict=True)])
+            tim = {p: summary_stats([t.get(p, 0.0) for t in samples[m]]) for p in phases}
+            mt = summary_stats([_method_time(t) for t in samples[m]])
+            paired = summary_stats(
+                [t["total"] / th["total"] for t, th in zip(samples[m], samples["hard"], strict=True)]
+            )
             results.append(
                 {
                     "size": [w, h],
