@@ -784,3 +784,36 @@ def test_an_error_while_the_umbrae_are_counted_leaves_the_threads_usable(monkeyp
     assert numba.get_num_threads() == threads
     again = render(scene, "irregular", 64, 48)
     assert np.array_equal(again.visibility, want.visibility, equal_nan=True)
+
+
+@pytest.mark.parametrize("light", ["rect", "sphere"])
+def test_v_composed_in_the_penumbra_pass_is_eq4_of_its_counts(light):
+    """The penumbra pass writes each bin's V as soon as its quads are done (step (e) inside step
+    (d)), visiting the bins without quads too: V must be exactly clamp(1 - (umbra + pen)) of the
+    per-sample counts and sums, 1 at samples outside the grid, in the eye image at each sample's
+    pixel, 1 at pixels without a sample. `bunny` at 96x72 has lit, umbra and penumbra samples and
+    bins with samples but no quads (checked)."""
+    from softshadows.methods import irregular as ir
+
+    scene = builtin.build("bunny", light)
+    pts, nrm, idx, bound = _eye_points(scene, 96, 72)
+    n_pix = 96 * 72
+    v_img, _st = irregular_visibility(scene, pts, nrm, origin_bound=bound, pixels=idx, n_pixels=n_pix)
+    v, _st, umbra, pen = irregular_visibility(scene, pts, nrm, origin_bound=bound, raw=True)
+    want = np.where(np.isnan(umbra), 1.0, np.clip(1.0 - (umbra + pen), 0.0, 1.0)).astype(np.float32)
+    assert np.array_equal(v, want)
+    img = np.ones(n_pix, np.float32)
+    img[idx] = want
+    assert np.array_equal(v_img, img)
+    assert (want == 0.0).any() and (want == 1.0).any() and ((want > 0.05) & (want < 0.95)).any()
+    # bins holding samples but no quad: composed by the pass all the same
+    g = ir.build_sample_grid(scene.light, ir.offset_points(pts, nrm, 0.0, bound), ir.GRID, ir.BINS, ir.SLICES)
+    fc = ir.facing_and_counted(scene.flat, scene.light.center)
+    box = ir.receivers_box(g.col_box)
+    r = ir._light_params(scene.light)[1]
+    edges, _s = ir.select_silhouette_edges(scene.flat, scene.light.center, "adjacency", True, box, r, fc)
+    bl = ir.bin_penumbra_quads(g, ir.build_penumbra_quads(g, edges, scene.light, r), r, True)
+    cells = g.bins * g.bins * g.slices
+    every = ir.bins_by_work(bl[0], g.start, cells, also_empty=True)
+    assert len(every) > len(ir.bins_by_work(bl[0], g.start, cells))
+    assert sorted(every) == list(np.flatnonzero(np.diff(g.start[::cells]) > 0))

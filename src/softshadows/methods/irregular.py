@@ -680,18 +680,23 @@ def _pairs_by_bin(counts, pair_bin, n_bins):
     return start, item[order]
 
 
-def bins_by_work(bin_start, g_start, cells_per_bin):
+def bins_by_work(bin_start, g_start, cells_per_bin, also_empty: bool = False):
     """The bins that have items, by estimated work (items x samples of the bin), largest first.
     The umbra and penumbra kernels run one worker per thread, each taking the next bin of this list
     from a shared atomic counter (:func:`next_item`) until none is left: greedy list scheduling,
     largest first, on the bins' real times (a static split by the estimate left one thread up to
     27% over the other). Each bin's own computation, and so V, does not depend on the order.
-    NumPy, not a kernel: Numba's stable sort alone took ~2 s to compile."""
+    NumPy, not a kernel: Numba's stable sort alone took ~2 s to compile. With ``also_empty``, then
+    the bins that hold samples but no items, in index order (the penumbra pass composes V per bin)."""
     bin_start = np.asarray(bin_start, np.int64)
     edges = np.asarray(g_start, np.int64)[:: int(cells_per_bin)][: len(bin_start)]
     items = np.diff(bin_start)
-    work = items * (np.diff(edges) + 1.0)
-    return np.argsort(-work, kind="stable")[: int(np.count_nonzero(items > 0))]
+    samples = np.diff(edges)
+    work = items * (samples + 1.0)
+    order = np.argsort(-work, kind="stable")[: int(np.count_nonzero(items > 0))]
+    if also_empty:
+        order = np.concatenate([order, np.flatnonzero((items == 0) & (samples > 0))])
+    return order
 
 
 @kernel(inline=True)
@@ -2115,9 +2120,17 @@ def _penumbra_kernel(
     counter,
     max_col,
     max_bin,
+    umbra,
+    order,
+    dest,
+    vout,
+    compose,
 ):
     """One worker of the penumbra pass (:func:`accumulate_penumbrae`), run by ``run_slots``, one per
-    thread: takes the next bin of ``bin_order`` (``next_item``) until none is left."""
+    thread: takes the next bin of ``bin_order`` (``next_item``) until none is left. With
+    ``compose``, a bin's samples are final once its quads are done (no other bin writes them; their
+    ``umbra`` counts are complete): step (e), :func:`compose_range`, writes their V into ``vout`` at
+    ``dest`` right then, while they are in cache, instead of a pass of its own after this one."""
     l, r, b, t = vp[VP_L], vp[VP_R], vp[VP_B], vp[VP_T]
     cw = (r - l) / gx
     ch = (t - b) / gy
@@ -2143,14 +2156,16 @@ def _penumbra_kernel(
         by = bi // nbx
         bx = bi % nbx
         jb = g_start[bi * B * B * S]  # the bin's first sample: rw and sinv are indexed from it
-        if not count_only:
+        je = g_start[(bi + 1) * B * B * S]
+        has_items = bin_start[bi] < bin_start[bi + 1]  # (without: a bin only composed)
+        if not count_only and has_items:
             if shape == 0:  # the rectangle's bound: 1 / view depth (rect_reach)
                 f0, f1, f2 = vp[VP_FORWARD], vp[VP_FORWARD + 1], vp[VP_FORWARD + 2]
-                for j in range(jb, g_start[(bi + 1) * B * B * S]):
+                for j in range(jb, je):
                     dz = (spos[j, 0] - vp[VP_ORIGIN]) * f0 + (spos[j, 1] - vp[VP_ORIGIN + 1]) * f1
                     sinv[j - jb] = 1.0 / (dz + (spos[j, 2] - vp[VP_ORIGIN + 2]) * f2)
             else:
-                for j in range(jb, g_start[(bi + 1) * B * B * S]):  # (rows: where needed, scalar_edge_terms)
+                for j in range(jb, je):  # (rows: where needed, scalar_edge_terms)
                     iD = 1.0 / sdist[j]
                     sinv[j - jb] = iD
                     # the unit direction from the light centre (disk_reach), one row per axis
@@ -2158,7 +2173,7 @@ def _penumbra_kernel(
                     sdir[1, j - jb] = (spos[j, 1] - c1) * iD
                     sdir[2, j - jb] = (spos[j, 2] - c2) * iD
         bx0, bx1, by0, by1 = _bin_box(vp, gx, gy, B, bx, by)
-        if shape == 1:  # the directions through the bin's cells' centres (disk_cell_reach)
+        if shape == 1 and has_items:  # the directions through the bin's cells' centres (disk_cell_reach)
             for cy in range(by * B, min(by * B + B, gy)):
                 for cx in range(bx * B, min(bx * B + B, gx)):
                     lc = (cy - by * B) * B + cx - bx * B
@@ -2352,6 +2367,8 @@ def _penumbra_kernel(
         tests[bi] = nt
         hits[bi] = nh
         evals[bi] = nev
+        if compose:
+            compose_range(jb, je, order, dest, umbra, pen, vout)
 
 
 def _light_params(light):
@@ -2380,12 +2397,18 @@ def accumulate_penumbrae(
 class PenumbraPass:
     """:func:`accumulate_penumbrae` in two steps: made (its inputs and outputs set up, on the
     calling thread: :func:`irregular_visibility` does it while the slot threads count umbrae), then
-    ``run()`` -> (pen, stats)."""
+    ``run()`` -> (pen, stats). With ``compose``, the pass also does step (e) bin by bin
+    (:func:`compose_range`; every bin with samples is visited): ``run_composed(umbra, n_all,
+    pixels)`` -> (V, pen, stats), V as :func:`compose_visibility` gives it."""
 
-    def __init__(self, grid: SampleGrid, edges: Edges, qd, bins, light, per_bin, wedge, count_only=False):
+    def __init__(
+        self, grid: SampleGrid, edges: Edges, qd, bins, light, per_bin, wedge, count_only=False, compose=False
+    ):
         shape, bound_r, radius, hu, hv, nrm_l, u, v = _light_params(light)
         n = len(grid.order)
         self.pen = np.zeros(n)
+        self.compose = bool(compose) and not count_only
+        self.order = grid.order
         nb = grid.n_bins
         self.frags, self.tests, self.hits = np.zeros(nb, np.int64), np.zeros(nb, np.int64), np.zeros(nb, np.int64)
         self.evals = np.zeros(nb, np.int64)
@@ -2430,7 +2453,7 @@ class PenumbraPass:
             self.tests,
             self.hits,
             self.evals,
-            bins_by_work(bins[0], grid.start, grid.bins * grid.bins * grid.slices),
+            bins_by_work(bins[0], grid.start, grid.bins * grid.bins * grid.slices, also_empty=self.compose),
             work_counter(),
             grid.max_column,
             grid.max_bin,
@@ -2438,7 +2461,23 @@ class PenumbraPass:
 
     def run(self):
         """The pass, one worker per thread (``run_slots``): (pen, stats)."""
-        run_slots(_penumbra_kernel, numba.get_num_threads(), *self.args)
+        if self.compose:
+            raise ValueError("a composing PenumbraPass runs with run_composed()")
+        return self._run(np.empty(0, np.int32), np.empty(0, np.int64), np.empty(0, np.float32))
+
+    def run_composed(self, umbra, n_all: int, pixels=None):
+        """The pass and step (e) in it: (V (n_all,) float32, pen, stats), V = 1 - (umbra + pen)
+        clamped at ``pixels`` (each grid input sample's place in V; default: its index), 1
+        elsewhere."""
+        if not self.compose:
+            raise ValueError("this PenumbraPass was made without compose")
+        v = np.ones(n_all, np.float32)
+        dest = np.arange(n_all, dtype=np.int64) if pixels is None else np.asarray(pixels, np.int64)
+        pen, st = self._run(np.asarray(umbra, np.int32), dest, v)  # (count_umbrae's int32: no copy)
+        return v, pen, st
+
+    def _run(self, umbra, dest, vout):
+        run_slots(_penumbra_kernel, numba.get_num_threads(), *self.args, umbra, self.order, dest, vout, self.compose)
         return self.pen, {
             "fragments": int(self.frags.sum()),
             "sample_tests": int(self.tests.sum()),
@@ -2450,16 +2489,22 @@ class PenumbraPass:
 # ---------------------------------------------------------------------------------------------
 # composition
 # ---------------------------------------------------------------------------------------------
-@kernel(nogil=True, nrt=False, noalias=True)
-def _compose_slot(slot, order, dest, umbra, pen, out, nslot):
-    """V = 1 - (umbra + pen), clamped, of the grid's samples scattered to ``out[dest[order[j]]]``
-    (``out`` already 1 everywhere). Run by ``run_slots``: slot ``slot`` of ``nslot`` takes one
-    contiguous block of the grid's samples (``dest`` is one-to-one: no two slots write one place)."""
-    m = order.shape[0]
-    j0, j1 = np.uint64(slot * m // nslot), np.uint64((slot + 1) * m // nslot)  # unsigned: see _sample_keys_slot
-    for j in range(j0, j1):
+@kernel(inline=True)
+def compose_range(j0, j1, order, dest, umbra, pen, out):
+    """Eq. 4 with C = 0 for the grid's samples j0..j1 (sorted order): V = 1 - (umbra + pen),
+    clamped to [0, 1], written to ``out[dest[order[j]]]`` (``dest`` one-to-one: no two samples
+    write one place)."""
+    for j in range(np.uint64(j0), np.uint64(j1)):  # unsigned: see _sample_keys_slot
         x = 1.0 - (umbra[j] + pen[j])
         out[dest[order[j]]] = min(max(x, 0.0), 1.0)
+
+
+@kernel(nogil=True, nrt=False, noalias=True)
+def _compose_slot(slot, order, dest, umbra, pen, out, nslot):
+    """:func:`compose_range` of the whole grid (``out`` already 1 everywhere). Run by
+    ``run_slots``: slot ``slot`` of ``nslot`` takes one contiguous block of the grid's samples."""
+    m = order.shape[0]
+    compose_range(slot * m // nslot, (slot + 1) * m // nslot, order, dest, umbra, pen, out)
 
 
 def compose_visibility(grid: SampleGrid, umbra, pen, n_all: int, pixels=None) -> np.ndarray:
@@ -2701,11 +2746,12 @@ def irregular_visibility(
                 edges, st_s = select_silhouette_edges(flat, light.center, silhouettes, folds, box, bound_r, fc)
                 qd = build_penumbra_quads(g, edges, light, bound_r)
                 bl = bin_penumbra_quads(g, qd, bound_r, per_bin)
-                penumbrae = PenumbraPass(g, edges, qd, bl, light, per_bin, wedge)
+                penumbrae = PenumbraPass(g, edges, qd, bl, light, per_bin, wedge, compose=True)
         finally:  # (if the work above raised: nothing is raised while the slot threads still count)
             umbra, st_u = umbrae.finish()
-        pen, st_p = penumbrae.run()  # step (d): accumulate_penumbrae
-        v = compose_visibility(g, umbra, pen, len(pts) if pixels is None else n_pixels, pixels)
+        # steps (d) and (e): accumulate_penumbrae, composing each bin's V (compose_visibility's)
+        # as soon as its quads are done
+        v, pen, st_p = penumbrae.run_composed(umbra, len(pts) if pixels is None else n_pixels, pixels)
     stats.update(
         samples=int(len(pts)),
         grid_samples=int(len(g.order)),
