@@ -515,27 +515,40 @@ def _sheet_strips(V0, V1, F0, F1, z0, z1, tolerance, max_subdiv):
 # ---- early rejection: a max-depth pyramid of Z_P ----------------------------------------------
 @kernel(inline=True)
 def _max_down_row(src, s0, sw, sh, dst, d0, dw, i):
-    """Row i of a 2x2-max reduction: src (sh, sw) stored flat from s0 into dst (.., dw) from d0.
-    Non-finite and negative values count as 0 (empty texels: nothing behind them)."""
+    """Row i of a 2x2-max reduction: src (sh, sw) float32 stored flat from s0 into dst (.., dw)
+    float32 from d0. Non-finite and negative values count as 0 (empty texels: nothing behind them).
+    The loop over the full column pairs reads the two source rows and writes the row through
+    slices (contiguous views: no index arithmetic on the flat arrays) and compares in float32 with
+    selects (no float64 constant, no ``max``): it vectorizes, ~6x faster than the same loop on
+    flat indices with ``max`` (2026-12-04, a 1287x1164 map on one thread: 0.18 against 1.19 ms),
+    the same values."""
     r0 = s0 + 2 * i * sw
     r1 = r0 + sw if 2 * i + 1 < sh else r0  # an odd last row: read row 2i twice (same max)
     jfull = sw // 2  # columns j < jfull have both source columns
+    top = src[r0 : r0 + 2 * jfull]
+    bot = src[r1 : r1 + 2 * jfull]
+    out = dst[d0 + i * dw : d0 + i * dw + jfull]
+    zero = np.float32(0.0)
     for j in range(jfull):  # branch-free: max(v, 0) of the finite values; inf and NaN count as 0
-        a = src[r0 + 2 * j]
-        b = src[r0 + 2 * j + 1]
-        c = src[r1 + 2 * j]
-        d = src[r1 + 2 * j + 1]
-        a = a if a < np.inf else 0.0
-        b = b if b < np.inf else 0.0
-        c = c if c < np.inf else 0.0
-        d = d if d < np.inf else 0.0
-        dst[d0 + i * dw + j] = max(max(max(a, b), max(c, d)), 0.0)
+        a = top[2 * j]
+        b = top[2 * j + 1]
+        c = bot[2 * j]
+        d = bot[2 * j + 1]
+        a = a if a < np.inf else zero
+        b = b if b < np.inf else zero
+        c = c if c < np.inf else zero
+        d = d if d < np.inf else zero
+        ab = a if a > b else b
+        cd = c if c > d else d
+        m = ab if ab > cd else cd
+        out[j] = m if m > zero else zero
     for j in range(jfull, dw):  # an odd last column
         a = src[r0 + 2 * j]
         c = src[r1 + 2 * j]
-        a = a if a < np.inf else 0.0
-        c = c if c < np.inf else 0.0
-        dst[d0 + i * dw + j] = max(max(a, c), 0.0)
+        a = a if a < np.inf else zero
+        c = c if c < np.inf else zero
+        m = a if a > c else c
+        dst[d0 + i * dw + j] = m if m > zero else zero
 
 
 @kernel(nogil=True, nrt=False, noalias=True)
