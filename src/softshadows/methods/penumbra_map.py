@@ -950,22 +950,28 @@ def penumbra_fragment_program(
     }
 
 
-@kernel(nogil=True, nrt=False)
-def _count_below_slot(slot, a, v, counts, nslot):
-    """counts[slot] = texels of ``a`` below ``v`` in rows slot, slot + nslot, ... (``run_slots``)."""
+@kernel(nrt=False)
+def _count_below_kernel(a, v):
+    """Texels of ``a`` (H,W) float32 below the float32 ``v``: per row, an int32 count of float32
+    comparisons (it vectorizes: 0.08 ms for a 1287x1164 map on one thread, against 0.15 ms for
+    comparisons in float64 and 0.15-0.34 ms for a two-slot launch of them in a frame)."""
     n = 0
-    for i in range(slot, a.shape[0], nslot):
-        for j in range(a.shape[1]):
-            n += a[i, j] < v
-    counts[slot] = n
+    for i in range(a.shape[0]):
+        row = a[i]
+        m = np.int32(0)
+        for j in range(row.shape[0]):
+            m += np.int32(row[j] < v)
+        n += m
+    return n
 
 
 def _count_below(a: np.ndarray, v: float) -> int:
-    """Texels of ``a`` (H,W) below ``v``, rows dealt to the threads (~0.3 ms serial for the map)."""
-    nslot = min(numba.get_num_threads(), max(a.shape[0], 1))
-    counts = np.zeros(nslot, np.int64)
-    run_slots(_count_below_slot, nslot, a, float(v), counts, nslot)
-    return int(counts.sum())
+    """Texels of ``a`` (H,W) float32 below ``v`` (a float32 value: 1.0 for the statistic), on the
+    calling thread."""
+    v32 = np.float32(v)
+    if float(v32) != float(v):
+        raise ValueError(f"_count_below: {v!r} is not a float32 value")
+    return int(_count_below_kernel(np.ascontiguousarray(a, np.float32), v32))
 
 
 @dataclass
