@@ -623,12 +623,15 @@ def test_queue_crossings_takes_the_flagged_texels_in_order():
         assert np.all(Q[0, 2:m] == 0.1) and np.all(Q[4, 2:m] == 0.5)
 
 
-@pytest.mark.parametrize("threads", [1, 2])
-def test_bin_patches_by_band_lists_every_patch_of_every_band_in_order(threads):
-    """``bin_patches_by_band`` (offsets in one pass, lists filled by the threads, each its own run
-    of bands): per band, exactly the patches whose extent meets it, in patch order, with one thread
-    or two; empty extents and empty bands included."""
+@pytest.mark.parametrize("threads,serial_below", [(1, 1 << 20), (2, 1 << 20), (2, 0)])
+def test_bin_patches_by_band_lists_every_patch_of_every_band_in_order(threads, serial_below, monkeypatch):
+    """``bin_patches_by_band`` (offsets and each patch's bands in one pass, lists filled on the
+    calling thread or, above ``_SERIAL_BAND_ENTRIES`` entries, by the threads, each its own run of
+    bands): per band, exactly the patches whose extent meets it, in patch order, with one thread or
+    two; empty extents and empty bands included."""
     import numba
+
+    monkeypatch.setattr(ssm, "_SERIAL_BAND_ENTRIES", serial_below)
 
     rng = np.random.default_rng(3)
     n, rows, band_rows = 3000, 97, 4
