@@ -293,13 +293,16 @@ def _column_box(c, start, sp, sd, S, box, dmax, occ):
     for j in range(start[c * S], start[c * S + S]):
         m = max(m, sd[j])
     dmax[c] = m
-    for k in range(3):
-        box[c, k] = np.inf
-        box[c, 3 + k] = -np.inf
+    # the running box in locals (not read and written back through ``box`` at every sample: LLVM
+    # cannot keep those in registers when it cannot tell ``box`` from ``sp``)
+    x0 = y0 = z0 = np.inf
+    x1 = y1 = z1 = -np.inf
     for j in range(start[c * S], start[c * S + S]):
-        for k in range(3):
-            box[c, k] = min(box[c, k], sp[j, k])
-            box[c, 3 + k] = max(box[c, 3 + k], sp[j, k])
+        x, y, z = sp[j, 0], sp[j, 1], sp[j, 2]
+        x0, y0, z0 = min(x0, x), min(y0, y), min(z0, z)
+        x1, y1, z1 = max(x1, x), max(y1, y), max(z1, z)
+    box[c, 0], box[c, 1], box[c, 2] = x0, y0, z0
+    box[c, 3], box[c, 4], box[c, 5] = x1, y1, z1
 
 
 @kernel(nogil=True, nrt=False, noalias=True)
