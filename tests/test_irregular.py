@@ -724,9 +724,9 @@ def test_error_bound_bounds_are_those_of_its_samples(light):
     view = eye_view(scene, 160, 120)
     g = rasterize(view, scene.flat.vertices, scene.flat.faces, cull="none")
     ctx = FrameContext(scene=scene, eye=g, eye_view=view, timer=Timer())
-    _p, nrm, idx = ctx.points()
+    idx = ctx.pixels()
     c = np.asarray(scene.light.center, float)
-    pts, _bound, bounds = error_bound_samples(ctx.flat, ctx.eye, idx, nrm, 0.0, scene.light)
+    pts, _bound, bounds = error_bound_samples(ctx.flat, ctx.eye, idx, scene.camera.eye, 0.0, scene.light)
     want = _extent(pts, c)
     assert len(pts) > 1000
     for a, b in zip(bounds.extent, want, strict=True):

@@ -131,6 +131,16 @@ class FrameContext:
             )
         return self.cache["points"]
 
+    def pixels(self) -> np.ndarray:
+        """The flat pixel indices (K,) i64 of the eye pixels with a surface, in row-major order:
+        :meth:`points`' third array, without gathering the positions and normals when they are
+        not made yet. Computed once per frame."""
+        if "points" in self.cache:
+            return self.cache["points"][2]
+        if "pixels" not in self.cache:
+            self.cache["pixels"] = np.flatnonzero(self.eye.mask.ravel())
+        return self.cache["pixels"]
+
     def scatter(self, values: np.ndarray, idx: np.ndarray, fill: float = 1.0) -> np.ndarray:
         """Per-point values at flat pixel indices ``idx`` -> (H,W) float32 image of the eye view;
         pixels not in ``idx`` get ``fill`` (render() sets pixels without a surface to NaN)."""

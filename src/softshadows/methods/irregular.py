@@ -2526,10 +2526,12 @@ _EB_BLOCK = 256
 
 @kernel(nogil=True, noalias=True)
 def _error_bound_samples_slot(
-    slot, verts, faces, tri_img, bary_img, idx, nrm, eps, lc, frame, out, bound, part, counter, nslot
+    slot, verts, faces, tri_img, bary_img, pos_img, nrm_img, eye, idx, eps, lc, frame, out, bound, part, counter, nslot
 ):
     """Ground truth's ray origins (:func:`ground_truth.hit_point`, float64): p + (BOUND_SAFETY x its
-    error bound + eps) n, n the geometric normal turned toward the eye; gathers from the G-buffer.
+    error bound + eps) n, n the geometric normal turned toward the eye; gathers from the G-buffer
+    (its triangle, barycentrics, and position and normal for the side toward the ``eye``, turned as
+    ``gather_points`` turns them, the same arithmetic: no per-sample arrays of its own).
     By blocks of points: the triangles' vertices and the points' inputs gathered into contiguous
     scratch first, then ``hit_point_at`` in a loop without gathers or branches (it vectorizes), its
     outputs stored contiguous and copied to the rows of ``out`` last: the same arithmetic, the same
@@ -2544,6 +2546,7 @@ def _error_bound_samples_slot(
     n = idx.shape[0]
     nblk = (n + _EB_BLOCK - 1) // _EB_BLOCK
     g = np.empty((17, _EB_BLOCK))  # inputs (14 rows), then the result (3)
+    ex, ey, ez = eye[0], eye[1], eye[2]
     while True:
         blk = next_item(counter)
         if blk >= nblk:
@@ -2561,7 +2564,12 @@ def _error_bound_samples_slot(
                 g[3 * c + 2, i] = np.float64(np.float32(verts[vi, 2]))
             g[9, i] = np.float64(bary_img[q, 0])
             g[10, i] = np.float64(bary_img[q, 1])
-            g[11, i], g[12, i], g[13, i] = nrm[k, 0], nrm[k, 1], nrm[k, 2]
+            # the normal turned toward the eye (gather_points' expression, float32 images)
+            px, py, pz = pos_img[q, 0], pos_img[q, 1], pos_img[q, 2]
+            nx, ny, nz = nrm_img[q, 0], nrm_img[q, 1], nrm_img[q, 2]
+            if nx * (ex - px) + ny * (ey - py) + nz * (ez - pz) < 0.0:
+                nx, ny, nz = -nx, -ny, -nz
+            g[11, i], g[12, i], g[13, i] = nx, ny, nz
         for i in range(m):
             px, py, pz, nx, ny, nz, ep, ee, _g = hit_point_at(
                 g[0, i], g[1, i], g[2, i], g[3, i], g[4, i], g[5, i], g[6, i], g[7, i], g[8, i],
@@ -2655,22 +2663,24 @@ def median_in_place(x: np.ndarray) -> float:
     return float(x[k]) if len(x) % 2 else float(0.5 * (x[:k].max() + x[k]))
 
 
-def error_bound_samples(flat, eye, idx, nrm, eps, light):
+def error_bound_samples(flat, eye, idx, eye_pos, eps, light):
     """(samples (K,3), bound (K,), bounds): the samples at ground truth's ray origins plus ``eps``
-    along the normal (the same points as ``hit_points`` + ``offset_points``, without their
-    temporaries) and their :class:`SampleBounds` for ``light``'s grid, the same bits as
-    :func:`_extent` and :func:`_window_of` would give."""
+    along the normal (the same points as ``hit_points`` + ``offset_points`` of ``gather_points``'
+    normals, without their temporaries) at the G-buffer ``eye``'s flat pixels ``idx``, seen from
+    ``eye_pos`` (the camera), and their :class:`SampleBounds` for ``light``'s grid, the same bits
+    as :func:`_extent` and :func:`_window_of` would give."""
     K = len(idx)
     out = np.empty((K, 3))
     bound = np.empty(K)
     part = np.empty(((K + _EB_BLOCK - 1) // _EB_BLOCK, 15))
     tri, bary = eye.tri_id.ravel(), eye.bary.reshape(-1, 2)
+    pos, nrm = eye.position.reshape(-1, 3), eye.normal.reshape(-1, 3)
     c = np.asarray(light.center, np.float64)
     rect = light.shape == "rect"
     frame = np.array(light_frame(light), np.float64) if rect else np.zeros((0, 3))
     run_threads(
-        _error_bound_samples_slot, flat.vertices, flat.faces, tri, bary, idx, nrm, eps, c, frame, out, bound,
-        part, work_counter(),
+        _error_bound_samples_slot, flat.vertices, flat.faces, tri, bary, pos, nrm, np.asarray(eye_pos, np.float64),
+        np.asarray(idx, np.int64), eps, c, frame, out, bound, part, work_counter(),
     )  # fmt: skip
     window = None
     if rect and K:
@@ -2845,16 +2855,20 @@ class Irregular(Method):
     sweep: ClassVar = {"grid": [64, 96, 128, 256]}
 
     def run(self, ctx, grid, slices, bins, per_bin, wedge, silhouettes, folds, origin, offset, overdraw_stats):
-        pts, nrm, idx = ctx.points()
         extra, bounds = {}, None
         if origin == "error-bound":
+            # the samples straight from the G-buffer: no gathered positions and normals
+            idx, nrm = ctx.pixels(), None
             with ctx.timer.phase("construction"):
                 lo, hi = ctx.scene.bounds()
                 eps = offset * float(np.linalg.norm(hi - lo))
-                pts, bound, bounds = error_bound_samples(ctx.flat, ctx.eye, idx, nrm, eps, ctx.scene.light)
+                eye_pos = np.asarray(ctx.scene.camera.eye, np.float64)
+                pts, bound, bounds = error_bound_samples(ctx.flat, ctx.eye, idx, eye_pos, eps, ctx.scene.light)
             # the samples are in place: no further offset
             offset = 0.0
             extra = {"eps": eps, "origin_bound_median": bound_median(bound)}
+        else:
+            pts, nrm, idx = ctx.points()
         v, stats = irregular_visibility(
             ctx.scene,
             pts,
