@@ -714,9 +714,9 @@ def test_frame_is_the_same_whatever_the_threads(light):
 
 @pytest.mark.parametrize("light", ["rect", "sphere"])
 def test_error_bound_bounds_are_those_of_its_samples(light):
-    """``error_bound_samples``' extent and (rectangle) window, folded from its blocks, are
-    ``_extent``'s and ``_window_of``'s of the samples it returns, the same bits: the grid built from
-    them is the grid built from the samples."""
+    """``error_bound_samples``' extent and window (the rectangle's frame; the sphere's toward a
+    given point), folded from its blocks, are ``_extent``'s and ``_window_of``'s of the samples it
+    returns, the same bits: the grid built from them is the grid built from the samples."""
     from softshadows.methods.irregular import _extent, _window_of, error_bound_samples
     from softshadows.raster.view import light_frame
 
@@ -732,10 +732,15 @@ def test_error_bound_bounds_are_those_of_its_samples(light):
     for a, b in zip(bounds.extent, want, strict=True):
         assert np.array_equal(np.asarray(a), np.asarray(b))
         assert np.array_equal(np.signbit(a), np.signbit(b))
+    toward = None
     if light == "sphere":
-        assert bounds.window is None
-        return
-    r, u, f = light_frame(scene.light)
+        assert bounds.window is None  # no frame known before the samples: no window
+        # with the point the sphere's frame looks toward (Irregular.run: the scene's box centre)
+        lo_s, hi_s = scene.bounds()
+        toward = (lo_s + hi_s) / 2
+        pts2, _b, bounds = error_bound_samples(ctx.flat, ctx.eye, idx, scene.camera.eye, 0.0, scene.light, toward)
+        assert np.array_equal(pts2, pts) and np.array_equal(bounds.toward, toward)
+    r, u, f = light_frame(scene.light, toward=toward)
     lo, hi = want[0], want[1]
     near = 1e-6 * float(np.linalg.norm(hi - lo))
     assert bounds.window[6] > near  # every sample beyond the near plane: the window applies

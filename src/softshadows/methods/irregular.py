@@ -438,20 +438,25 @@ def _window_of(pts, o, r, u, f, near):
     return x0, x1, y0, y1, z0, z1
 
 
-def fit_grid_view(light, pts: np.ndarray, grid: int, lo, hi, window=None) -> View:
+def fit_grid_view(light, pts: np.ndarray, grid: int, lo, hi, window=None, toward=None) -> View:
     """The light view of the grid: from the light centre (``light_frame``: along the rectangle's
     normal, toward the samples' box centre for the sphere), its window fitted to the samples in
-    front of it (one pass, no temporary arrays). ``window``: the rectangle's (x0, x1, y0, y1, z0,
-    z1) of the samples with z > 0 and their smallest z, when the caller has them already
-    (:func:`error_bound_samples`); used when every sample lies beyond the near plane (then they are
-    the same samples: the same bits as :func:`_window_of`)."""
+    front of it (one pass, no temporary arrays). ``window``: (x0, x1, y0, y1, z0, z1) of the
+    samples with z > 0 and their smallest z in the frame ``light_frame(light, toward)`` (for the
+    sphere, ``toward`` is a point known before the samples: the scene's box centre), when the
+    caller has them already (:func:`error_bound_samples`); used, with that frame, when every
+    sample lies beyond the near plane (then they are the same samples: the same bits as
+    :func:`_window_of`), else the frame toward the samples' box centre and a pass over them. V does
+    not depend on the frame (the grid's cells, bins and slices only decide which samples each
+    test visits; every sample's sums run in the same order)."""
     if len(pts) == 0:
         return light_view(light, np.zeros((1, 3)), grid, grid)
-    r, u, f = light_frame(light, toward=(lo + hi) / 2)
     near = 1e-6 * max(float(np.linalg.norm(hi - lo)), 1e-12)
-    if window is not None and light.shape == "rect" and window[6] > near:
+    if window is not None and window[6] > near:
+        r, u, f = light_frame(light, toward=toward)  # the frame the window was measured in
         x0, x1, y0, y1, _z0, z1 = window[:6]
     else:
+        r, u, f = light_frame(light, toward=(lo + hi) / 2)
         x0, x1, y0, y1, _z0, z1 = _window_of(pts, light.center, r, u, f, near)
     if not np.isfinite(x0):
         return light_view(light, pts, grid, grid)
@@ -477,7 +482,7 @@ def build_sample_grid(light, pts: np.ndarray, grid: int, bins: int, slices: int,
         view = fit_grid_view(light, pts, grid, lo, hi)
     else:
         lo, hi, d0, d1 = bounds.extent
-        view = fit_grid_view(light, pts, grid, lo, hi, bounds.window)
+        view = fit_grid_view(light, pts, grid, lo, hi, bounds.window, bounds.toward)
     vp = view.params()
     nbx = nby = -(-grid // bins)
     dlo = max(d0 * (1 - 1e-9), 1e-12)
@@ -2639,6 +2644,7 @@ class SampleBounds:
 
     extent: tuple
     window: tuple | None = None
+    toward: np.ndarray | None = None  # (the sphere) the point the window's frame looks toward
 
 
 #: the statistic ``origin_bound_median`` is the median of every ``_BOUND_MEDIAN_STRIDE``-th sample's
@@ -2663,12 +2669,13 @@ def median_in_place(x: np.ndarray) -> float:
     return float(x[k]) if len(x) % 2 else float(0.5 * (x[:k].max() + x[k]))
 
 
-def error_bound_samples(flat, eye, idx, eye_pos, eps, light):
+def error_bound_samples(flat, eye, idx, eye_pos, eps, light, toward=None):
     """(samples (K,3), bound (K,), bounds): the samples at ground truth's ray origins plus ``eps``
     along the normal (the same points as ``hit_points`` + ``offset_points`` of ``gather_points``'
     normals, without their temporaries) at the G-buffer ``eye``'s flat pixels ``idx``, seen from
     ``eye_pos`` (the camera), and their :class:`SampleBounds` for ``light``'s grid, the same bits
-    as :func:`_extent` and :func:`_window_of` would give."""
+    as :func:`_extent` and :func:`_window_of` would give: the window in the rectangle's frame, or
+    for the sphere in the frame toward ``toward`` (none without it)."""
     K = len(idx)
     out = np.empty((K, 3))
     bound = np.empty(K)
@@ -2676,18 +2683,19 @@ def error_bound_samples(flat, eye, idx, eye_pos, eps, light):
     tri, bary = eye.tri_id.ravel(), eye.bary.reshape(-1, 2)
     pos, nrm = eye.position.reshape(-1, 3), eye.normal.reshape(-1, 3)
     c = np.asarray(light.center, np.float64)
-    rect = light.shape == "rect"
-    frame = np.array(light_frame(light), np.float64) if rect else np.zeros((0, 3))
+    framed = light.shape == "rect" or toward is not None
+    frame = np.array(light_frame(light, toward=toward), np.float64) if framed else np.zeros((0, 3))
     run_threads(
         _error_bound_samples_slot, flat.vertices, flat.faces, tri, bary, pos, nrm, np.asarray(eye_pos, np.float64),
         np.asarray(idx, np.int64), eps, c, frame, out, bound, part, work_counter(),
     )  # fmt: skip
     window = None
-    if rect and K:
+    if framed and K:
         w = np.empty(7)
         _fold_window(part, w)
         window = tuple(float(x) for x in w)
-    return out, bound, SampleBounds(fold_extent(part, K), window)
+    tw = None if toward is None or light.shape == "rect" else np.asarray(toward, np.float64)
+    return out, bound, SampleBounds(fold_extent(part, K), window, tw)
 
 
 def offset_points(pts, nrm, eps, bound=None):
@@ -2863,7 +2871,11 @@ class Irregular(Method):
                 lo, hi = ctx.scene.bounds()
                 eps = offset * float(np.linalg.norm(hi - lo))
                 eye_pos = np.asarray(ctx.scene.camera.eye, np.float64)
-                pts, bound, bounds = error_bound_samples(ctx.flat, ctx.eye, idx, eye_pos, eps, ctx.scene.light)
+                # the sphere's grid frame toward the scene's box centre, known before the samples:
+                # their window in it comes with them (no pass of its own, fit_grid_view)
+                pts, bound, bounds = error_bound_samples(
+                    ctx.flat, ctx.eye, idx, eye_pos, eps, ctx.scene.light, toward=(lo + hi) / 2
+                )
             # the samples are in place: no further offset
             offset = 0.0
             extra = {"eps": eps, "origin_bound_median": bound_median(bound)}
