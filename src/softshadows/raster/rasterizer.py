@@ -418,11 +418,14 @@ def _tile_row_bits_slot(slot, mask, words, T, ntx, nty, bits, tile_any, nslot):
     """bits[tile, li]: bit k set where texel (li, k) of the tile is set (nonzero) in ``mask`` (H,W)
     uint8; tile_any[tile]: any of them. ``words``: ``mask``'s bytes viewed as uint64 (the first
     8 * len(words) of them, row-major), read 8 texels at a time (:func:`_bytes_at`,
-    :func:`_byte_bits`) whatever W, empty: texel by texel. Run by ``run_slots``: slot ``slot`` of
+    :func:`_byte_bits`; a whole 16-texel tile row from the three words it touches, branch-free:
+    half the time of two :func:`_bytes_at` on `penumbra-map`'s 1287-wide maps) whatever W, empty:
+    texel by texel. Run by ``run_slots``: slot ``slot`` of
     ``nslot`` takes the rows of tiles slot, slot + nslot, ... (whole rows: no two slots read the
     same mask line)."""
     H, W = mask.shape
-    nbytes = 8 * words.shape[0]
+    nwords = words.shape[0]
+    nbytes = 8 * nwords
     for ty in range(slot, nty, nslot):
         for tx in range(ntx):
             tile = ty * ntx + tx
@@ -434,12 +437,22 @@ def _tile_row_bits_slot(slot, mask, words, T, ntx, nty, bits, tile_any, nslot):
                 b = 0
                 if i < H:
                     p0 = i * W + x0
-                    # the texels' groups of 8 that lie inside the words, then texel by texel
-                    nfull = min(nw // 8, max(nbytes - p0, 0) // 8)
-                    for w in range(nfull):
-                        b |= _byte_bits(_bytes_at(words, p0 + 8 * w)) << (8 * w)
-                    for k in range(8 * nfull, nw):
-                        b |= np.int64(mask[i, x0 + k] != 0) << k
+                    q = p0 >> 3
+                    if T == 16 and nw == 16 and q + 2 < nwords:
+                        # a whole 16-texel row: the three words it touches, shifted together
+                        # without a branch (a shift by 64 - o written as two, for o = 0)
+                        o = np.uint64(8 * (p0 & 7))
+                        w0, w1, w2 = words[q], words[q + 1], words[q + 2]
+                        lo = (w0 >> o) | ((w1 << (np.uint64(63) - o)) << np.uint64(1))
+                        hi = (w1 >> o) | ((w2 << (np.uint64(63) - o)) << np.uint64(1))
+                        b = _byte_bits(lo) | (_byte_bits(hi) << 8)
+                    else:
+                        # the texels' groups of 8 that lie inside the words, then texel by texel
+                        nfull = min(nw // 8, max(nbytes - p0, 0) // 8)
+                        for w in range(nfull):
+                            b |= _byte_bits(_bytes_at(words, p0 + 8 * w)) << (8 * w)
+                        for k in range(8 * nfull, nw):
+                            b |= np.int64(mask[i, x0 + k] != 0) << k
                 bits[tile, li] = b
                 a |= b
             tile_any[tile] = a != 0
