@@ -2465,7 +2465,11 @@ def _front_end(vp, W, H, verts, fcs, code, near, mask=None, tiny=False, duals=Tr
     nb = (H + TILE - 1) // TILE if tiny else 0
     tcode = np.empty(F if tiny else 0, dtype=np.int64)
     tcount = np.empty((nchunk, nb), dtype=np.int64)
-    run_slots(_select_slot, nthreads, verts, fcs, vp, near, code, vs, chunk, ccount, nthreads, keep, tcode, tcount)
+    # a launch per pass costs ~50 us (run_slots): as many slots as there are chunks (one, on the
+    # calling thread, for a mesh of a few thousand faces, e.g. a receiver plane); the chunks, and so
+    # the results, are the same whatever the slot count
+    nsel = min(nthreads, nchunk)
+    run_slots(_select_slot, nsel, verts, fcs, vp, near, code, vs, chunk, ccount, nsel, keep, tcode, tcount)
     if tiny and int(tcount.sum()) < _TINY_MIN_PER_PIXEL * W * H:
         # too few small triangles to pay for the tiny path's per-pixel buffers: all go to setup
         keep[keep == 3] = 1
@@ -2515,9 +2519,10 @@ def _front_end(vp, W, H, verts, fcs, code, near, mask=None, tiny=False, duals=Tr
         rowbits = _E2I64
         tile_any = _E1U
     use = mask is not None
+    nset = min(nthreads, nchunk)  # (as _select_slot's)
     run_slots(
         _setup_count_slot,
-        nthreads,
+        nset,
         verts,
         fcs,
         vs,
@@ -2534,7 +2539,7 @@ def _front_end(vp, W, H, verts, fcs, code, near, mask=None, tiny=False, duals=Tr
         ntx,
         chunk,
         cnt,
-        nthreads,
+        nset,
         tile_any,
         use,
         sh,
@@ -2542,7 +2547,7 @@ def _front_end(vp, W, H, verts, fcs, code, near, mask=None, tiny=False, duals=Tr
     )
     _bin_offsets(cnt, start)
     bins = np.empty(int(start[-1]), dtype=np.int32)
-    run_slots(_bin_fill_slot, nthreads, NC, box, ntx, chunk, cnt, bins, nthreads, tile_any, use, sh)
+    run_slots(_bin_fill_slot, nset, NC, box, ntx, chunk, cnt, bins, nset, tile_any, use, sh)
     fe = FrontEnd(vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, normals, rowbits, sh, tri)
     if not want_tiny:
         return fe
