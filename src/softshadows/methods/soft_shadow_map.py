@@ -1579,20 +1579,24 @@ def project_soft_shadow_map_slot(slot, position, tri_id, receiver, svp, ssm, out
     (H,W,3), ``tri_id`` (H,W), -1 where no surface; ``receiver``: per triangle, whether it is a
     receiver): receivers read the SSM (bilinear) at their projection from the light; V = 1 -
     occlusion. Outside the SSM, behind the light, on occluder-only geometry or without a surface:
-    V = 1. Per row, the projections first (one float64 array per coordinate, no branch: LLVM
-    vectorizes it), then the lookups; ``n_row[i]``: row i's number of receiver pixels.
+    V = 1. Per row, the positions copied and projected first (one float64 array per coordinate, no
+    branch: LLVM vectorizes it), then the lookups; ``n_row[i]``: row i's number of receiver pixels.
 
     Run by ``run_slots``: slot ``slot`` of ``nslot`` takes every ``nslot``-th row (in row order
     the upper half of an eye image is often sky, no surface, nothing to look up: contiguous runs
     of rows left one thread idle for most of the pass)."""
     H, W = tri_id.shape
     Hs, Ws = ssm.shape
-    sc = np.empty((3, W))
+    sc = np.empty((6, W))
     for i in range(slot, H, nslot):
+        # the row's positions to one float64 array per coordinate first (the G-buffer interleaves
+        # them: projected straight from it, the row took 1.4x the time; as biased_light_row)
         for j in range(W):
-            sx, sy, z = view_project(
-                svp, np.float64(position[i, j, 0]), np.float64(position[i, j, 1]), np.float64(position[i, j, 2])
-            )
+            sc[3, j] = position[i, j, 0]
+            sc[4, j] = position[i, j, 1]
+            sc[5, j] = position[i, j, 2]
+        for j in range(W):
+            sx, sy, z = view_project(svp, sc[3, j], sc[4, j], sc[5, j])
             sc[0, j] = sx
             sc[1, j] = sy
             sc[2, j] = z
