@@ -1407,11 +1407,13 @@ def _quad_bin_slots_slot(slot, qd, radius, dmax, corner2, vp, gx, gy, B, slots, 
 
 
 @kernel(nogil=True, nrt=False, noalias=True)
-def _quad_bins_slot(slot, qd, radius, dmax, corner2, bin_maxd, per_bin, vp, gx, gy, B, nbx, offs, out, counts, nslot):
+def _quad_bins_slot(
+    slot, qd, radius, dmax, corner2, bin_maxd, per_bin, vp, gx, gy, B, nbx, bgeo, offs, out, counts, nslot
+):
     """The screen bins quad e overlaps (refined per bin with ``per_bin``), in bin order, into its
     slots ``out[offs[e]:offs[e + 1]]`` (the rest of them -1) and their number into ``counts[e]``.
-    One pass of the tests. Run by ``run_slots``: slot ``slot`` of ``nslot`` takes one contiguous
-    block of the quads."""
+    One pass of the tests. ``bgeo``: per bin, :func:`_bin_geometry` (made once, not per quad). Run
+    by ``run_slots``: slot ``slot`` of ``nslot`` takes one contiguous block of the quads."""
     cw, ch = (vp[VP_R] - vp[VP_L]) / gx, (vp[VP_T] - vp[VP_B]) / gy
     hb = 0.5 * B * np.sqrt(cw * cw + ch * ch) * (1.0 + 1e-12)  # a whole bin's half diagonal
     chb, shb = np.cos(hb), np.sin(hb) * (1.0 + 1e-12)
@@ -1449,14 +1451,14 @@ def _quad_bins_slot(slot, qd, radius, dmax, corner2, bin_maxd, per_bin, vp, gx, 
                 bi = by * nbx + bx
                 if bin_maxd[bi] <= 0.0:
                     continue
-                x0, x1, y0, y1 = _bin_box(vp, gx, gy, B, bx, by)
+                x0, x1, y0, y1 = bgeo[bi, 0], bgeo[bi, 1], bgeo[bi, 2], bgeo[bi, 3]
                 if qd[e, 7] > 0.0:
                     kb = rect_k(qd, e, bin_maxd[bi] if per_bin else dmax)
                     hit = kb >= 0.0 and rect_reach(qd, e, x0, x1, y0, y1) <= kb
                 else:
                     R = Rg
                     if per_bin:
-                        R = quad_half_width(qd, e, radius, bin_maxd[bi], box_corner2(x0, x1, y0, y1))
+                        R = quad_half_width(qd, e, radius, bin_maxd[bi], bgeo[bi, 4])
                     # the quad (segment grown by R) against the bin: separating axes
                     hit = R > 0.0 and (
                         not np.isfinite(R) or axes_overlap_box(ux, uy, qcx, qcy, hl0 + R, R, x0, x1, y0, y1)
@@ -1464,7 +1466,7 @@ def _quad_bins_slot(slot, qd, radius, dmax, corner2, bin_maxd, per_bin, vp, gx, 
                     if hit and np.isfinite(R):
                         # by angles (disk_cell_reach with the bin's centre and a whole bin's half
                         # diagonal, at least its own): the quad's stretch dropped
-                        mx, my, mz = cell_direction(0.5 * (x0 + x1), 0.5 * (y0 + y1), vp)
+                        mx, my, mz = bgeo[bi, 5], bgeo[bi, 6], bgeo[bi, 7]
                         iDb = 1.0 / (bin_maxd[bi] if per_bin else dmax)
                         ang, entry = disk_cell_reach(mx, my, mz, chb, shb, qd[e, _QN:], rdm, radius, iDb)
                         hit = not (ang and entry < 0.0)
@@ -1474,6 +1476,22 @@ def _quad_bins_slot(slot, qd, radius, dmax, corner2, bin_maxd, per_bin, vp, gx, 
         for i in range(k + n, offs[e + 1]):
             out[i] = -1
         counts[e] = n
+
+
+@kernel
+def _bin_geometry(vp, gx, gy, B, nbx, nby):
+    """Per screen bin (nbx * nby, 8): its box (:func:`_bin_box`), the box's ``box_corner2`` and
+    the unit direction through its centre (:func:`cell_direction`): what :func:`_quad_bins_slot`
+    tests every quad against, the same values, computed once per bin instead of per (quad, bin)."""
+    g = np.empty((nbx * nby, 8))
+    for by in range(nby):
+        for bx in range(nbx):
+            bi = by * nbx + bx
+            x0, x1, y0, y1 = _bin_box(vp, gx, gy, B, bx, by)
+            g[bi, 0], g[bi, 1], g[bi, 2], g[bi, 3] = x0, x1, y0, y1
+            g[bi, 4] = box_corner2(x0, x1, y0, y1)
+            g[bi, 5], g[bi, 6], g[bi, 7] = cell_direction(0.5 * (x0 + x1), 0.5 * (y0 + y1), vp)
+    return g
 
 
 def window_corner2(vp) -> float:
@@ -1538,7 +1556,8 @@ def bin_penumbra_quads(grid: SampleGrid, qd: np.ndarray, light_radius: float, pe
     )
     np.cumsum(offs[1:], out=offs[1:])
     slots = np.empty(offs[-1], np.int64)
-    run_slots(_quad_bins_slot, nslot, *args, offs, slots, counts, nslot)
+    bgeo = _bin_geometry(grid.vp, grid.gx, grid.gy, grid.bins, grid.nbx, grid.nby)
+    run_slots(_quad_bins_slot, nslot, *args, bgeo, offs, slots, counts, nslot)
     return _pairs_by_bin(counts, slots[slots >= 0], grid.n_bins)
 
 
