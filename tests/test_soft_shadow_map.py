@@ -544,7 +544,7 @@ def test_disk_frames32_rounds_the_float64_frames():
     assert (rd0 > 0).sum() > 500  # receivers are there
     f64 = ssm.disk_frames(rd0, sv.params(), sc.light.radius)
     f32 = ssm.disk_frames32(rd0, sv.params(), sc.light.radius)
-    assert np.array_equal(f32, f64[[0, 1, 2, 9, 10, 11]].astype(np.float32))
+    assert np.array_equal(f32, f64[[0, 1, 2, 9, 10, 11]].astype(np.float32).transpose(1, 0, 2))  # (H, 6, W)
 
 
 def _sphere_extent_reference(x0, x1, y0, y1, z, rho, lzb, z_max, svp):

@@ -1198,11 +1198,11 @@ def _disk_row_pass(F, recv_depth, recv_mesh, ssm, flags, ramp, ia, ib, fw, base,
             # no short-circuit: it vectorizes; the column mask from an int32 ramp (16 lanes per compare)
             rj = ramp[ju]
             ok = (zr > zo) & (not_check | (recv_mesh[ii, jx] != pm32)) & (rj >= lo) & (rj < hi)
-            wx = F[0, ii, jx]
-            wy = F[1, ii, jx]
-            hz = F[2, ii, jx] * zo
-            hp = F[3, ii, jx]
-            kap = F[4, ii, jx]
+            wx = F[ii, 0, jx]
+            wy = F[ii, 1, jx]
+            hz = F[ii, 2, jx] * zo
+            hp = F[ii, 3, jx]
+            kap = F[ii, 4, jx]
             hmax = hp * _HM32
             h0 = wx * x0 + wy * y0 + hz
             h1 = wx * x1 + wy * y0 + hz
@@ -1223,7 +1223,7 @@ def _disk_row_pass(F, recv_depth, recv_mesh, ssm, flags, ramp, ia, ib, fw, base,
                 & (qq2 - h2 * h2 <= k2 * d2 * d2)
                 & (qq3 - h3 * h3 <= k2 * d3 * d3)
             )
-            rc = kap * (hp - hc) + sr * F[5, ii, jx]
+            rc = kap * (hp - hc) + sr * F[ii, 5, jx]
             miss = cc - hc * hc > rc * rc
             area = ak * (zr - zo) * (d1 + d3) / (k2 * (d0 * d1) * (d2 * d3))
             add = area if (ok & inr & ins) else _F0
@@ -1369,10 +1369,14 @@ def _patch_constants(x0, x1, y0, y1, zo, pk, p):
 @kernel(nogil=True)
 def disk_frames32_slot(slot, recv_depth, svp, rho, out, nslot):
     """The planes of :func:`disk_frames` that :func:`_disk_row_pass` reads, in float32, into ``out``
-    (6,H,W) (zeros; left as it is where no receiver): w (3), |p|, kappa, sqrt(1 + kappa^2) (the
+    (H,6,W) (zeros; left as it is where no receiver): w (3), |p|, kappa, sqrt(1 + kappa^2) (the
     same arithmetic as :func:`disk_frames`, rounded; the float64 planes themselves are not kept:
-    the exact path recomputes a texel's frame). Run by ``run_slots``: slot ``slot`` of ``nslot``
-    takes every ``nslot``-th row."""
+    the exact path recomputes a texel's frame). Row-major by texel row, then plane (not six
+    (H,W) planes): the row pass reads the six planes' rows together, and whole planes lie a
+    multiple of 4 KiB apart (64 KiB for a 128^2 map), so that their rows fell in one set of the L1
+    cache, 6 of its 8 ways, and the row pass ran 12 or 16 ms from one process to the next on
+    `bunny`, by where the other arrays it reads happened to lie. Run by ``run_slots``: slot
+    ``slot`` of ``nslot`` takes every ``nslot``-th row."""
     H, W = recv_depth.shape
     l, r, b, t = svp[VP_L], svp[VP_R], svp[VP_B], svp[VP_T]
     dxs = (r - l) / W
@@ -1385,18 +1389,19 @@ def disk_frames32_slot(slot, recv_depth, svp, rho, out, nslot):
             if zr > 0.0:
                 ux = l + (j + 0.5) * dxs
                 _disk_frame(ux * zr, uy * zr, zr, rho, f)
-                out[0, i, j] = f[0]
-                out[1, i, j] = f[1]
-                out[2, i, j] = f[2]
-                out[3, i, j] = f[9]
-                out[4, i, j] = f[10]
-                out[5, i, j] = f[11]
+                out[i, 0, j] = f[0]
+                out[i, 1, j] = f[1]
+                out[i, 2, j] = f[2]
+                out[i, 3, j] = f[9]
+                out[i, 4, j] = f[10]
+                out[i, 5, j] = f[11]
 
 
 def disk_frames32(recv_depth, svp, rho) -> np.ndarray:
-    """:func:`disk_frames32_slot` over the whole map, one slot per thread: (6,H,W) float32, zeros
+    """:func:`disk_frames32_slot` over the whole map, one slot per thread: (H,6,W) float32, zeros
     where no receiver."""
-    out = np.zeros((6, *recv_depth.shape), np.float32)
+    H, W = recv_depth.shape
+    out = np.zeros((H, 6, W), np.float32)
     run_threads(disk_frames32_slot, recv_depth, svp, float(rho), out)
     return out
 
