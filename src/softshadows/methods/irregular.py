@@ -440,8 +440,8 @@ def _window_of(pts, o, r, u, f, near):
 
 def fit_grid_view(light, pts: np.ndarray, grid: int, lo, hi, window=None, toward=None) -> View:
     """The light view of the grid: from the light centre (``light_frame``: along the rectangle's
-    normal, toward the samples' box centre for the sphere), its window fitted to the samples in
-    front of it (one pass, no temporary arrays). ``window``: (x0, x1, y0, y1, z0, z1) of the
+    normal; for the sphere toward ``toward`` or the samples' box centre, below), its window fitted
+    to the samples in front of it (one pass, no temporary arrays). ``window``: (x0, x1, y0, y1, z0, z1) of the
     samples with z > 0 and their smallest z in the frame ``light_frame(light, toward)`` (for the
     sphere, ``toward`` is a point known before the samples: the scene's box centre), when the
     caller has them already (:func:`error_bound_samples`); used, with that frame, when every
