@@ -652,30 +652,31 @@ def _triangle_setup(verts, faces, counted, vp, center, tri2d, tribox, trid, vali
 def _triangles_by_bin(tribox, valid, vp, gx, gy, B, nbx, n_bins):
     """(start (n_bins + 1), items): per screen bin, the valid triangles whose box overlaps it,
     ascending; bin b's are ``items[start[b]:start[b + 1]]``. A counting sort by bin in two passes
-    over the triangles: count per bin, prefix sum, fill (no pair list, no atomics)."""
+    over the triangles: count per bin (each triangle's range of bins kept), prefix sum, fill (no
+    pair list, no atomics)."""
+    F = tribox.shape[0]
     start = np.zeros(n_bins + 1, np.int64)
-    for f in range(tribox.shape[0]):
+    rng = np.empty((F, 4), np.int64)  # the bins (by0, by1, bx0, bx1), exclusive ends; empty: 0, 0, 0, 0
+    for f in range(F):
+        rng[f, 0] = rng[f, 1] = rng[f, 2] = rng[f, 3] = 0
         if valid[f]:
             cx0, cx1, cy0, cy1 = _cell_range(tribox[f, 0], tribox[f, 1], tribox[f, 2], tribox[f, 3], vp, gx, gy)
             if cx0 > cx1 or cy0 > cy1:
                 continue
-            for by in range(cy0 // B, cy1 // B + 1):
-                for bx in range(cx0 // B, cx1 // B + 1):
+            rng[f, 0], rng[f, 1], rng[f, 2], rng[f, 3] = cy0 // B, cy1 // B + 1, cx0 // B, cx1 // B + 1
+            for by in range(rng[f, 0], rng[f, 1]):
+                for bx in range(rng[f, 2], rng[f, 3]):
                     start[by * nbx + bx + 1] += 1
     for b in range(n_bins):
         start[b + 1] += start[b]
     fill = start[:-1].copy()
     items = np.empty(start[n_bins], np.int64)
-    for f in range(tribox.shape[0]):
-        if valid[f]:
-            cx0, cx1, cy0, cy1 = _cell_range(tribox[f, 0], tribox[f, 1], tribox[f, 2], tribox[f, 3], vp, gx, gy)
-            if cx0 > cx1 or cy0 > cy1:
-                continue
-            for by in range(cy0 // B, cy1 // B + 1):
-                for bx in range(cx0 // B, cx1 // B + 1):
-                    i = by * nbx + bx
-                    items[fill[i]] = f
-                    fill[i] += 1
+    for f in range(F):
+        for by in range(rng[f, 0], rng[f, 1]):
+            for bx in range(rng[f, 2], rng[f, 3]):
+                i = by * nbx + bx
+                items[fill[i]] = f
+                fill[i] += 1
     return start, items
 
 
