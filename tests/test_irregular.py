@@ -635,14 +635,18 @@ def test_visibility_finite_in_unit_interval(name, shape):
     assert (v < 0.5).any()  # every built-in scene has a shadow in view
 
 
-@pytest.mark.parametrize("threads", [1, 2])
-def test_sort_samples_is_the_serial_counting_sort_whatever_the_threads(threads):
-    """``sort_samples`` (the grid's counting sort and gather by the threads together) gives the
-    serial ``counting_sort``'s start and order (stable, negative keys dropped) and the records in
-    that order, with one thread or two; keys repeat, some bins stay empty."""
+@pytest.mark.parametrize("threads,serial_places", [(1, True), (2, True), (2, False)])
+def test_sort_samples_is_the_serial_counting_sort_whatever_the_threads(threads, serial_places, monkeypatch):
+    """``sort_samples`` (the grid's counting sort and gather by the threads together; the places
+    in one serial pass below ``_SERIAL_PLACES`` keys, else by the threads) gives the serial
+    ``counting_sort``'s start and order (stable, negative keys dropped) and the records in that
+    order, with one thread or two; keys repeat, some bins stay empty."""
     import numba
 
+    from softshadows.methods import irregular as ir
     from softshadows.methods.irregular import counting_sort, sort_samples
+
+    monkeypatch.setattr(ir, "_SERIAL_PLACES", 1 << 30 if serial_places else 0)
 
     rng = np.random.default_rng(7)
     n, n_keys = 5003, 97
