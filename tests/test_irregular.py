@@ -826,3 +826,27 @@ def test_v_composed_in_the_penumbra_pass_is_eq4_of_its_counts(light):
     every = ir.bins_by_work(bl[0], g.start, cells, also_empty=True)
     assert len(every) > len(ir.bins_by_work(bl[0], g.start, cells))
     assert sorted(every) == list(np.flatnonzero(np.diff(g.start[::cells]) > 0))
+
+
+@pytest.mark.parametrize("impl", ["scalar", "avx512"])
+def test_compact_indices_packs_the_flagged_positions_in_order(impl):
+    """``compact_indices`` (the penumbra pass's compaction of the reach tests' survivors): out[m:]
+    gets base + q for every flagged q (flags 0 or 1), in order, and the count comes back, for
+    lengths around the 8-flag chunks; both implementations (the AVX-512 one only on a host that
+    has it) against a Python loop."""
+    from softshadows import _jit
+
+    if impl == "avx512" and not _jit.HAS_AVX512:
+        pytest.skip("this host has no AVX-512 (the scalar loop is what runs here; tested above)")
+    fn = py_callable(_jit._compact_indices_avx512 if impl == "avx512" else _jit._compact_indices_scalar)
+    rng = np.random.default_rng(11)
+    for n in (0, 1, 7, 8, 9, 15, 16, 17, 63, 64, 65, 200):
+        for density in (0.0, 0.3, 1.0):
+            keep = (rng.random(n) < density).astype(np.int8)
+            base, m0 = int(rng.integers(0, 1000)), int(rng.integers(0, 5))
+            out = np.full(m0 + n + 8, -7, np.int64)
+            m = fn(keep, np.int64(n), np.int64(base), out, np.int64(m0))
+            want = [base + q for q in range(n) if keep[q] != 0]
+            assert m == m0 + len(want)
+            assert out[m0:m].tolist() == want
+            assert (out[:m0] == -7).all()  # nothing written before m

@@ -54,6 +54,7 @@ import time
 import numpy as np
 from llvmlite import ir
 from numba import njit, types
+from numba.core import cgutils
 from numba.core import codegen as _codegen
 from numba.core import typed_passes as _typed_passes
 from numba.core.registry import CPUDispatcher
@@ -417,6 +418,92 @@ def next_item(typingctx, counter):
 def work_counter() -> np.ndarray:
     """A fresh counter for :func:`next_item` (one per launch): items are claimed from 0 on."""
     return np.zeros(1, np.int64)
+
+
+def _host_has_avx512() -> bool:
+    """Whether the kernels are compiled for this host (Numba's default CPU) and it has AVX-512F (the
+    vector compress of :func:`compact_indices`). A portable target (``NUMBA_CPU_NAME``) gets the
+    scalar loop."""
+    from numba.core import config
+
+    if config.CPU_NAME not in (None, "host"):
+        return False
+    try:
+        from llvmlite import binding
+
+        return bool(binding.get_host_cpu_features().get("avx512f", False))
+    except Exception:  # pragma: no cover - no feature query: the scalar loop is always right
+        return False
+
+
+#: :func:`compact_indices` packs 8 flags at a time with AVX-512's ``vpcompressq`` (register form)
+HAS_AVX512 = _host_has_avx512()
+
+
+@intrinsic
+def _compress8(typingctx, keep, i0, base, out, m):
+    """``out[m:m + 8]`` := base + q for the q in 0..7 with ``keep[i0 + q]`` != 0, in order, packed
+    to the front (the 8 stores are written whole: the rest of them is garbage); returns how many.
+    ``keep`` int8 (8 bytes from ``i0`` readable), ``out`` int64 (8 entries from ``m`` writable).
+    The register form of AVX-512's compress and one vector store: LLVM's generic
+    ``llvm.masked.compressstore`` is the memory form, microcoded on AMD Zen 4 (2.5x slower than the
+    scalar loop there; this, 4x faster than it)."""
+    if not (
+        isinstance(keep, types.Array)
+        and keep.dtype == types.int8
+        and isinstance(out, types.Array)
+        and out.dtype == types.int64
+    ):
+        return None
+
+    def codegen(context, builder, sig, args):
+        k = context.make_array(sig.args[0])(context, builder, args[0])
+        o = context.make_array(sig.args[3])(context, builder, args[3])
+        i8, i32, i64 = ir.IntType(8), ir.IntType(32), ir.IntType(64)
+        v8i8, v8i64 = ir.VectorType(i8, 8), ir.VectorType(i64, 8)
+        flags = builder.load(builder.bitcast(builder.gep(k.data, [args[1]]), v8i8.as_pointer()), align=1)
+        mask = builder.icmp_unsigned("!=", flags, ir.Constant(v8i8, [0] * 8))
+        b = builder.insert_element(ir.Constant(v8i64, ir.Undefined), args[2], ir.Constant(i32, 0))
+        b = builder.shuffle_vector(b, ir.Constant(v8i64, ir.Undefined), ir.Constant(ir.VectorType(i32, 8), [0] * 8))
+        vals = builder.add(b, ir.Constant(v8i64, list(range(8))))
+        fnty = ir.FunctionType(v8i64, [v8i64, v8i64, mask.type])
+        comp = builder.call(
+            cgutils.get_or_insert_function(builder.module, fnty, "llvm.x86.avx512.mask.compress.v8i64"),
+            [vals, ir.Constant(v8i64, [0] * 8), mask],
+        )
+        builder.store(comp, builder.bitcast(builder.gep(o.data, [args[4]]), v8i64.as_pointer()), align=8)
+        pop = cgutils.get_or_insert_function(builder.module, ir.FunctionType(i8, [i8]), "llvm.ctpop.i8")
+        return builder.zext(builder.call(pop, [builder.bitcast(mask, i8)]), i64)
+
+    return types.int64(keep, types.int64, types.int64, out, types.int64), codegen
+
+
+@kernel(inline=True, nrt=False)
+def _compact_indices_avx512(keep, n, base, out, m):
+    i = 0
+    while i + 8 <= n:
+        m += _compress8(keep, np.int64(i), np.int64(base + i), out, np.int64(m))
+        i += 8
+    for q in range(i, n):
+        out[np.uint64(m)] = base + q
+        m += keep[q]
+    return m
+
+
+@kernel(inline=True, nrt=False)
+def _compact_indices_scalar(keep, n, base, out, m):
+    for q in range(n):
+        out[np.uint64(m)] = base + q  # unsigned: no wrap-around code
+        m += keep[q]
+    return m
+
+
+#: ``compact_indices(keep, n, base, out, m)``: ``out[m:]`` := base + q for the q < n with
+#: ``keep[q]`` = 1 (int8 flags, 0 or 1), in order; returns m + their count. ``out`` needs 8 entries of
+#: slack past its last (whole 8-lane stores). The same values either way; on an AVX-512 host 8
+#: flags at a time (:func:`_compress8`), else a branch-free loop (a store per flag, the position
+#: advanced by it).
+compact_indices = _compact_indices_avx512 if HAS_AVX512 else _compact_indices_scalar
 
 
 def run_threads(fn, *args) -> None:

@@ -19,7 +19,16 @@ from typing import ClassVar
 import numba
 import numpy as np
 
-from .._jit import calling_thread_only, kernel, next_item, run_slots, run_threads, start_slots, work_counter
+from .._jit import (
+    calling_thread_only,
+    compact_indices,
+    kernel,
+    next_item,
+    run_slots,
+    run_threads,
+    start_slots,
+    work_counter,
+)
 from ..analytic import atan2_upper, rect_halfplanes_area
 from ..geometry.silhouette import build_adjacency, facing, facing_from_planes
 from ..raster.rasterizer import prefetch
@@ -2192,7 +2201,7 @@ def _penumbra_kernel(
     hd = 0.5 * np.sqrt(cw * cw + ch * ch) * (1.0 + 1e-12)  # a cell's half diagonal (rounded up)
     chd, shd = np.cos(hd), np.sin(hd) * (1.0 + 1e-12)  # (disk_cell_reach) the angle it bounds
     buf = np.zeros((4, 8))  # scratch, once per worker
-    cand = np.empty(max_bin, np.int64)
+    cand = np.empty(max_bin + 8, np.int64)  # (compact_indices writes 8 at a time)
     cval = np.empty(max_bin)
     cp = np.empty((3, max_bin))  # the candidates' positions, contiguous
     rsc = np.empty((_TERM_ROWS, max_bin))  # the edge terms' scratch
@@ -2360,9 +2369,7 @@ def _penumbra_kernel(
                             ky = abs(ddy) <= rey + k * rhy
                             kn = abs(sdx * ddy - sdy * ddx) <= ren + k * rhn
                             keep[np.uint64(i)] = np.int8(kx) & np.int8(ky) & np.int8(kn)
-                        for i in range(j1 - j0):
-                            cand[np.uint64(m)] = j0 + i  # unsigned: no wrap-around code
-                            m += keep[i]
+                        m = compact_indices(keep, j1 - j0, j0, cand, m)
                     elif dr > 0.0:
                         # disk_reach at each sample, branch-free; unsigned indices (no
                         # negative-index wrap-around code) and selects: the loop vectorizes
@@ -2371,9 +2378,7 @@ def _penumbra_kernel(
                             keep[np.uint64(i)] = disk_reach(
                                 sdir[0, k], sdir[1, k], sdir[2, k], sinv[k], radius, rdm, arc
                             )
-                        for i in range(j1 - j0):
-                            cand[np.uint64(m)] = j0 + i  # unsigned: no wrap-around code
-                            m += keep[i]
+                        m = compact_indices(keep, j1 - j0, j0, cand, m)
                     else:
                         for j in range(j0, j1):
                             cand[m] = j
