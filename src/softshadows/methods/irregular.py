@@ -847,9 +847,7 @@ def _umbra_kernel(
                         k1 = (e1 > 0.0) | ((e1 == 0.0) & t1)
                         k2 = (e2 > 0.0) | ((e2 == 0.0) & t2)
                         keep[w, np.uint64(i)] = np.int8(k0) & np.int8(k1) & np.int8(k2)
-                    for i in range(j1 - j0):
-                        cand[w, np.uint64(m)] = j0 + i  # unsigned: no wrap-around code
-                        m += keep[w, i]
+                    m = compact_indices(keep[w], j1 - j0, j0, cand[w], m)
             for i in range(m):
                 j = cand[w, i]
                 den = nx * (sp[j, 0] - center[0]) + ny * (sp[j, 1] - center[1]) + nz * (sp[j, 2] - center[2])
@@ -913,7 +911,7 @@ def start_umbrae(grid: SampleGrid, verts, faces, counted, center):
         bins_by_work(bstart, grid.start, grid.bins * grid.bins * grid.slices),
         work_counter(),
         np.empty((nw, max(max_col, 1)), np.int8),
-        np.empty((nw, max(max_bin, 1)), np.int64),
+        np.empty((nw, max(max_bin, 1) + 8), np.int64),  # (compact_indices writes 8 at a time)
         result=lambda: (
             umbra,
             {
