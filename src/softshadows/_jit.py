@@ -420,20 +420,23 @@ def work_counter() -> np.ndarray:
     return np.zeros(1, np.int64)
 
 
-def _host_has_avx512() -> bool:
-    """Whether the kernels are compiled for this host (Numba's default CPU) and it has AVX-512F (the
-    vector compress of :func:`compact_indices`). A portable target (``NUMBA_CPU_NAME``) gets the
-    scalar loop."""
-    from numba.core import config
-
-    if config.CPU_NAME not in (None, "host"):
-        return False
+def host_has_avx512f(default: bool = False) -> bool:
+    """Whether this host's CPU has AVX-512F, as LLVM sees it (``default`` when it cannot say)."""
     try:
         from llvmlite import binding
 
         return bool(binding.get_host_cpu_features().get("avx512f", False))
-    except Exception:  # pragma: no cover - no feature query: the scalar loop is always right
-        return False
+    except Exception:  # pragma: no cover - no feature query
+        return default
+
+
+def _host_has_avx512() -> bool:
+    """Whether the kernels are compiled for this host (Numba's default CPU) and it has AVX-512F (the
+    vector compress of :func:`compact_indices`). A portable target (``NUMBA_CPU_NAME``) gets the
+    scalar loop, as a host that cannot say."""
+    from numba.core import config
+
+    return config.CPU_NAME in (None, "host") and host_has_avx512f(default=False)
 
 
 #: :func:`compact_indices` packs 8 flags at a time with AVX-512's ``vpcompressq`` (register form)

@@ -31,7 +31,7 @@ from .._jit import (
 )
 from ..analytic import atan2_upper, rect_halfplanes_area
 from ..geometry.silhouette import build_adjacency, facing, facing_from_planes
-from ..raster.rasterizer import prefetch
+from ..raster.rasterizer import bin_offsets, prefetch
 from ..raster.view import VP_B, VP_FORWARD, VP_L, VP_ORIGIN, VP_R, VP_RIGHT, VP_T, VP_UP, View, light_frame, light_view
 from .base import Method, MethodOutput, Param, register
 from .ground_truth import BOUND_SAFETY, hit_point_at
@@ -265,27 +265,12 @@ def _sort_slot(w, phase, key, rec, hist, tot, start, order, sx, sy, sp, sd):
 _SERIAL_PLACES = 1 << 20
 
 
-@kernel(nogil=True, nrt=False)
-def _sort_places(hist, start):
-    """Phases 1 and 2 of :func:`_sort_slot` over every key in one serial pass: each key's first
-    place (``start``) and each chunk's first place for it (``hist``, in place), key-major and
-    chunk-minor; returns the number of samples placed."""
-    C, nk = hist.shape
-    t = 0
-    for c in range(nk):
-        start[c] = t
-        for q in range(C):
-            h = hist[q, c]
-            hist[q, c] = t
-            t += h
-    return t
-
-
 def sort_samples(key, rec, n_keys: int):
     """(start (n_keys + 1), order, sx, sy, sp, sd): :func:`counting_sort` of the grid keys (the same
     ``start`` and ``order``: stable, negative keys dropped) and the sorted samples' records gathered,
     by the threads together (``_sort_slot``, its five phases; phases 1 and 2 as one serial pass,
-    :func:`_sort_places`, below ``_SERIAL_PLACES`` keys): the serial sort's scatter was the
+    the rasterizer's ``bin_offsets`` (keys for tiles, chunks the same), below ``_SERIAL_PLACES``
+    keys): the serial sort's scatter was the
     longest serial step of the frame. The places are key-major, chunk-minor, so the order is the
     serial sort's whatever the number of threads."""
     C = max(1, min(numba.get_num_threads(), len(key)))
@@ -297,11 +282,12 @@ def sort_samples(key, rec, n_keys: int):
     for phase in (0,) if serial else (0, 1):  # (one range: it starts at 0)
         run_slots(_sort_slot, C, phase, key, rec, hist, tot, start, e0, e1, e1, e2, e1)
     if serial:
-        m = int(_sort_places(hist, start))
+        bin_offsets(hist, start)  # (start[n_keys]: the total)
+        m = int(start[n_keys])
     else:
         np.cumsum(tot[: C + 1], out=tot[: C + 1])
         m = int(tot[C + 1 :].sum())
-    start[n_keys] = m
+        start[n_keys] = m
     order = np.empty(m, np.int64)
     sx, sy, sd = np.empty(m), np.empty(m), np.empty(m)
     sp = np.empty((m, 3))
@@ -782,6 +768,7 @@ def _umbra_kernel(
     the next bin of ``bin_order`` (``next_item``) until none is left. ``keep``, ``cand``: scratch,
     one row per worker (a cell column's flags; a triangle's candidates in the bin)."""
     w = _worker
+    keep_w, cand_w = keep[w], cand[w]  # this worker's scratch rows, once
     while True:
         q = next_item(counter)
         if q >= bin_order.shape[0]:
@@ -847,7 +834,7 @@ def _umbra_kernel(
                         k1 = (e1 > 0.0) | ((e1 == 0.0) & t1)
                         k2 = (e2 > 0.0) | ((e2 == 0.0) & t2)
                         keep[w, np.uint64(i)] = np.int8(k0) & np.int8(k1) & np.int8(k2)
-                    m = compact_indices(keep[w], j1 - j0, j0, cand[w], m)
+                    m = compact_indices(keep_w, j1 - j0, j0, cand_w, m)
             for i in range(m):
                 j = cand[w, i]
                 den = nx * (sp[j, 0] - center[0]) + ny * (sp[j, 1] - center[1]) + nz * (sp[j, 2] - center[2])

@@ -23,7 +23,7 @@ import numba
 import numpy as np
 from numba.cpython.unsafe.numbers import trailing_zeros
 
-from .._jit import kernel, py_callable, run_slots, run_threads
+from .._jit import host_has_avx512f, kernel, py_callable, run_slots, run_threads
 from ..analytic import disk_facing_frame, polygon_disk_area, quad_disk_area_small, quad_disk_area_small32
 from ..errors import SoftShadowsError
 from ..raster import View, rasterize_depth, rasterize_fragments
@@ -927,13 +927,8 @@ def _host_lanes() -> int:
     passes (both lights) cover whole vectors of this many texels (a row that is not a whole number
     of vectors ends in a scalar remainder loop; rounding up to 16 on an 8-lane host ran 15% more
     vectors on `bunny`'s sphere rows). Only the speed depends on it: the extra texels add exactly 0
-    (and are not flagged)."""
-    try:
-        from llvmlite import binding
-
-        return 16 if binding.get_host_cpu_features().get("avx512f", False) else 8
-    except Exception:  # pragma: no cover - no feature query: the wider vectors are always whole
-        return 16
+    (and are not flagged). Without a feature query: 16, the wider vectors are always whole."""
+    return 16 if host_has_avx512f(default=True) else 8
 
 
 ROW_LANES = _host_lanes()  # float32 sums: the row passes cover whole vectors of this many texels

@@ -765,9 +765,10 @@ def _setup_count_slot(
 
 
 @kernel
-def _bin_offsets(cnt, bstart):
-    """cnt (nchunk, ntiles) counts -> write offsets in place; bstart (ntiles+1) tile starts.
-    Serial: nchunk * ntiles is small, and a parallel region costs more than it saves."""
+def bin_offsets(cnt, bstart):
+    """cnt (nchunk, ntiles) counts -> write offsets in place, tile-major and chunk-minor; bstart
+    (ntiles+1) tile starts, bstart[ntiles] the total. Serial: nchunk * ntiles is small, and a
+    parallel region costs more than it saves (also ``irregular.sort_samples``' places)."""
     nchunk = cnt.shape[0]
     ntiles = cnt.shape[1]
     o = 0
@@ -783,7 +784,7 @@ def _bin_offsets(cnt, bstart):
 @kernel(nogil=True, nrt=False)
 def _bin_fill_slot(slot, NC, box, ntx, chunk, off, bins, nslot, tile_any, use_bits, sh):
     """The pieces' slots into ``bins``, chunk c of tile t from the offset off[c, t] (advanced in
-    place; see :func:`_bin_offsets`): per tile, in chunk order and in face order within a chunk.
+    place; see :func:`bin_offsets`): per tile, in chunk order and in face order within a chunk.
     Run by ``run_slots``: slot ``slot`` takes chunks slot, slot + nslot, ..."""
     nchunk = off.shape[0]
     F = NC.shape[0]
@@ -2545,7 +2546,7 @@ def _front_end(vp, W, H, verts, fcs, code, near, mask=None, tiny=False, duals=Tr
         sh,
         duals,
     )
-    _bin_offsets(cnt, start)
+    bin_offsets(cnt, start)
     bins = np.empty(int(start[-1]), dtype=np.int32)
     run_slots(_bin_fill_slot, nset, NC, box, ntx, chunk, cnt, bins, nset, tile_any, use, sh)
     fe = FrontEnd(vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, normals, rowbits, sh, tri)
