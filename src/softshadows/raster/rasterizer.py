@@ -1196,7 +1196,7 @@ def _next_span(scan, hi, j1, e0, e1, e2, r0, r1, r2):
 
 
 @kernel(inline=True)
-def _depth_test_row(zb, tb, t, span, cols, pl, zrow, zr, ortho, nz, nzi):
+def _depth_test_row(zb, tb, t, span, cols, pl, zrow, zr, ortho, nz, nzi, keep_tb):
     """Depth test of the fragments of triangle t on ``span`` = (li, klo, khi), the columns klo..khi
     of tile row li, against the tile's nearest depths ``zb`` and triangles ``tb``: the whole tile
     row at once (vectorizes), masked to the span. ``cols`` = (x0, wl, wsx): the tile's first column
@@ -1204,10 +1204,20 @@ def _depth_test_row(zb, tb, t, span, cols, pl, zrow, zr, ortho, nz, nzi):
     depth clamp and the far plane. Nearer wins, and at equal depth the smaller triangle (``tb``
     holds the winner's index): the result is the lexicographic minimum of (depth, triangle) over
     the fragments, whatever order the pieces come in (:func:`_depth_pass` draws them front to
-    back)."""
+    back). Without ``keep_tb`` (the depths only: ``rasterize_depth(tri=False)``) ``tb`` is neither
+    read nor written: nearer wins, and at equal depth the depth stays the same bits whichever
+    fragment wins (a depth is never -0.0: a view depth is positive)."""
     li, klo, khi = span
     x0, wl, wsx = cols
     zlo, zhi, far = zr
+    if not keep_tb:
+        for k in range(TILE):
+            xw = wl + ((x0 + k) + 0.5) * wsx
+            z = _clamp_depth(_frag_depth(ortho, pl, zrow, xw), zlo, zhi)
+            zc = zb[li, k]
+            take = (k >= klo) & (k <= khi) & (not (z > far)) & (z < zc)
+            zb[li, k] = z if take else zc + nz
+        return
     for k in range(TILE):
         xw = wl + ((x0 + k) + 0.5) * wsx
         z = _clamp_depth(_frag_depth(ortho, pl, zrow, xw), zlo, zhi)
@@ -1308,7 +1318,7 @@ def _front_to_back(bins, a, n, zinfo, ks):
 
 
 @kernel(inline=True)
-def _depth_pass(vw, near, tile, rect, start, bins, box, edges, zinfo, planes, zb, tb, SP, sh, tri, face, nz, ks):
+def _depth_pass(vw, near, tile, rect, start, bins, box, edges, zinfo, planes, zb, tb, SP, sh, tri, face, nz, ks, keep_tb):
     """The nearest depth ``zb`` and triangle ``tb`` (-1: none) of every pixel of the tile ``rect`` =
     (y0, y1, x0, x1), from the pieces binned to it (the dense modes: depth and G-buffer). ``tb``
     holds the front-end triangle, or with ``face`` its face ``tri[u]`` (the depth mode's output:
@@ -1362,10 +1372,15 @@ def _depth_pass(vw, near, tile, rect, start, bins, box, edges, zinfo, planes, zb
             lo, hi, r0, r1, r2 = _first_span(scan, li, py, j0, j1, SP, e0, e1, e2)
             while lo <= hi:
                 span = (li, lo - x0, hi - x0)
-                if ortho:
-                    _depth_test_row(zb, tb, tv, span, cols, pl, zrow, zr, True, nz, nzi)
+                if keep_tb:
+                    if ortho:
+                        _depth_test_row(zb, tb, tv, span, cols, pl, zrow, zr, True, nz, nzi, True)
+                    else:
+                        _depth_test_row(zb, tb, tv, span, cols, pl, zrow, zr, False, nz, nzi, True)
+                elif ortho:
+                    _depth_test_row(zb, tb, tv, span, cols, pl, zrow, zr, True, nz, nzi, False)
                 else:
-                    _depth_test_row(zb, tb, tv, span, cols, pl, zrow, zr, False, nz, nzi)
+                    _depth_test_row(zb, tb, tv, span, cols, pl, zrow, zr, False, nz, nzi, False)
                 lo, hi = _next_span(scan, hi, j1, e0, e1, e2, r0, r1, r2)
 
 
@@ -1869,8 +1884,9 @@ def _tiles_depth_slot(slot, fe, sc, depth_out, tri_out, zt, ft, rz, rt, ks, coun
                         trow[k] = -1
                 continue
             _depth_pass(
-                vw, near, tile, rect, start, bins, box, edges, zinfo, planes, zb, tb, SP, sh, tri, face, nz, kss
-            )
+                vw, near, tile, rect, start, bins, box, edges, zinfo, planes, zb, tb, SP, sh, tri, face, nz, kss,
+                with_tri,
+            )  # fmt: skip
             if tiny:
                 for i in range(y0, y1 + 1):
                     # row views: their indices are known non-negative (no wrap-around selects)
@@ -1948,7 +1964,7 @@ def _tiles_gbuffer_slot(slot, fe, sc, out, rz, rt, ks, counter):
             rect = _tile_rect(ty, tx, T, W, H)
             tile = ty * ntx + tx
             _depth_pass(
-                vw, near, tile, rect, start, bins, box, edges, zinfo, planes, zb, tb, SP, sh, tri, face, nz, kss
+                vw, near, tile, rect, start, bins, box, edges, zinfo, planes, zb, tb, SP, sh, tri, face, nz, kss, True
             )
             _tile_to_rows(zb, tb, rzs, rts, rect, True)
         ya = ty * T
