@@ -794,7 +794,9 @@ def test_tiny_path_is_bit_identical_to_the_tile_pass(ortho, monkeypatch):
 def test_depth_only_is_the_same_depth(tiny, monkeypatch):
     """``rasterize_depth(tri=False)`` writes no faces (None) and the same depths bit for bit as with
     them: whole tiles and the image's partial last row and column of tiles (70 x 45 pixels), big
-    quads and small triangles (through the tiny path and through setup), both cull modes."""
+    quads and small triangles (through the tiny path and through setup), both cull modes. The quads
+    come twice (equal depths at every pixel they win: the depths-only tile pass keeps the first
+    fragment where the full one keeps the smaller face, the same depth bits either way)."""
     from softshadows.raster import rasterizer as R
 
     rng = np.random.default_rng(5)
@@ -803,8 +805,8 @@ def test_depth_only_is_the_same_depth(tiny, monkeypatch):
     xy = c + rng.uniform(-4.0, 4.0, size=(n, 3, 2))
     z = rng.uniform(0.6, 2.4, size=(n, 3))
     quads = np.array([[[-3, -3], [W + 3, -3], [W + 3, H + 3]], [[-3, -3], [W + 3, H + 3], [-3, H + 3]]], float)
-    xy = np.concatenate([quads, xy]).reshape(-1, 2)
-    z = np.concatenate([np.full((2, 3), 2.3), z]).reshape(-1)
+    xy = np.concatenate([quads, xy, quads]).reshape(-1, 2)
+    z = np.concatenate([np.full((2, 3), 2.3), z, np.full((2, 3), 2.3)]).reshape(-1)
     V, view, F = _screen_scene(xy, z, W, H, False, 0.5, 2.5)
     monkeypatch.setattr(R, "TINY_PATH", tiny)
     for cull in ("none", "back"):
