@@ -384,6 +384,57 @@ def start_slots(fn, nslot: int, *args, result=None) -> SlotLaunch:
     return SlotLaunch(fn, int(nslot), args, result=result)
 
 
+class SharedWork:
+    """Work that the calling thread offers to the slot threads of a :func:`start_slots` launch that
+    finish theirs early: a slot thread calls :meth:`help` after its own part (the launch's slot
+    function wraps the kernel, see ``penumbra_map.start_eye_lookups``); the calling thread calls
+    :meth:`run` with a kernel whose items are claimed from a shared counter (:func:`next_item`).
+    ``run`` runs the kernel on the calling thread and on every slot thread that has come to
+    ``help`` since the offer, and returns once all of them are done: the same items computed,
+    whoever computes them. A slot thread that finishes its own part before the offer, or after the
+    calling thread's kernel has run out of items, leaves at once (the calling thread does the rest
+    alone), so that the outcome never depends on the timing, only the time it takes. Made for the
+    calling thread's serial work that overlaps a launch (:func:`calling_thread_only`) when the
+    launch ends first: `penumbra-map`'s eye lookups end ~1 ms before its cones' rejection."""
+
+    def __init__(self):
+        self._cond = threading.Condition()
+        self._task = None
+        self._closed = False
+        self._helpers = 0
+
+    def help(self, slot: int) -> None:
+        """From slot thread ``slot`` (>= 1) of the launch: run the offered kernel (if any is still
+        open) with this slot, then leave."""
+        with self._cond:
+            if self._task is None or self._closed:
+                return
+            self._helpers += 1
+            fn, args, nslot = self._task
+        try:
+            fn(slot, *args, nslot)
+        finally:
+            with self._cond:
+                self._helpers -= 1
+                self._cond.notify_all()
+
+    def run(self, fn, nslot: int, *args) -> None:
+        """Offer ``fn(slot, *args, nslot)`` (its items claimed from a counter in ``args``) and run
+        it as slot 0 on the calling thread; return when every slot thread that joined is done.
+        Offered once: a second call runs on the calling thread alone."""
+        with self._cond:
+            first = self._task is None and not self._closed
+            if first:
+                self._task = (fn, args, int(nslot))
+        try:
+            fn(0, *args, int(nslot))
+        finally:
+            with self._cond:
+                self._closed = True
+                while self._helpers:
+                    self._cond.wait()
+
+
 @contextlib.contextmanager
 def calling_thread_only():
     """Within: :func:`run_threads` (and every launch sized by ``numba.get_num_threads()``) runs one

@@ -24,7 +24,16 @@ from typing import ClassVar
 import numba
 import numpy as np
 
-from .._jit import calling_thread_only, kernel, next_item, run_slots, run_threads, start_slots, work_counter
+from .._jit import (
+    SharedWork,
+    calling_thread_only,
+    kernel,
+    next_item,
+    run_slots,
+    run_threads,
+    start_slots,
+    work_counter,
+)
 from ..geometry.silhouette import Silhouette, cached_adjacency, silhouette_adjacency, silhouette_brute
 from ..raster import View, rasterize_depth, rasterize_min_blend
 from ..raster.programs import PROGRAM_PENUMBRA, penumbra_intensity, smoothstep_bernstein  # noqa: F401
@@ -209,12 +218,19 @@ def _view_basis(view: View):
 
 
 def build_cones(
-    view: View, positions: np.ndarray, light_radius: float, z_far: float, segments: int, zmax_pyramid=None
+    view: View,
+    positions: np.ndarray,
+    light_radius: float,
+    z_far: float,
+    segments: int,
+    zmax_pyramid=None,
+    share=None,
 ) -> Primitives:
     """Pass 2b: a cone per silhouette vertex (positions (N,3)): tip at v_i, base circle of radius
     ``C_ri = (Z_far - Z_vi) L_r / Z_vi`` on the far plane around the ray from the light center through
     v_i, as ``segments`` triangles (v_i, B_k, B_k+1). With ``zmax_pyramid`` (early rejection) each
-    base vertex is pulled in along its ruling to the largest ``Z_P`` under the adjacent triangles."""
+    base vertex is pulled in along its ruling to the largest ``Z_P`` under the adjacent triangles
+    (``share``: see :func:`_reject_cones`)."""
     n = len(positions)
     if n == 0:
         return Primitives.empty()
@@ -233,7 +249,7 @@ def build_cones(
     lam = np.ones((n_ok, segments))  # fraction of each ruling kept (1 = to the far plane)
     keep = np.ones(n_ok, bool)
     if zmax_pyramid is not None:
-        lam, keep = _reject_cones(view, q, zv, bx, by, z_far, zmax_pyramid)
+        lam, keep = _reject_cones(view, q, zv, bx, by, z_far, zmax_pyramid, share)
     tips = np.asarray(positions, np.float64)[ok][keep]
     zv, bx, by, lam = zv[keep], bx[keep], by[keep], lam[keep]
     m = len(zv)
@@ -712,11 +728,13 @@ def _cone_reject_slot(
     eps,
     lam,
     keep,
+    counter,
     nslot,
 ):
     """Per cone (row) and base vertex k: lam[i,k] in [0,1] (fraction of the ruling to the far plane
     that can carry kept fragments); keep[i] false when no triangle of the cone can. Run by
-    ``run_slots``: slot ``slot`` of ``nslot`` takes every ``nslot``-th cone.
+    ``run_slots`` or :class:`SharedWork`: each slot takes the next cone from ``counter``
+    (``next_item``) until none is left (each cone's result is its own: the same whoever computes it).
 
     A fragment at depth z is kept only if z < Z_P of its texel <= max Z_P under any region of the
     wedge containing it. (1) The whole wedge, truncated at depth z, is bounded ``iters`` times;
@@ -724,7 +742,10 @@ def _cone_reject_slot(
     whose max Z_P lies behind its nearest depth (and not behind that max)."""
     n, seg = bx.shape
     zlim = np.empty(seg)
-    for i in range(slot, n, nslot):
+    while True:
+        i = next_item(counter)
+        if i >= n:
+            break
         iz = 1.0 / zv[i]
         izf = 1.0 / z_far
         tx = qx[i] * iz
@@ -771,14 +792,17 @@ def _cone_reject_slot(
                 lam[i, k] = min((z - zv[i]) / (z_far - zv[i]), 1.0)
 
 
-def _reject_cones(view, q, zv, bx, by, z_far, pyr):
+def _reject_cones(view, q, zv, bx, by, z_far, pyr, share=None):
+    """(lam, keep) of :func:`_cone_reject_slot`; with ``share`` (:class:`SharedWork`) the slot
+    threads of a running launch that finish theirs help (:meth:`PenumbraMapMethod.run`)."""
     data, offs, ws, hs = pyr
     l, r, b, t = view.window
     n, seg = bx.shape
     lam = np.ones((n, seg))
     keep = np.ones(n, bool)
     eps = 1e-9 * z_far
-    run_threads(
+    launch = run_threads if share is None else (lambda fn, *a: share.run(fn, numba.get_num_threads(), *a))
+    launch(
         _cone_reject_slot,
         l,
         t,
@@ -799,6 +823,7 @@ def _reject_cones(view, q, zv, bx, by, z_far, pyr):
         eps,
         lam,
         keep,
+        work_counter(),
     )
     return lam, keep
 
@@ -999,13 +1024,16 @@ def render_penumbra_map(
     early_reject: bool = True,
     needed: np.ndarray | None = None,
     timer=None,
+    share=None,
 ) -> PenumbraMap:
     """Pass 2: clear to white, find silhouettes, draw cones and sheets through the fragment program.
     ``needed`` (H,W) uint8 of the map: shade only these texels (the others stay white), e.g. the
     texels the eye pass reads (:func:`eye_lookups`); None: every texel (the paper). ``needed`` may
     also be a function that returns it, called just before the fragment program: until then this
     runs on the calling thread alone (``calling_thread_only``) while the slot threads do the work
-    the function waits for (:meth:`PenumbraMapMethod.run`: the eye lookups)."""
+    the function waits for (:meth:`PenumbraMapMethod.run`: the eye lookups); ``share``
+    (:class:`SharedWork`): those slot threads, once done, help with the cones' rejection, which
+    is therefore built last (the sheets first: they are independent of the cones)."""
     phase = timer.phase if timer is not None else (lambda name: nullcontext())
     view = smp.view
     flat = scene.flat
@@ -1023,10 +1051,10 @@ def render_penumbra_map(
             if not early_reject:
                 pyr = None
             faces = flat.faces if flat.occluder.all() else flat.faces_where(flat.occluder)  # once per geometry
-            cones = build_cones(view, flat.vertices[sil.vertices], light_radius, z_far, cone_segments, pyr)
             sheets = build_sheets(
                 view, flat.vertices, faces, sil, light_radius, z_far, sheet_tolerance, sheet_max_subdiv, pyr
             )
+            cones = build_cones(view, flat.vertices[sil.vertices], light_radius, z_far, cone_segments, pyr, share)
             nv = len(cones.vertices)
             verts = np.concatenate([cones.vertices, sheets.vertices])
             tris = np.concatenate([cones.triangles, sheets.triangles + nv])
@@ -1207,19 +1235,29 @@ def start_eye_lookups(
     bias: float,
     slope_bias: float,
     mark: bool = True,
+    share=None,
 ):
     """:func:`eye_lookups_image` started: its rows taken by the slot threads (``start_slots``) while
     the calling thread is free for other work (:meth:`PenumbraMapMethod.run`: pass 2's
     silhouettes, cones and sheets) until it calls the launch's ``finish()``, which returns the
-    :class:`EyeLookups`."""
+    :class:`EyeLookups`. ``share`` (:class:`SharedWork`): a slot thread that runs out of rows then
+    helps with the work the calling thread offers there."""
     H, W = mask.shape
     code = np.empty((H, W), np.int32)
     PH, PW = smp.view.height, smp.view.width
     needed = np.zeros((PH, PW), np.uint8) if mark else np.zeros((0, 0), np.uint8)
     pl, _, pt, _ = smp.border
     nslot = numba.get_num_threads()
+    fn = _eye_lookup_slot
+    if share is not None:
+
+        def fn(slot, *args):  # the rows, then the offered work (slot 0, the calling thread: the rows)
+            _eye_lookup_slot(slot, *args)
+            if slot:
+                share.help(slot)
+
     return start_slots(
-        _eye_lookup_slot,
+        fn,
         nslot,
         smp.hard_view.params(),
         smp.occluder_depth,
@@ -1373,7 +1411,10 @@ class PenumbraMapMethod(Method):
             smp = shadow_map_pass(scene, map_size, lr)
         with ctx.timer.phase("eye_pass"):  # its lookups first: the texels it will read
             g = ctx.eye
-            lookups = start_eye_lookups(smp, g.position, g.normal, g.mask, bias, slope_bias, mark=texels == "read")
+            share = SharedWork()  # the lookups' slot threads, once done, help with the cones
+            lookups = start_eye_lookups(
+                smp, g.position, g.normal, g.mask, bias, slope_bias, mark=texels == "read", share=share
+            )
         try:  # the slot threads look up while pass 2 builds its cones; it joins them for the texels
             pmap = render_penumbra_map(
                 scene,
@@ -1388,6 +1429,7 @@ class PenumbraMapMethod(Method):
                 early_reject=early_reject,
                 needed=lambda: lookups.finish().needed,
                 timer=ctx.timer,
+                share=share,
             )
         finally:  # (joined already; if pass 2 raised: nothing is raised while the slot threads still look up)
             look = lookups.finish()

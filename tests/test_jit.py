@@ -1,0 +1,116 @@
+"""The kernels' threading helpers (``softshadows._jit``): work shared with a launch's slot threads."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import pytest
+
+from softshadows._jit import SharedWork
+
+N_ITEMS = 40
+
+
+def _claiming_work(started: threading.Event, ended: list):
+    """A kernel-shaped Python function ``fn(slot, done, who, nslot)`` whose items are claimed from a
+    shared counter, as the package's slot kernels claim theirs (``next_item``): each item is
+    counted in ``done`` and its slot written to ``who``; each slot's end time goes to ``ended``.
+    Slot 1 claims one item, then lets slot 0 (which waits for that) start, so that both take items
+    whatever the threads' timing."""
+    lock = threading.Lock()
+    nxt = [0]
+
+    def claim():
+        with lock:
+            i = nxt[0]
+            nxt[0] += 1
+            return i
+
+    def fn(slot, done, who, nslot):
+        if slot == 0 and not started.wait(timeout=10.0):
+            raise AssertionError("the helper never started")
+        first = True
+        while (i := claim()) < len(done):
+            done[i] += 1
+            who[i] = slot
+            if slot == 1 and first:
+                started.set()
+                first = False
+            time.sleep(0.0005)  # both slots take some of the items
+        ended.append((slot, time.perf_counter()))
+
+    return fn
+
+
+def test_shared_work_runs_every_item_once_with_a_helper():
+    """A slot thread that comes to ``help`` while the calling thread runs the offered work takes
+    items from the same counter; ``run`` returns only once the helper is done: every item computed
+    exactly once, some by each thread, none still running when ``run`` returns."""
+    share = SharedWork()
+    started = threading.Event()
+    ended = []
+    fn = _claiming_work(started, ended)
+    done = [0] * N_ITEMS
+    who = [-1] * N_ITEMS
+
+    def helper():
+        while not share._task:  # (the offer is published at the start of run)
+            time.sleep(0.0001)
+        share.help(1)
+
+    t = threading.Thread(target=helper)
+    t.start()
+    share.run(fn, 2, done, who)
+    returned = time.perf_counter()
+    t.join(timeout=10.0)
+    assert done == [1] * N_ITEMS
+    assert 0 in who and 1 in who
+    assert sorted(s for s, _ in ended) == [0, 1]
+    assert all(end <= returned for _, end in ended)  # run waited for the helper's last item
+
+
+def test_shared_work_without_a_helper_or_after_it_closed():
+    """With no slot thread helping, the calling thread computes every item; a ``help`` before the
+    offer or after ``run`` has returned runs nothing (a launch that ends early or late changes
+    only the time, never the result)."""
+    share = SharedWork()
+    share.help(1)  # before any offer: nothing to do, returns at once
+    started = threading.Event()
+    started.set()  # slot 0 does not wait for a helper
+    fn = _claiming_work(started, [])
+    done = [0] * N_ITEMS
+    who = [-1] * N_ITEMS
+    share.run(fn, 2, done, who)
+    assert done == [1] * N_ITEMS and set(who) == {0}
+    calls = []
+    share._task = (lambda *a: calls.append(a), (), 2)  # even a task still set: closed after run
+    share.help(1)
+    assert calls == []
+
+
+def test_shared_work_raises_the_calling_threads_error_after_the_helpers():
+    """An error in the calling thread's part reaches the caller, after the helpers have finished."""
+    share = SharedWork()
+    helper_done = threading.Event()
+
+    def fn(slot, nslot):
+        if slot == 1:
+            time.sleep(0.02)
+            helper_done.set()
+            return
+        while share._helpers == 0:  # let the helper join first
+            time.sleep(0.0001)
+        raise ValueError("slot 0")
+
+    def helper():
+        while not share._task:
+            time.sleep(0.0001)
+        share.help(1)
+
+    t = threading.Thread(target=helper)
+    t.start()
+    with pytest.raises(ValueError, match="slot 0"):
+        share.run(fn, 2)
+    assert helper_done.is_set()
+    t.join(timeout=10.0)
