@@ -1318,7 +1318,9 @@ def _front_to_back(bins, a, n, zinfo, ks):
 
 
 @kernel(inline=True)
-def _depth_pass(vw, near, tile, rect, start, bins, box, edges, zinfo, planes, zb, tb, SP, sh, tri, face, nz, ks, keep_tb):
+def _depth_pass(
+    vw, near, tile, rect, start, bins, box, edges, zinfo, planes, zb, tb, SP, sh, tri, face, nz, ks, keep_tb
+):
     """The nearest depth ``zb`` and triangle ``tb`` (-1: none) of every pixel of the tile ``rect`` =
     (y0, y1, x0, x1), from the pieces binned to it (the dense modes: depth and G-buffer). ``tb``
     holds the front-end triangle, or with ``face`` its face ``tri[u]`` (the depth mode's output:
