@@ -795,6 +795,38 @@ def test_an_error_while_the_umbrae_are_counted_leaves_the_threads_usable(monkeyp
     assert np.array_equal(again.visibility, want.visibility, equal_nan=True)
 
 
+@pytest.mark.parametrize("threads", [1, 2])
+def test_an_error_in_the_umbrae_set_up_reaches_the_caller(monkeypatch, threads):
+    """The umbra count's triangle set-up runs on the first slot to start (a slot thread, or the
+    calling thread when it has none, ``start_umbrae``): an exception there reaches the caller as
+    itself from every slot (none waits for a set-up that failed), and the next frame renders the
+    same V as before."""
+    import numba
+
+    from softshadows.methods import irregular as ir
+
+    scene = builtin.build("bunny", "sphere")
+    old = numba.get_num_threads()
+    try:
+        numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
+        want = render(scene, "irregular", 64, 48)
+        calls = []
+
+        def broken(*a, **k):
+            calls.append(1)
+            raise RuntimeError("set-up")
+
+        monkeypatch.setattr(ir, "_triangle_setup", broken)
+        with pytest.raises(RuntimeError, match="set-up"):
+            render(scene, "irregular", 64, 48)
+        assert calls == [1]  # made once, whatever the slots
+        monkeypatch.undo()
+        again = render(scene, "irregular", 64, 48)
+    finally:
+        numba.set_num_threads(old)
+    assert np.array_equal(again.visibility, want.visibility, equal_nan=True)
+
+
 @pytest.mark.parametrize("light", ["rect", "sphere"])
 def test_v_composed_in_the_penumbra_pass_is_eq4_of_its_counts(light):
     """The penumbra pass writes each bin's V as soon as its quads are done (step (e) inside step
