@@ -113,6 +113,33 @@ def test_same_bits_whatever_the_slots(monkeypatch, light):
     assert one.stats == five.stats
 
 
+def test_cells_min_max_is_the_min_and_max_over_the_box():
+    """``_cells_min_max`` (the smallest and largest value over a box of cells from the square sparse
+    tables of ``cell_range_tables``) equals NumPy's min and max over the box, bit for bit, for every
+    box of a grid whose sides are not powers of two (wide, tall, square, single cells), with +inf
+    cells (empty) among them."""
+    from softshadows._jit import py_callable
+    from softshadows.methods.pcss import _cells_min_max, cell_range_tables
+
+    mm = py_callable(_cells_min_max)
+    rng = np.random.default_rng(3)
+    ny, nx = 11, 13
+    cmin = rng.uniform(0.0, 5.0, (ny, nx)).astype(np.float32)
+    cmin[rng.random((ny, nx)) < 0.2] = np.inf
+    cmax = cmin + rng.uniform(0.0, 1.0, (ny, nx)).astype(np.float32)
+    tmin, tmax = cell_range_tables(cmin, cmax)
+    n = 0
+    for gy0 in range(ny):
+        for gy1 in range(gy0, ny):
+            for gx0 in range(nx):
+                for gx1 in range(gx0, nx):
+                    lo, hi = mm(tmin, tmax, gy0, gy1, gx0, gx1)
+                    box = (slice(gy0, gy1 + 1), slice(gx0, gx1 + 1))
+                    assert lo == cmin[box].min() and hi == cmax[box].max()
+                    n += 1
+    assert n == (ny * (ny + 1) // 2) * (nx * (nx + 1) // 2)
+
+
 def test_region_decided_against_the_cells_and_the_texels():
     """``_region_decided`` (the filter's lit/dark test from the occupancy grid's cells, with its
     shortcut on the cell under the point) against both definitions it stands for, on random maps
@@ -121,7 +148,7 @@ def test_region_decided_against_the_cells_and_the_texels():
     (2) conservative on the texels: lit implies every texel of the box is >= hi (texels outside
     the map count as lit), dark implies every texel is < lo."""
     from softshadows._jit import py_callable
-    from softshadows.methods.pcss import OCC_CELL, _region_decided, occupancy_grid
+    from softshadows.methods.pcss import OCC_CELL, _region_decided, cell_range_tables, occupancy_grid
 
     decided = py_callable(_region_decided)
     rng = np.random.default_rng(11)
@@ -134,6 +161,7 @@ def test_region_decided_against_the_cells_and_the_texels():
             depth[:16] = np.float32(5.0)
             depth[16:, :64] = np.float32(0.5)
         _sat, _z, cmin, cmax = occupancy_grid(depth)
+        tmin, tmax = cell_range_tables(cmin, cmax)
         for q in range(400):
             if q % 2:  # anywhere, partly or wholly off the map
                 sx, sy = rng.uniform(-20, W + 20), rng.uniform(-20, H + 20)
@@ -143,7 +171,7 @@ def test_region_decided_against_the_cells_and_the_texels():
                 ex, ey = rng.uniform(2.0, 5.0), rng.uniform(2.0, 5.0)
             lo = rng.uniform(0.0, 2.0)
             hi = lo + rng.uniform(0.0, 4.0)
-            lit, dark = decided(cmin, cmax, OCC_CELL, H, W, sx, sy, ex, ey, lo, hi)
+            lit, dark = decided(tmin, tmax, OCC_CELL, H, W, sx, sy, ex, ey, lo, hi)
             c0, c1 = int(np.floor(sx - ex)), int(np.floor(sx + ex))
             r0, r1 = int(np.floor(sy - ey)), int(np.floor(sy + ey))
             inside = c0 >= 0 and r0 >= 0 and c1 < W and r1 < H

@@ -365,6 +365,85 @@ def occupancy_grid(depth: np.ndarray) -> tuple[np.ndarray, float, np.ndarray, np
     return counts, float(row_min.min()) if ny else np.inf, cmin, cmax
 
 
+@kernel(nogil=True, nrt=False)
+def _square_levels(tmin, tmax):
+    """Fill levels k >= 1 of ``tmin``, ``tmax`` (L, ny, nx) from level 0 (the cells' smallest and
+    largest depths): level k at [gy, gx] holds the smallest (largest) value over the cells
+    [gy, gy + 2^k) x [gx, gx + 2^k), clamped to the grid, as the min (max) of four values of level
+    k - 1: values of the grid, no rounding."""
+    L, ny, nx = tmin.shape
+    for k in range(1, L):
+        h = 1 << (k - 1)
+        for gy in range(ny):
+            g2 = min(gy + h, ny - 1)
+            a0 = tmin[k - 1, gy]
+            a1 = tmin[k - 1, g2]
+            b0 = tmax[k - 1, gy]
+            b1 = tmax[k - 1, g2]
+            om = tmin[k, gy]
+            oM = tmax[k, gy]
+            m = max(nx - h, 0)
+            for gx in range(m):
+                om[gx] = min(min(a0[gx], a0[gx + h]), min(a1[gx], a1[gx + h]))
+                oM[gx] = max(max(b0[gx], b0[gx + h]), max(b1[gx], b1[gx + h]))
+            for gx in range(m, nx):
+                om[gx] = min(min(a0[gx], a0[nx - 1]), min(a1[gx], a1[nx - 1]))
+                oM[gx] = max(max(b0[gx], b0[nx - 1]), max(b1[gx], b1[nx - 1]))
+
+
+def cell_range_tables(cmin: np.ndarray, cmax: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Square sparse tables of :func:`occupancy_grid`'s per-cell smallest and largest depths (each
+    (L, ny, nx) float32, see :func:`_square_levels`): the smallest and largest depth over a box of
+    cells in a few reads (:func:`_cells_min_max`) where a loop over its cells took one read per
+    cell (a filter region covers ~30-50 cells at the defaults: 1.15M cell reads a frame on
+    `bunny`). 0.05 ms for the 64 x 64 grid of a 1024^2 map."""
+    ny, nx = cmin.shape
+    L = max(int(min(ny, nx)).bit_length(), 1)
+    tmin = np.empty((L, ny, nx), np.float32)
+    tmax = np.empty_like(tmin)
+    tmin[0] = cmin
+    tmax[0] = cmax
+    _square_levels(tmin, tmax)
+    return tmin, tmax
+
+
+@kernel(inline=True)
+def _floor_log2(n):
+    """floor(log2(n)) of an int n >= 1."""
+    k = 0
+    while (2 << k) <= n:
+        k += 1
+    return k
+
+
+@kernel(inline=True)
+def _cells_min_max(tmin, tmax, gy0, gy1, gx0, gx1):
+    """(smallest, largest) over the cells [gy0, gy1] x [gx0, gx1] (inclusive, non-empty): squares of
+    2^k cells, k from the shorter side, at steps of 2^k along the longer one (the last flush with
+    its end) and at both ends of the shorter one; they overlap, which min and max allow."""
+    ny = gy1 - gy0 + 1
+    nx = gx1 - gx0 + 1
+    k = _floor_log2(min(ny, nx))
+    s = 1 << k
+    lo = np.float32(np.inf)
+    hi = np.float32(-np.inf)
+    y = gy0
+    while True:
+        yy = min(y, gy1 - s + 1)
+        x = gx0
+        while True:
+            xx = min(x, gx1 - s + 1)
+            lo = min(lo, tmin[k, yy, xx])
+            hi = max(hi, tmax[k, yy, xx])
+            if xx == gx1 - s + 1:
+                break
+            x += s
+        if yy == gy1 - s + 1:
+            break
+        y += s
+    return lo, hi
+
+
 @kernel(inline=True)
 def _region_empty(sat, cell, H, W, sx, sy, rx, ry):
     """Whether the taps around (sx, sy) within (rx, ry) texels (each tap reads the texel under it or
@@ -386,10 +465,11 @@ def _region_empty(sat, cell, H, W, sx, sy, rx, ry):
 
 
 @kernel(inline=True)
-def _region_decided(cmin, cmax, cell, H, W, sx, sy, ex, ey, lo, hi):
+def _region_decided(tmin, tmax, cell, H, W, sx, sy, ex, ey, lo, hi):
     """(every texel read is >= ``hi``, every texel read is < ``lo``) for bilinear taps within
     (ex - 2, ey - 2) texels of (sx, sy), from the cells under their bounding box (grown as in
-    :func:`_region_empty`): texels outside the map count as +inf (lit, never below ``lo``)."""
+    :func:`_region_empty`; ``tmin``, ``tmax``: :func:`cell_range_tables`): texels outside the map
+    count as +inf (lit, never below ``lo``)."""
     if not (abs(sx) < 1e7 and abs(sy) < 1e7 and ex < 1e7 and ey < 1e7):
         return False, False  # (also NaN)
     c0 = int(np.floor(sx - ex))
@@ -408,16 +488,10 @@ def _region_decided(cmin, cmax, cell, H, W, sx, sy, ex, ey, lo, hi):
     xc, yc = int(np.floor(sx)), int(np.floor(sy))
     if 0 <= xc < W and 0 <= yc < H:
         gc, gr = xc // cell, yc // cell
-        if not (cmin[gr, gc] >= hi) and not (cmax[gr, gc] < lo):
+        if not (tmin[0, gr, gc] >= hi) and not (tmax[0, gr, gc] < lo):
             return False, False
-    lit = True
-    for gy in range(r0 // cell, r1 // cell + 1):
-        for gx in range(c0 // cell, c1 // cell + 1):
-            lit &= cmin[gy, gx] >= hi
-            blk &= cmax[gy, gx] < lo
-        if not (lit or blk):
-            return False, False
-    return lit, blk
+    dmin, dmax = _cells_min_max(tmin, tmax, r0 // cell, r1 // cell, c0 // cell, c1 // cell)
+    return dmin >= hi, blk and dmax < lo
 
 
 @kernel(nogil=True, nrt=False)
@@ -568,8 +642,8 @@ def filtering_kernel(
     seed,
     bilinear,
     plane,
-    cmin,
-    cmax,
+    tmin,
+    tmax,
     out,
     wp_out,
     radius_out,
@@ -619,7 +693,7 @@ def filtering_kernel(
             hi = zt
             if plane:  # bounds of the taps' plane depths (see _plane_range)
                 lo, hi = _plane_range(vp, nr, nu, nf, npo, sx, sy, ex, ey, z, off, iw, ih)
-            lit, dark = _region_decided(cmin, cmax, OCC_CELL, H, W, sx, sy, ex, ey, lo, hi)
+            lit, dark = _region_decided(tmin, tmax, OCC_CELL, H, W, sx, sy, ex, ey, lo, hi)
             if lit:  # every texel read is lit: every tap adds its whole weight, V = 1
                 out[i, j] = 1.0
                 continue
@@ -747,7 +821,7 @@ def filtering(smap, eye, offs, zr, avg, nblk, light, pattern, disk, rotate, seed
     float32, 1 where no surface; per point: penumbra width (world, max over axes), filter radius
     (texels, max over axes)). ``grid``: the map's :func:`occupancy_grid` (computed here if not
     given)."""
-    cmin, cmax = (occupancy_grid(smap.depth) if grid is None else grid)[2:]
+    tmin, tmax = cell_range_tables(*(occupancy_grid(smap.depth) if grid is None else grid)[2:])
     n = int(offs[-1])
     out = np.empty(eye.mask.shape, np.float32)
     wp = np.empty(n, np.float64)
@@ -770,8 +844,8 @@ def filtering(smap, eye, offs, zr, avg, nblk, light, pattern, disk, rotate, seed
         int(seed),
         bool(bilinear),
         bool(plane),
-        cmin,
-        cmax,
+        tmin,
+        tmax,
         out,
         wp,
         radius,
