@@ -716,6 +716,32 @@ def test_frame_is_the_same_whatever_the_threads(light):
     assert a.stats == b.stats
 
 
+@pytest.mark.parametrize("scene_name", ["bunny", "plant"])
+def test_error_bound_samples_are_ground_truths_ray_origins(scene_name):
+    """``error_bound_samples`` (the default samples, straight from the G-buffer, by blocks, a
+    point on the previous point's triangle reusing its corners) gives ground truth's ray origins
+    bit for bit: ``hit_points`` of ``gather_points``' normals, moved along the normal by
+    BOUND_SAFETY x (error bounds) + eps; and those bounds. ``plant``: many small triangles, so the
+    triangle changes often between neighbouring pixels."""
+    from softshadows.methods.irregular import error_bound_samples, offset_points
+
+    scene = builtin.build(scene_name, "rect")
+    view = eye_view(scene, 160, 120)
+    g = rasterize(view, scene.flat.vertices, scene.flat.faces, cull="none")
+    ctx = FrameContext(scene=scene, eye=g, eye_view=view, timer=Timer())
+    _p, nrm, idx = ctx.points()
+    hp, n, err_point, err_embree, _grazing, _own = hit_points(scene.flat, g, idx, nrm)
+    bound = BOUND_SAFETY * (err_point + err_embree)
+    eps = 1e-4
+    want = offset_points(hp, n, eps, bound)
+    got, got_bound, _bounds = error_bound_samples(ctx.flat, ctx.eye, ctx.pixels(), scene.camera.eye, eps, scene.light)
+    assert len(got) > 1000
+    assert np.array_equal(got_bound, bound)
+    assert np.array_equal(got, want)
+    tri = g.tri_id.ravel()[ctx.pixels()]
+    assert 0.2 < np.mean(tri[1:] == tri[:-1]) < 1.0  # both paths of the corners' gather taken
+
+
 @pytest.mark.parametrize("light", ["rect", "sphere"])
 def test_error_bound_bounds_are_those_of_its_samples(light):
     """``error_bound_samples``' extent and window (the rectangle's frame; the sphere's toward a

@@ -2606,7 +2606,9 @@ def _error_bound_samples_slot(
     (its triangle, barycentrics, and position and normal for the side toward the ``eye``, turned as
     ``gather_points`` turns them, the same arithmetic: no per-sample arrays of its own).
     By blocks of points: the triangles' vertices and the points' inputs gathered into contiguous
-    scratch first, then ``hit_point_at`` in a loop without gathers or branches (it vectorizes), its
+    scratch first (a point on the previous point's triangle copies its corners from the previous
+    column: neighbouring pixels mostly share a triangle, and the chain of dependent loads to a
+    triangle's vertices was a third of the kernel's time), then ``hit_point_at`` in a loop without gathers or branches (it vectorizes), its
     outputs stored contiguous and copied to the rows of ``out`` last: the same arithmetic, the same
     bits as ``hit_point`` point by point. Also each block's row of ``part`` (``_extent_slot``'s:
     the block's box and its smallest and largest distance to the light centre ``lc``), for
@@ -2626,15 +2628,21 @@ def _error_bound_samples_slot(
             break
         k0 = blk * _EB_BLOCK
         m = min(n, k0 + _EB_BLOCK) - k0
+        tp = -1
         for i in range(m):
             k = k0 + i
             q = idx[k]
             t = tri_img[q]
-            for c in range(3):
-                vi = faces[t, c]
-                g[3 * c, i] = np.float64(np.float32(verts[vi, 0]))  # Embree's float32 vertex coordinates
-                g[3 * c + 1, i] = np.float64(np.float32(verts[vi, 1]))
-                g[3 * c + 2, i] = np.float64(np.float32(verts[vi, 2]))
+            if t == tp:  # the previous sample's triangle (a neighbouring pixel): its corners again
+                for r in range(9):
+                    g[r, i] = g[r, i - 1]
+            else:  # (the chain triangle -> face -> vertices, each a dependent load)
+                for c in range(3):
+                    vi = faces[t, c]
+                    g[3 * c, i] = np.float64(np.float32(verts[vi, 0]))  # Embree's float32 vertex coordinates
+                    g[3 * c + 1, i] = np.float64(np.float32(verts[vi, 1]))
+                    g[3 * c + 2, i] = np.float64(np.float32(verts[vi, 2]))
+            tp = t
             g[9, i] = np.float64(bary_img[q, 0])
             g[10, i] = np.float64(bary_img[q, 1])
             # the normal turned toward the eye (gather_points' expression, float32 images)
