@@ -423,8 +423,7 @@ class SharedWork:
         it as slot 0 on the calling thread; return when every slot thread that joined is done.
         Offered once: a second call runs on the calling thread alone."""
         with self._cond:
-            first = self._task is None and not self._closed
-            if first:
+            if self._task is None and not self._closed:
                 self._task = (fn, args, int(nslot))
         try:
             fn(0, *args, int(nslot))

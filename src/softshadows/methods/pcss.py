@@ -368,7 +368,9 @@ def occupancy_grid(depth: np.ndarray) -> tuple[np.ndarray, float, np.ndarray, np
 @kernel(nogil=True, nrt=False)
 def _square_levels(tmin, tmax):
     """Fill levels k >= 1 of ``tmin``, ``tmax`` (L, ny, nx) from level 0 (the cells' smallest and
-    largest depths): level k at [gy, gx] holds the smallest (largest) value over the cells
+    largest depths): Décoret's N-Buffers (``occlusion_textures.prefilter_nbuffers`` builds them
+    for box means, zero outside; here min and max, clamped to the grid, so that a box's value is
+    exact, not filtered). Level k at [gy, gx] holds the smallest (largest) value over the cells
     [gy, gy + 2^k) x [gx, gx + 2^k), clamped to the grid, as the min (max) of four values of level
     k - 1: values of the grid, no rounding."""
     L, ny, nx = tmin.shape
