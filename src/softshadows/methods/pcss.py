@@ -170,6 +170,16 @@ def _plane_depth(vp, nr, nu, nf, npo, sx, sy, z_center, iw, ih):
 
 
 @kernel(inline=True)
+def _plane_depth_bf(nr, nu, nf, npo, xp, yp, z_center):
+    """:func:`_plane_depth` from the window coordinates (``_ray_xy``'s), without branches (for the
+    vector loops): the same operations and result."""
+    den = nr * xp + nu * yp + nf
+    d = npo / den
+    bad = (abs(den) < 1e-6) | ~((d > 0.5 * z_center) & (d < 2.0 * z_center))
+    return z_center if bad else d
+
+
+@kernel(inline=True)
 def _cmp_bilinear(depth, sx, sy, zt):
     """Hardware-PCF equivalent: 2x2 bilinearly weighted 'lit' tests (texels outside the map are lit)."""
     H, W = depth.shape
@@ -496,7 +506,72 @@ def _region_decided(tmin, tmax, cell, H, W, sx, sy, ex, ey, lo, hi):
     return dmin >= hi, blk and dmax < lo
 
 
-@kernel(nogil=True, nrt=False)
+@kernel(inline=True, noalias=True)
+def _search_taps(vp, depth_flat, H, W, ox, oy, m, PS, TOT, CNT, iw, ih):
+    """One tap (pattern offset ``ox``, ``oy``) of the blocker search at a row's ``m`` points, vectorized
+    across the points: the receiver plane on, the pattern unrotated and ``iw``, ``ih`` nonzero
+    (:func:`_ray_xy`). The points' state in the rows of ``PS`` (13, n): sx, sy, rx, ry, zt, lo, hi,
+    nr, nu, nf, npo, z, off; the sums in ``TOT`` and counts in ``CNT``. Each tap makes the
+    decision of :func:`_search_point`'s, the plane depth computed at every point and kept where
+    the texel lies in [lo, hi): the same bits."""
+    for q in range(m):
+        qx = np.uint64(q)
+        tx = PS[0, qx] + ox * PS[2, qx]
+        ty = PS[1, qx] - oy * PS[3, qx]
+        col = np.int64(np.floor(tx))
+        row = np.int64(np.floor(ty))
+        inside = (row >= 0) & (row < H) & (col >= 0) & (col < W)
+        d = depth_flat[np.uint64(row * W + col if inside else 0)]
+        xp = vp[VP_L] + (tx * iw) * (vp[VP_R] - vp[VP_L])
+        yp = vp[VP_T] - (ty * ih) * (vp[VP_T] - vp[VP_B])
+        zc = _plane_depth_bf(PS[7, qx], PS[8, qx], PS[9, qx], PS[10, qx], xp, yp, PS[11, qx]) - PS[12, qx]
+        blk = inside & (d < PS[6, qx]) & ((d < PS[5, qx]) | (d < zc))
+        TOT[qx] += d if blk else 0.0
+        CNT[qx] += np.int64(blk)
+
+
+@kernel(inline=True)
+def _search_point(
+    vp, depth_map, pattern, disk, rotate, seed, k, plane, sx, sy, rx, ry, zt, lo, hi, nr, nu, nf, npo, z, off, iw, ih
+):
+    """The blocker search's taps at one point k: (blocker count, average blocker depth)."""
+    H, W = depth_map.shape
+    c = 1.0
+    s = 0.0
+    shx = 0.0
+    shy = 0.0
+    if rotate:
+        a = _hash01(k, seed)
+        c = np.cos(2.0 * np.pi * a)
+        s = np.sin(2.0 * np.pi * a)
+        shx = 2.0 * a
+        shy = 2.0 * _hash01(k + 0x5BD1E995, seed)
+    total = 0.0
+    cnt = 0
+    for t in range(pattern.shape[0]):
+        ox, oy = _tap_offset(pattern, t, disk, rotate, c, s, shx, shy)
+        tx = sx + ox * rx
+        ty = sy - oy * ry
+        col = int(np.floor(tx))
+        row = int(np.floor(ty))
+        if row < 0 or row >= H or col < 0 or col >= W:
+            continue
+        d = depth_map[row, col]
+        zc = zt
+        if plane:
+            if d >= hi:
+                continue  # beyond every plane depth: not a blocker (e.g. an empty texel)
+            if d >= lo:
+                zc = _plane_depth(vp, nr, nu, nf, npo, tx, ty, z, iw, ih) - off
+            else:
+                zc = np.inf  # in front of every plane depth: a blocker
+        blk = d < zc  # branch-free (adding 0.0 to the non-negative sum changes no bit)
+        total += d if blk else 0.0
+        cnt += blk
+    return cnt, (total / cnt if cnt > 0 else 0.0)
+
+
+@kernel(nogil=True)
 def blocker_search_kernel(
     slot,
     vp,
@@ -532,18 +607,31 @@ def blocker_search_kernel(
     it is odd in it or takes its absolute value, and negation is exact). Run by ``run_slots``, one
     slot per thread; each slot takes the next image row from ``counter`` (``next_item``) until none
     is left, so that a slot whose thread is held up (a shared machine) takes fewer rows. A point's
-    outputs depend on its own inputs only: the same bits whatever slot computes it."""
+    outputs depend on its own inputs only: the same bits whatever slot computes it.
+
+    At the defaults (receiver plane on, pattern unrotated, a power-of-two map: ``fast``) the
+    points of a row that need taps are set up one by one, then their taps are taken tap by tap
+    across the points (:func:`_search_taps`, a loop LLVM vectorizes: gathers instead of a
+    hard-to-predict branch per tap); otherwise each point takes its taps right away
+    (:func:`_search_point`). Both make the same decisions and sums in the same order."""
     h, w = mask.shape
     H, W = depth_map.shape
     S = pattern.shape[0]
     texel1 = (vp[VP_R] - vp[VP_L]) / vp[VP_W]  # texel size at depth 1 (perspective)
     iw = _exact_inverse(vp[VP_W])
     ih = _exact_inverse(vp[VP_H])
+    dflat = depth_map.reshape(H * W)
+    PS = np.empty((13, w + 8))
+    KK = np.empty(w + 8, np.int64)
+    fast = plane and not rotate and iw != 0.0 and ih != 0.0
+    TOT = np.empty(w + 8)
+    CNT = np.empty(w + 8, np.int64)
     while True:  # the next image row (``counter``: a work queue shared by the slots)
         i = next_item(counter)
         if i >= h:
             break
         k = offs[i] - 1
+        m = 0
         for j in range(w):
             if not mask[i, j]:
                 continue
@@ -579,40 +667,70 @@ def blocker_search_kernel(
                 lo, hi = _plane_range(
                     vp, nr, nu, nf, npo, sx, sy, rx * (1.0 + 1e-6) + 2.0, ry * (1.0 + 1e-6) + 2.0, z, off, iw, ih
                 )
-            c = 1.0
-            s = 0.0
-            shx = 0.0
-            shy = 0.0
-            if rotate:
-                a = _hash01(k, seed)
-                c = np.cos(2.0 * np.pi * a)
-                s = np.sin(2.0 * np.pi * a)
-                shx = 2.0 * a
-                shy = 2.0 * _hash01(k + 0x5BD1E995, seed)
-            total = 0.0
-            cnt = 0
-            for t in range(S):
-                ox, oy = _tap_offset(pattern, t, disk, rotate, c, s, shx, shy)
-                tx = sx + ox * rx
-                ty = sy - oy * ry
-                col = int(np.floor(tx))
-                row = int(np.floor(ty))
-                if row < 0 or row >= H or col < 0 or col >= W:
-                    continue
-                d = depth_map[row, col]
-                zc = zt
-                if plane:
-                    if d >= hi:
-                        continue  # beyond every plane depth: not a blocker (e.g. an empty texel)
-                    if d >= lo:
-                        zc = _plane_depth(vp, nr, nu, nf, npo, tx, ty, z, iw, ih) - off
-                    else:
-                        zc = np.inf  # in front of every plane depth: a blocker
-                blk = d < zc  # branch-free (adding 0.0 to the non-negative sum changes no bit)
-                total += d if blk else 0.0
-                cnt += blk
-            avg_out[k] = total / cnt if cnt > 0 else 0.0
-            nblk_out[k] = cnt
+            PS[0, m] = sx
+            PS[1, m] = sy
+            PS[2, m] = rx
+            PS[3, m] = ry
+            PS[4, m] = zt
+            PS[5, m] = lo
+            PS[6, m] = hi
+            PS[7, m] = nr
+            PS[8, m] = nu
+            PS[9, m] = nf
+            PS[10, m] = npo
+            PS[11, m] = z
+            PS[12, m] = off
+            if not fast:  # the taps here, point by point
+                nblk_out[k], avg_out[k] = _search_point(
+                    vp,
+                    depth_map,
+                    pattern,
+                    disk,
+                    rotate,
+                    seed,
+                    k,
+                    plane,
+                    sx,
+                    sy,
+                    rx,
+                    ry,
+                    zt,
+                    lo,
+                    hi,
+                    nr,
+                    nu,
+                    nf,
+                    npo,
+                    z,
+                    off,
+                    iw,
+                    ih,
+                )
+                continue
+            PS[0, m] = sx
+            PS[1, m] = sy
+            PS[2, m] = rx
+            PS[3, m] = ry
+            PS[4, m] = zt
+            PS[5, m] = lo
+            PS[6, m] = hi
+            PS[7, m] = nr
+            PS[8, m] = nu
+            PS[9, m] = nf
+            PS[10, m] = npo
+            PS[11, m] = z
+            PS[12, m] = off
+            KK[m] = k
+            TOT[m] = 0.0
+            CNT[m] = 0
+            m += 1
+        for t in range(S):  # (m = 0 unless fast)
+            _search_taps(vp, dflat, H, W, pattern[t, 0], pattern[t, 1], m, PS, TOT, CNT, iw, ih)
+        for q in range(m):
+            kq = KK[q]
+            cnt = CNT[q]
+            avg_out[kq] = TOT[q] / cnt if cnt > 0 else 0.0
+            nblk_out[kq] = cnt
 
 
 @kernel(inline=True)
@@ -625,7 +743,52 @@ def penumbra_estimation(z_receiver, z_blocker, w_light):
     return (z_receiver - z_blocker) * w_light / z_blocker
 
 
-@kernel(nogil=True, nrt=False)
+@kernel(inline=True, noalias=True)
+def _filter_taps(vp, depth_flat, H, W, ox, oy, m, FS, ACC, iw, ih):
+    """One tap (pattern offset ``ox``, ``oy``) of the filter at a row's ``m`` points, vectorized
+    across the points, as :func:`_search_taps` (same conditions): :func:`_cmp_bilinear_plane`'s
+    operations without branches, added to ``ACC``. ``FS`` (12, n): sx, sy, rx, ry, nr, nu, nf,
+    npo, z, off, lo, hi."""
+    inf = np.inf
+    for q in range(m):
+        qx = np.uint64(q)
+        tx = FS[0, qx] + ox * FS[2, qx]
+        ty = FS[1, qx] - oy * FS[3, qx]
+        x = tx - 0.5
+        y = ty - 0.5
+        x0 = np.int64(np.floor(x))
+        y0 = np.int64(np.floor(y))
+        x1 = x0 + 1
+        y1 = y0 + 1
+        in_c0 = (x0 >= 0) & (x0 < W)
+        in_c1 = (x1 >= 0) & (x1 < W)
+        in_r0 = (y0 >= 0) & (y0 < H)
+        in_r1 = (y1 >= 0) & (y1 < H)
+        d00 = depth_flat[np.uint64(y0 * W + x0 if in_r0 & in_c0 else 0)]
+        d01 = depth_flat[np.uint64(y0 * W + x1 if in_r0 & in_c1 else 0)]
+        d10 = depth_flat[np.uint64(y1 * W + x0 if in_r1 & in_c0 else 0)]
+        d11 = depth_flat[np.uint64(y1 * W + x1 if in_r1 & in_c1 else 0)]
+        d00 = d00 if in_r0 & in_c0 else inf
+        d01 = d01 if in_r0 & in_c1 else inf
+        d10 = d10 if in_r1 & in_c0 else inf
+        d11 = d11 if in_r1 & in_c1 else inf
+        dmin = min(min(d00, d01), min(d10, d11))
+        dmax = max(max(d00, d01), max(d10, d11))
+        xp = vp[VP_L] + (tx * iw) * (vp[VP_R] - vp[VP_L])
+        yp = vp[VP_T] - (ty * ih) * (vp[VP_T] - vp[VP_B])
+        zp = _plane_depth_bf(FS[4, qx], FS[5, qx], FS[6, qx], FS[7, qx], xp, yp, FS[8, qx]) - FS[9, qx]
+        zt = -inf if dmin >= FS[11, qx] else (inf if dmax < FS[10, qx] else zp)
+        fx = x - x0
+        fy = y - y0
+        acc = 0.0
+        acc += 0.0 if d00 < zt else (1.0 - fx) * (1.0 - fy)
+        acc += 0.0 if d01 < zt else fx * (1.0 - fy)
+        acc += 0.0 if d10 < zt else (1.0 - fx) * fy
+        acc += 0.0 if d11 < zt else fx * fy
+        ACC[qx] += acc
+
+
+@kernel(nogil=True)
 def filtering_kernel(
     slot,
     vp,
@@ -655,18 +818,27 @@ def filtering_kernel(
     """Steps 2 and 3 per point: penumbra estimation, then percentage-closer filtering with a
     kernel of radius w / 2 (per light axis) in texels at the receiver's depth. The points, their
     indices and the slots as in :func:`blocker_search_kernel`; V goes to ``out`` (h, w) at the
-    point's pixel, 1 where no surface."""
+    point's pixel, 1 where no surface. With the 2x2 comparisons against the receiver plane, the
+    pattern unrotated and a power-of-two map (``fast``: the defaults), a row's points still
+    undecided after the cell test take their taps after the row, tap by tap across the points
+    (:func:`_filter_taps`, vectorized), as the blocker search does: the same bits."""
     h, w = mask.shape
     H, W = depth_map.shape
     S = pattern.shape[0]
     texel1 = (vp[VP_R] - vp[VP_L]) / vp[VP_W]  # texel size at depth 1 (perspective map)
     iw = _exact_inverse(vp[VP_W])
     ih = _exact_inverse(vp[VP_H])
+    fast = plane and bilinear and not rotate and iw != 0.0 and ih != 0.0
+    dflat = depth_map.reshape(H * W)
+    FS = np.empty((12, w + 8))
+    KJ = np.empty(w + 8, np.int64)
+    ACC = np.empty(w + 8)
     while True:  # the next image row (``counter``: a work queue shared by the slots)
         i = next_item(counter)
         if i >= h:
             break
         k = offs[i] - 1
+        m = 0
         for j in range(w):
             if not mask[i, j]:
                 out[i, j] = 1.0
@@ -702,6 +874,23 @@ def filtering_kernel(
             if dark:  # every texel read is a blocker: no tap adds anything, V = 0
                 out[i, j] = 0.0
                 continue
+            if fast:  # the taps after the row, across its points
+                FS[0, m] = sx
+                FS[1, m] = sy
+                FS[2, m] = rx
+                FS[3, m] = ry
+                FS[4, m] = nr
+                FS[5, m] = nu
+                FS[6, m] = nf
+                FS[7, m] = npo
+                FS[8, m] = z
+                FS[9, m] = off
+                FS[10, m] = lo
+                FS[11, m] = hi
+                KJ[m] = j
+                ACC[m] = 0.0
+                m += 1
+                continue
             c = 1.0
             s = 0.0
             shx = 0.0
@@ -729,6 +918,11 @@ def filtering_kernel(
                     acc += _cmp_nearest(depth_map, tx, ty, zc)
             v = acc / S
             out[i, j] = min(max(v, 0.0), 1.0)
+        for t in range(S):  # (m = 0 unless fast)
+            _filter_taps(vp, dflat, H, W, pattern[t, 0], pattern[t, 1], m, FS, ACC, iw, ih)
+        for q in range(m):
+            v = ACC[q] / S
+            out[i, KJ[q]] = min(max(v, 0.0), 1.0)
 
 
 @kernel(nogil=True)
