@@ -251,6 +251,19 @@ def _plane_range(vp, nr, nu, nf, npo, sx, sy, ex, ey, z, off, iw, ih):
 
 
 @kernel(inline=True)
+def _bilinear_lit(d00, d01, d10, d11, zt, fx, fy):
+    """The lit share of a 2x2 bilinear comparison: the weights of the texels not in front of ``zt``
+    (fractions ``fx``, ``fy`` of the tap between the texel centers), by branch-free selects
+    (adding 0.0 to the non-negative sum changes no bit)."""
+    acc = 0.0
+    acc += 0.0 if d00 < zt else (1.0 - fx) * (1.0 - fy)
+    acc += 0.0 if d01 < zt else fx * (1.0 - fy)
+    acc += 0.0 if d10 < zt else (1.0 - fx) * fy
+    acc += 0.0 if d11 < zt else fx * fy
+    return acc
+
+
+@kernel(inline=True)
 def _cmp_bilinear_plane(depth, sx, sy, vp, nr, nu, nf, npo, z, off, iw, ih, lo, hi):
     """:func:`_cmp_bilinear` against the receiver plane's depth at (sx, sy) (``_plane_depth - off``),
     bit for bit, with the plane evaluated only when the 2x2 texels straddle [lo, hi) (see
@@ -271,15 +284,7 @@ def _cmp_bilinear_plane(depth, sx, sy, vp, nr, nu, nf, npo, z, off, iw, ih, lo, 
         zt = np.inf  # every texel a blocker (all inside the map: outside ones are +inf)
     else:
         zt = _plane_depth(vp, nr, nu, nf, npo, sx, sy, z, iw, ih) - off
-    fx = x - x0
-    fy = y - y0
-    # branch-free selects (adding 0.0 to the non-negative sum changes no bit)
-    acc = 0.0
-    acc += 0.0 if d00 < zt else (1.0 - fx) * (1.0 - fy)
-    acc += 0.0 if d01 < zt else fx * (1.0 - fy)
-    acc += 0.0 if d10 < zt else (1.0 - fx) * fy
-    acc += 0.0 if d11 < zt else fx * fy
-    return acc
+    return _bilinear_lit(d00, d01, d10, d11, zt, x - x0, y - y0)
 
 
 @kernel(inline=True)
@@ -506,12 +511,32 @@ def _region_decided(tmin, tmax, cell, H, W, sx, sy, ex, ey, lo, hi):
     return dmin >= hi, blk and dmax < lo
 
 
+@kernel(inline=True)
+def _keep_point(P, m, sx, sy, rx, ry, zt, lo, hi, nr, nu, nf, npo, z, off):
+    """Store a point's tap state as column ``m`` of ``P`` (13, n), for the vectorized taps
+    (:func:`_search_taps`, :func:`_filter_taps`): its texel position, tap radii, comparison depth,
+    plane-depth bounds, the plane in view coordinates, its depth and offset."""
+    P[0, m] = sx
+    P[1, m] = sy
+    P[2, m] = rx
+    P[3, m] = ry
+    P[4, m] = zt
+    P[5, m] = lo
+    P[6, m] = hi
+    P[7, m] = nr
+    P[8, m] = nu
+    P[9, m] = nf
+    P[10, m] = npo
+    P[11, m] = z
+    P[12, m] = off
+
+
 @kernel(inline=True, noalias=True)
 def _search_taps(vp, depth_flat, H, W, ox, oy, m, PS, TOT, CNT, iw, ih):
     """One tap (pattern offset ``ox``, ``oy``) of the blocker search at a row's ``m`` points, vectorized
     across the points: the receiver plane on, the pattern unrotated and ``iw``, ``ih`` nonzero
-    (:func:`_ray_xy`). The points' state in the rows of ``PS`` (13, n): sx, sy, rx, ry, zt, lo, hi,
-    nr, nu, nf, npo, z, off; the sums in ``TOT`` and counts in ``CNT``. Each tap makes the
+    (:func:`_ray_xy`). The points' state in ``PS`` (:func:`_keep_point`); the sums in ``TOT`` and
+    counts in ``CNT``. Each tap makes the
     decision of :func:`_search_point`'s, the plane depth computed at every point and kept where
     the texel lies in [lo, hi): the same bits."""
     for q in range(m):
@@ -667,19 +692,6 @@ def blocker_search_kernel(
                 lo, hi = _plane_range(
                     vp, nr, nu, nf, npo, sx, sy, rx * (1.0 + 1e-6) + 2.0, ry * (1.0 + 1e-6) + 2.0, z, off, iw, ih
                 )
-            PS[0, m] = sx
-            PS[1, m] = sy
-            PS[2, m] = rx
-            PS[3, m] = ry
-            PS[4, m] = zt
-            PS[5, m] = lo
-            PS[6, m] = hi
-            PS[7, m] = nr
-            PS[8, m] = nu
-            PS[9, m] = nf
-            PS[10, m] = npo
-            PS[11, m] = z
-            PS[12, m] = off
             if not fast:  # the taps here, point by point
                 nblk_out[k], avg_out[k] = _search_point(
                     vp,
@@ -707,19 +719,7 @@ def blocker_search_kernel(
                     ih,
                 )
                 continue
-            PS[0, m] = sx
-            PS[1, m] = sy
-            PS[2, m] = rx
-            PS[3, m] = ry
-            PS[4, m] = zt
-            PS[5, m] = lo
-            PS[6, m] = hi
-            PS[7, m] = nr
-            PS[8, m] = nu
-            PS[9, m] = nf
-            PS[10, m] = npo
-            PS[11, m] = z
-            PS[12, m] = off
+            _keep_point(PS, m, sx, sy, rx, ry, zt, lo, hi, nr, nu, nf, npo, z, off)
             KK[m] = k
             TOT[m] = 0.0
             CNT[m] = 0
@@ -747,8 +747,8 @@ def penumbra_estimation(z_receiver, z_blocker, w_light):
 def _filter_taps(vp, depth_flat, H, W, ox, oy, m, FS, ACC, iw, ih):
     """One tap (pattern offset ``ox``, ``oy``) of the filter at a row's ``m`` points, vectorized
     across the points, as :func:`_search_taps` (same conditions): :func:`_cmp_bilinear_plane`'s
-    operations without branches, added to ``ACC``. ``FS`` (12, n): sx, sy, rx, ry, nr, nu, nf,
-    npo, z, off, lo, hi."""
+    operations without branches, added to ``ACC``. ``FS``: the points' state as
+    :func:`_keep_point` stores it."""
     inf = np.inf
     for q in range(m):
         qx = np.uint64(q)
@@ -776,16 +776,9 @@ def _filter_taps(vp, depth_flat, H, W, ox, oy, m, FS, ACC, iw, ih):
         dmax = max(max(d00, d01), max(d10, d11))
         xp = vp[VP_L] + (tx * iw) * (vp[VP_R] - vp[VP_L])
         yp = vp[VP_T] - (ty * ih) * (vp[VP_T] - vp[VP_B])
-        zp = _plane_depth_bf(FS[4, qx], FS[5, qx], FS[6, qx], FS[7, qx], xp, yp, FS[8, qx]) - FS[9, qx]
-        zt = -inf if dmin >= FS[11, qx] else (inf if dmax < FS[10, qx] else zp)
-        fx = x - x0
-        fy = y - y0
-        acc = 0.0
-        acc += 0.0 if d00 < zt else (1.0 - fx) * (1.0 - fy)
-        acc += 0.0 if d01 < zt else fx * (1.0 - fy)
-        acc += 0.0 if d10 < zt else (1.0 - fx) * fy
-        acc += 0.0 if d11 < zt else fx * fy
-        ACC[qx] += acc
+        zp = _plane_depth_bf(FS[7, qx], FS[8, qx], FS[9, qx], FS[10, qx], xp, yp, FS[11, qx]) - FS[12, qx]
+        zt = -inf if dmin >= FS[6, qx] else (inf if dmax < FS[5, qx] else zp)
+        ACC[qx] += _bilinear_lit(d00, d01, d10, d11, zt, x - x0, y - y0)
 
 
 @kernel(nogil=True)
@@ -830,7 +823,7 @@ def filtering_kernel(
     ih = _exact_inverse(vp[VP_H])
     fast = plane and bilinear and not rotate and iw != 0.0 and ih != 0.0
     dflat = depth_map.reshape(H * W)
-    FS = np.empty((12, w + 8))
+    FS = np.empty((13, w + 8))
     KJ = np.empty(w + 8, np.int64)
     ACC = np.empty(w + 8)
     while True:  # the next image row (``counter``: a work queue shared by the slots)
@@ -875,18 +868,7 @@ def filtering_kernel(
                 out[i, j] = 0.0
                 continue
             if fast:  # the taps after the row, across its points
-                FS[0, m] = sx
-                FS[1, m] = sy
-                FS[2, m] = rx
-                FS[3, m] = ry
-                FS[4, m] = nr
-                FS[5, m] = nu
-                FS[6, m] = nf
-                FS[7, m] = npo
-                FS[8, m] = z
-                FS[9, m] = off
-                FS[10, m] = lo
-                FS[11, m] = hi
+                _keep_point(FS, m, sx, sy, rx, ry, zt, lo, hi, nr, nu, nf, npo, z, off)
                 KJ[m] = j
                 ACC[m] = 0.0
                 m += 1
