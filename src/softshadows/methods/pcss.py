@@ -160,13 +160,7 @@ def _plane_depth(vp, nr, nu, nf, npo, sx, sy, z_center, iw, ih):
     ``z_center`` where the ray grazes the plane or the depth leaves [z/2, 2z]. ``iw``, ``ih``: see
     :func:`_ray_xy`."""
     xp, yp = _ray_xy(vp, sx, sy, iw, ih)
-    den = nr * xp + nu * yp + nf
-    if abs(den) < 1e-6:
-        return z_center
-    d = npo / den
-    if not (d > 0.5 * z_center and d < 2.0 * z_center):
-        return z_center
-    return d
+    return _plane_depth_bf(nr, nu, nf, npo, xp, yp, z_center)
 
 
 @kernel(inline=True)
@@ -227,7 +221,7 @@ def _plane_range(vp, nr, nu, nf, npo, sx, sy, ex, ey, z, off, iw, ih):
     the tap's coordinates, so every tap's denominator lies between the corners' extremes, and where
     it keeps its sign away from the ``1e-6`` cut-off the depth ``npo / den`` is monotonic in it too;
     the fallback depth ``z`` is always included. A box where the denominator may reach 0 keeps
-    :func:`_plane_bounds`."""
+    :func:`_plane_bounds`. No branch (the vectorized set-up of :func:`_search_setup`)."""
     lo, hi = _plane_bounds(z, off)
     xa, ya = _ray_xy(vp, sx - ex, sy - ey, iw, ih)
     xb, yb = _ray_xy(vp, sx + ex, sy + ey, iw, ih)
@@ -237,8 +231,7 @@ def _plane_range(vp, nr, nu, nf, npo, sx, sy, ex, ey, z, off, iw, ih):
     d11 = nr * xb + nu * yb + nf
     dmin = min(min(d00, d01), min(d10, d11))
     dmax = max(max(d00, d01), max(d10, d11))
-    if not (dmin >= 1e-6 or dmax <= -1e-6):  # (also NaN)
-        return lo, hi
+    keep = ~((dmin >= 1e-6) | (dmax <= -1e-6))  # (also NaN); without a branch: it vectorizes
     qa = npo / dmin
     qb = npo / dmax
     pmin = min(qa, qb)
@@ -247,7 +240,7 @@ def _plane_range(vp, nr, nu, nf, npo, sx, sy, ex, ey, z, off, iw, ih):
     pmax += 1e-12 * abs(pmax)
     pmin = min(max(pmin, 0.5 * z), z)  # depths outside (z/2, 2z) fall back to z
     pmax = max(min(pmax, 2.0 * z), z)
-    return max(lo, pmin - off), min(hi, pmax - off)
+    return (lo if keep else max(lo, pmin - off)), (hi if keep else min(hi, pmax - off))
 
 
 @kernel(inline=True)
@@ -532,6 +525,41 @@ def _keep_point(P, m, sx, sy, rx, ry, zt, lo, hi, nr, nu, nf, npo, z, off):
 
 
 @kernel(inline=True, noalias=True)
+def _points_setup(vp, PP, PS, m, bias, slope_bias, iw, ih, search):
+    """The rest of a step's per-point set-up for a row's ``m`` kept points, vectorized across them:
+    from each point's position and normal (``PP`` (6, n)) and its texel position, radii and depth
+    (rows 0-3 and 11 of ``PS``, :func:`_keep_point`'s layout) the plane and the plane bounds, and
+    with ``search`` (the blocker search) the bias and comparison depth (else, the filter: rows 4
+    and 12 hold them), into the other rows, with the kernels' per-point operations: the same
+    values."""
+    for q in range(m):
+        qx = np.uint64(q)
+        px = PP[0, qx]
+        py = PP[1, qx]
+        pz = PP[2, qx]
+        nx = PP[3, qx]
+        ny = PP[4, qx]
+        nz = PP[5, qx]
+        sx = PS[0, qx]
+        sy = PS[1, qx]
+        rx = PS[2, qx]
+        ry = PS[3, qx]
+        z = PS[11, qx]
+        if search:
+            off = receiver_offset(vp, px, py, pz, nx, ny, nz, z, bias, slope_bias)
+            zt = z - off
+        else:
+            zt = PS[4, qx]
+            off = PS[12, qx]
+        nr, nu, nf = _view_normal(vp, nx, ny, nz)
+        npo = nx * (px - vp[VP_ORIGIN]) + ny * (py - vp[VP_ORIGIN + 1]) + nz * (pz - vp[VP_ORIGIN + 2])
+        lo, hi = _plane_range(
+            vp, nr, nu, nf, npo, sx, sy, rx * (1.0 + 1e-6) + 2.0, ry * (1.0 + 1e-6) + 2.0, z, off, iw, ih
+        )
+        _keep_point(PS, q, sx, sy, rx, ry, zt, lo, hi, nr, nu, nf, npo, z, off)
+
+
+@kernel(inline=True, noalias=True)
 def _search_taps(vp, depth_flat, H, W, ox, oy, m, PS, TOT, CNT, iw, ih):
     """One tap (pattern offset ``ox``, ``oy``) of the blocker search at a row's ``m`` points, vectorized
     across the points: the receiver plane on, the pattern unrotated and ``iw``, ``ih`` nonzero
@@ -647,6 +675,7 @@ def blocker_search_kernel(
     ih = _exact_inverse(vp[VP_H])
     dflat = depth_map.reshape(H * W)
     PS = np.empty((13, w + 8))
+    PP = np.empty((6, w + 8))
     KK = np.empty(w + 8, np.int64)
     fast = plane and not rotate and iw != 0.0 and ih != 0.0
     TOT = np.empty(w + 8)
@@ -679,6 +708,23 @@ def blocker_search_kernel(
                 avg_out[k] = 0.0
                 nblk_out[k] = 0
                 continue
+            if fast:  # the rest of the set-up and the taps after the row, across its kept points
+                PP[0, m] = px
+                PP[1, m] = py
+                PP[2, m] = pz
+                PP[3, m] = nx
+                PP[4, m] = ny
+                PP[5, m] = nz
+                PS[0, m] = sx
+                PS[1, m] = sy
+                PS[2, m] = rx
+                PS[3, m] = ry
+                PS[11, m] = z
+                KK[m] = k
+                TOT[m] = 0.0
+                CNT[m] = 0
+                m += 1
+                continue
             off = receiver_offset(vp, px, py, pz, nx, ny, nz, z, bias, slope_bias)
             zt = z - off
             zr_out[k] = zt
@@ -692,38 +738,35 @@ def blocker_search_kernel(
                 lo, hi = _plane_range(
                     vp, nr, nu, nf, npo, sx, sy, rx * (1.0 + 1e-6) + 2.0, ry * (1.0 + 1e-6) + 2.0, z, off, iw, ih
                 )
-            if not fast:  # the taps here, point by point
-                nblk_out[k], avg_out[k] = _search_point(
-                    vp,
-                    depth_map,
-                    pattern,
-                    disk,
-                    rotate,
-                    seed,
-                    k,
-                    plane,
-                    sx,
-                    sy,
-                    rx,
-                    ry,
-                    zt,
-                    lo,
-                    hi,
-                    nr,
-                    nu,
-                    nf,
-                    npo,
-                    z,
-                    off,
-                    iw,
-                    ih,
-                )
-                continue
-            _keep_point(PS, m, sx, sy, rx, ry, zt, lo, hi, nr, nu, nf, npo, z, off)
-            KK[m] = k
-            TOT[m] = 0.0
-            CNT[m] = 0
-            m += 1
+            nblk_out[k], avg_out[k] = _search_point(
+                vp,
+                depth_map,
+                pattern,
+                disk,
+                rotate,
+                seed,
+                k,
+                plane,
+                sx,
+                sy,
+                rx,
+                ry,
+                zt,
+                lo,
+                hi,
+                nr,
+                nu,
+                nf,
+                npo,
+                z,
+                off,
+                iw,
+                ih,
+            )
+        if m:  # (fast)
+            _points_setup(vp, PP, PS, m, bias, slope_bias, iw, ih, True)
+            for q in range(m):
+                zr_out[KK[q]] = PS[4, q]
         for t in range(S):  # (m = 0 unless fast)
             _search_taps(vp, dflat, H, W, pattern[t, 0], pattern[t, 1], m, PS, TOT, CNT, iw, ih)
         for q in range(m):
@@ -824,6 +867,7 @@ def filtering_kernel(
     fast = plane and bilinear and not rotate and iw != 0.0 and ih != 0.0
     dflat = depth_map.reshape(H * W)
     FS = np.empty((13, w + 8))
+    PP = np.empty((6, w + 8))
     KJ = np.empty(w + 8, np.int64)
     ACC = np.empty(w + 8)
     while True:  # the next image row (``counter``: a work queue shared by the slots)
@@ -852,6 +896,23 @@ def filtering_kernel(
             sx, sy, z = view_project(vp, px, py, pz)
             zt = zr[k]
             off = z - zt
+            if fast:  # the rest after the row, across its points (_points_setup, then the cell test)
+                PP[0, m] = px
+                PP[1, m] = py
+                PP[2, m] = pz
+                PP[3, m] = nx
+                PP[4, m] = ny
+                PP[5, m] = nz
+                FS[0, m] = sx
+                FS[1, m] = sy
+                FS[2, m] = rx
+                FS[3, m] = ry
+                FS[4, m] = zt
+                FS[11, m] = z
+                FS[12, m] = off
+                KJ[m] = j
+                m += 1
+                continue
             nr, nu, nf = _view_normal(vp, nx, ny, nz)
             npo = nx * (px - vp[VP_ORIGIN]) + ny * (py - vp[VP_ORIGIN + 1]) + nz * (pz - vp[VP_ORIGIN + 2])
             ex = rx * (1.0 + 1e-6) + 2.0
@@ -866,12 +927,6 @@ def filtering_kernel(
                 continue
             if dark:  # every texel read is a blocker: no tap adds anything, V = 0
                 out[i, j] = 0.0
-                continue
-            if fast:  # the taps after the row, across its points
-                _keep_point(FS, m, sx, sy, rx, ry, zt, lo, hi, nr, nu, nf, npo, z, off)
-                KJ[m] = j
-                ACC[m] = 0.0
-                m += 1
                 continue
             c = 1.0
             s = 0.0
@@ -900,6 +955,22 @@ def filtering_kernel(
                     acc += _cmp_nearest(depth_map, tx, ty, zc)
             v = acc / S
             out[i, j] = min(max(v, 0.0), 1.0)
+        if m:  # (fast) the set-up's rest, then the decided test; the others are kept for the taps
+            _points_setup(vp, PP, FS, m, 0.0, 0.0, iw, ih, False)
+            n = 0
+            for q in range(m):
+                ex = FS[2, q] * (1.0 + 1e-6) + 2.0
+                ey = FS[3, q] * (1.0 + 1e-6) + 2.0
+                lit, dark = _region_decided(tmin, tmax, OCC_CELL, H, W, FS[0, q], FS[1, q], ex, ey, FS[5, q], FS[6, q])
+                if lit or dark:  # every texel read lit: V = 1; all blockers: V = 0
+                    out[i, KJ[q]] = 1.0 if lit else 0.0
+                    continue
+                for c13 in range(13):
+                    FS[c13, n] = FS[c13, q]
+                KJ[n] = KJ[q]
+                ACC[n] = 0.0
+                n += 1
+            m = n
         for t in range(S):  # (m = 0 unless fast)
             _filter_taps(vp, dflat, H, W, pattern[t, 0], pattern[t, 1], m, FS, ACC, iw, ih)
         for q in range(m):
