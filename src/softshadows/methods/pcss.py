@@ -524,6 +524,26 @@ def _keep_point(P, m, sx, sy, rx, ry, zt, lo, hi, nr, nu, nf, npo, z, off):
     P[12, m] = off
 
 
+@kernel(inline=True)
+def _keep_pixel(PP, P, m, px, py, pz, nx, ny, nz, sx, sy, rx, ry, zt, z, off):
+    """Store what :func:`_points_setup` starts from as column ``m``: the point and its normal in
+    ``PP`` (6, n), its texel position, radii, comparison depth, depth and offset in ``P``
+    (:func:`_keep_point`'s rows)."""
+    PP[0, m] = px
+    PP[1, m] = py
+    PP[2, m] = pz
+    PP[3, m] = nx
+    PP[4, m] = ny
+    PP[5, m] = nz
+    P[0, m] = sx
+    P[1, m] = sy
+    P[2, m] = rx
+    P[3, m] = ry
+    P[4, m] = zt
+    P[11, m] = z
+    P[12, m] = off
+
+
 @kernel(inline=True, noalias=True)
 def _points_setup(vp, PP, PS, m, bias, slope_bias, iw, ih, search):
     """The rest of a step's per-point set-up for a row's ``m`` kept points, vectorized across them:
@@ -709,17 +729,7 @@ def blocker_search_kernel(
                 nblk_out[k] = 0
                 continue
             if fast:  # the rest of the set-up and the taps after the row, across its kept points
-                PP[0, m] = px
-                PP[1, m] = py
-                PP[2, m] = pz
-                PP[3, m] = nx
-                PP[4, m] = ny
-                PP[5, m] = nz
-                PS[0, m] = sx
-                PS[1, m] = sy
-                PS[2, m] = rx
-                PS[3, m] = ry
-                PS[11, m] = z
+                _keep_pixel(PP, PS, m, px, py, pz, nx, ny, nz, sx, sy, rx, ry, z, z, 0.0)  # (zt, off: set up later)
                 KK[m] = k
                 TOT[m] = 0.0
                 CNT[m] = 0
@@ -897,19 +907,7 @@ def filtering_kernel(
             zt = zr[k]
             off = z - zt
             if fast:  # the rest after the row, across its points (_points_setup, then the cell test)
-                PP[0, m] = px
-                PP[1, m] = py
-                PP[2, m] = pz
-                PP[3, m] = nx
-                PP[4, m] = ny
-                PP[5, m] = nz
-                FS[0, m] = sx
-                FS[1, m] = sy
-                FS[2, m] = rx
-                FS[3, m] = ry
-                FS[4, m] = zt
-                FS[11, m] = z
-                FS[12, m] = off
+                _keep_pixel(PP, FS, m, px, py, pz, nx, ny, nz, sx, sy, rx, ry, zt, z, off)
                 KJ[m] = j
                 m += 1
                 continue
