@@ -682,10 +682,11 @@ def blocker_search_kernel(
     is left, so that a slot whose thread is held up (a shared machine) takes fewer rows. A point's
     outputs depend on its own inputs only: the same bits whatever slot computes it.
 
-    At the defaults (receiver plane on, pattern unrotated, a power-of-two map: ``fast``) the
-    points of a row that need taps are set up one by one, then their taps are taken tap by tap
-    across the points (:func:`_search_taps`, a loop LLVM vectorizes: gathers instead of a
-    hard-to-predict branch per tap); otherwise each point takes its taps right away
+    At the defaults (receiver plane on, pattern unrotated, a power-of-two map: ``fast``) a row's
+    points are tested one by one (depth beyond ``z_near``, the occupancy cells), the kept ones get
+    their bias, plane and plane bounds across them (:func:`_points_setup`), then their taps tap by
+    tap across them (:func:`_search_taps`): loops LLVM vectorizes (gathers instead of a
+    hard-to-predict branch per tap). Otherwise each point is set up and takes its taps right away
     (:func:`_search_point`). Both make the same decisions and sums in the same order."""
     h, w = mask.shape
     H, W = depth_map.shape
@@ -865,8 +866,9 @@ def filtering_kernel(
     kernel of radius w / 2 (per light axis) in texels at the receiver's depth. The points, their
     indices and the slots as in :func:`blocker_search_kernel`; V goes to ``out`` (h, w) at the
     point's pixel, 1 where no surface. With the 2x2 comparisons against the receiver plane, the
-    pattern unrotated and a power-of-two map (``fast``: the defaults), a row's points still
-    undecided after the cell test take their taps after the row, tap by tap across the points
+    pattern unrotated and a power-of-two map (``fast``: the defaults), a row's points with a
+    blocker get their plane and plane bounds across them (:func:`_points_setup`), then the cell
+    test one by one, and those it leaves undecided their taps tap by tap across them
     (:func:`_filter_taps`, vectorized), as the blocker search does: the same bits."""
     h, w = mask.shape
     H, W = depth_map.shape
