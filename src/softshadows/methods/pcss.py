@@ -150,6 +150,14 @@ def _ray_xy(vp, sx, sy, iw, ih):
     :func:`_exact_inverse`) make them exact."""
     fx = sx * iw if iw != 0.0 else sx / vp[VP_W]
     fy = sy * ih if ih != 0.0 else sy / vp[VP_H]
+    return _window_of(vp, fx, fy)
+
+
+@kernel(inline=True)
+def _window_of(vp, fx, fy):
+    """Window coordinates of the map fractions (``fx``, ``fy``) = texel coordinates over the map's
+    size (:func:`_ray_xy`; the vectorized taps pass ``sx * iw`` directly, their maps being ones
+    where that is exact)."""
     return vp[VP_L] + fx * (vp[VP_R] - vp[VP_L]), vp[VP_T] - fy * (vp[VP_T] - vp[VP_B])
 
 
@@ -595,8 +603,7 @@ def _search_taps(vp, depth_flat, H, W, ox, oy, m, PS, TOT, CNT, iw, ih):
         row = np.int64(np.floor(ty))
         inside = (row >= 0) & (row < H) & (col >= 0) & (col < W)
         d = depth_flat[np.uint64(row * W + col if inside else 0)]
-        xp = vp[VP_L] + (tx * iw) * (vp[VP_R] - vp[VP_L])
-        yp = vp[VP_T] - (ty * ih) * (vp[VP_T] - vp[VP_B])
+        xp, yp = _window_of(vp, tx * iw, ty * ih)
         zc = _plane_depth_bf(PS[7, qx], PS[8, qx], PS[9, qx], PS[10, qx], xp, yp, PS[11, qx]) - PS[12, qx]
         blk = inside & (d < PS[6, qx]) & ((d < PS[5, qx]) | (d < zc))
         TOT[qx] += d if blk else 0.0
@@ -828,8 +835,7 @@ def _filter_taps(vp, depth_flat, H, W, ox, oy, m, FS, ACC, iw, ih):
         d11 = d11 if in_r1 & in_c1 else inf
         dmin = min(min(d00, d01), min(d10, d11))
         dmax = max(max(d00, d01), max(d10, d11))
-        xp = vp[VP_L] + (tx * iw) * (vp[VP_R] - vp[VP_L])
-        yp = vp[VP_T] - (ty * ih) * (vp[VP_T] - vp[VP_B])
+        xp, yp = _window_of(vp, tx * iw, ty * ih)
         zp = _plane_depth_bf(FS[7, qx], FS[8, qx], FS[9, qx], FS[10, qx], xp, yp, FS[11, qx]) - FS[12, qx]
         zt = -inf if dmin >= FS[6, qx] else (inf if dmax < FS[5, qx] else zp)
         ACC[qx] += _bilinear_lit(d00, d01, d10, d11, zt, x - x0, y - y0)
