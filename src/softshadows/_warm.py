@@ -239,6 +239,7 @@ def warm_raster_modes() -> None:
         r._E2I64,
         0,
         np.zeros(1, dtype=np.int32),
+        r.view_kind(vp),
     )
     r._tiles_depth(
         fe, r._scratch(fe.tile), np.empty((H, W), np.float32), np.empty((H, W), np.int32), r._NO_ZT, r._NO_FT

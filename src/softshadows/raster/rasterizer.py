@@ -663,7 +663,7 @@ def _select_fill_slot(slot, chunk, coff, keep, tri, tcode, toff, tface, tlist, n
 
 
 @kernel(nogil=True, nrt=False)
-def _tiny_depth_slot(slot, verts, faces, vs, vp, near, cull, bstart, tface, tlist, phase, nslot, zt, ft):
+def _tiny_depth_slot(slot, verts, faces, vs, vp, kind, near, cull, bstart, tface, tlist, phase, nslot, zt, ft):
     """The tiny path of the depth modes: the nearest depth ``zt`` (float64) and face ``ft`` of every
     pixel over the small triangles listed per band of ``TILE`` rows (``bstart``, ``tface``,
     ``tlist``; see :func:`_select_slot`), drawn directly at their few covered pixel centers: the
@@ -673,8 +673,9 @@ def _tiny_depth_slot(slot, verts, faces, vs, vp, near, cull, bstart, tface, tlis
     tile pass's rule, so merging zt/ft into its output in any order gives the output of one pass
     over all faces. A small triangle's rows lie in its band and the next one: ``phase`` 0 clears
     and draws the even bands (bands b and b + 1 cleared by the slot of band b), phase 1 draws the
-    odd ones; no two slots write the same row. Run by ``run_slots``, one slot per thread."""
-    W, H, ortho, far, wl, wt, wsx, wsy = _view_window(vp)
+    odd ones; no two slots write the same row. Run by ``run_slots``, one slot per thread. ``kind``:
+    the view's (:func:`view_kind`)."""
+    W, H, ortho, far, wl, wt, wsx, wsy = _view_window_of(vp, kind)
     nb = bstart.shape[0] - 1
     for b in range(phase + 2 * slot, nb, 2 * nslot):
         if phase == 0:
@@ -822,6 +823,31 @@ def _view_window(vp):
     wsx = (vp[VP_R] - vp[VP_L]) / vp[VP_W]
     wsy = (vp[VP_T] - vp[VP_B]) / vp[VP_H]
     return W, H, vp[VP_ORTHO] != 0.0, vp[VP_FAR], vp[VP_L], vp[VP_T], wsx, wsy
+
+
+#: a view's kind as a *type* (``FrontEnd.kind``): an empty array of 1 dimension (perspective) or 2
+#: (orthographic). ``_view_window_of`` reads its ``ndim``, a compile-time constant: a tile kernel
+#: compiles for one kind only (the other when first used), with every ``if ortho`` folded. With the
+#: kind a run-time value (``_view_window``), LLVM merged the two arms of the depth tests (one per
+#: kind) into one loop that computed both depths, two divisions per fragment, and then chose one
+#: (``_depth_test_row``: ~20% of a depth pass over a map that a few large triangles cover)
+PERSPECTIVE = np.zeros(0)
+ORTHOGRAPHIC = np.zeros((0, 0))
+PERSPECTIVE.flags.writeable = False
+ORTHOGRAPHIC.flags.writeable = False
+
+
+def view_kind(vp) -> np.ndarray:
+    """:data:`PERSPECTIVE` or :data:`ORTHOGRAPHIC`: the kind of the view of parameters ``vp``."""
+    return ORTHOGRAPHIC if vp[VP_ORTHO] != 0.0 else PERSPECTIVE
+
+
+@kernel(inline=True)
+def _view_window_of(vp, kind):
+    """:func:`_view_window` with ``ortho`` known at compile time, from ``kind`` (:data:`PERSPECTIVE`
+    or :data:`ORTHOGRAPHIC`) rather than from ``vp``."""
+    W, H, _ortho, far, wl, wt, wsx, wsy = _view_window(vp)
+    return W, H, kind.ndim == 2, far, wl, wt, wsx, wsy
 
 
 @kernel(inline=True)
@@ -1855,9 +1881,9 @@ def _tiles_depth_slot(slot, fe, sc, depth_out, tri_out, zt, ft, rz, rt, ks, coun
     whole rows: written tile by tile (16 columns per image row), the stores went to 2 x 16 output
     lines far apart per tile, in a loop too short for LLVM's vector loop (about half of the tile
     pass's time on a map that the ground covers); whole rows are a vectorized, sequential copy."""
-    vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, _normals, _rowbits, sh, tri = fe
+    vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, _normals, _rowbits, sh, tri, kind = fe
     zbuf, tbuf, spbuf, _ibuf, _lbuf, _nslot, nz = sc
-    vw = _view_window(vp)
+    vw = _view_window_of(vp, kind)
     W, H = vw[0], vw[1]
     tiny = zt.shape[0] > 0
     zb = zbuf[slot]
@@ -1945,9 +1971,9 @@ def _tiles_gbuffer_slot(slot, fe, sc, out, rz, rt, ks, counter):
     tile's winners (depth, front-end triangle) go to the slot's row scratch ``rz[slot]``, ``rt[slot]``
     (T, W) first, and a finished row of tiles is turned into G-buffer rows whole, one image row at
     a time."""
-    vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, normals, _rowbits, sh, tri = fe
+    vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, normals, _rowbits, sh, tri, kind = fe
     zbuf, tbuf, spbuf, _ibuf, _lbuf, _nslot, nz = sc
-    vw = _view_window(vp)
+    vw = _view_window_of(vp, kind)
     W, H, ortho, _far, wl, wt, wsx, wsy = vw
     frame = _view_frame(vp)
     zb = zbuf[slot]
@@ -1989,9 +2015,9 @@ def _tiles_gbuffer(fe, sc, out):
 @kernel(nogil=True, nrt=False)
 def _tiles_count_slot(slot, fe, sc, fcount):
     """Slot ``slot`` of :func:`_tiles_count` (``run_slots``)."""
-    vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, _normals, _rowbits, sh, _tri = fe
+    vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, _normals, _rowbits, sh, _tri, kind = fe
     _zbuf, _tbuf, spbuf, _ibuf, _lbuf, nslot, _nz = sc
-    vw = _view_window(vp)
+    vw = _view_window_of(vp, kind)
     W, H, ortho, far, wl, wt, wsx, wsy = vw
     SP = spbuf[slot]
     for ty in range(slot, nty, nslot):
@@ -2035,9 +2061,9 @@ def _tiles_count(fe, sc, fcount):
 @kernel(nogil=True, nrt=False)
 def _tiles_fragments_slot(slot, fe, sc, foff, fpix, ftri, fbary, fdepth):
     """Slot ``slot`` of :func:`_tiles_fragments` (``run_slots``)."""
-    vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, _normals, _rowbits, sh, tri = fe
+    vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, _normals, _rowbits, sh, tri, kind = fe
     _zbuf, _tbuf, spbuf, _ibuf, _lbuf, nslot, _nz = sc
-    W, H, ortho, far, wl, wt, wsx, wsy = _view_window(vp)
+    W, H, ortho, far, wl, wt, wsx, wsy = _view_window_of(vp, kind)
     SP = spbuf[slot]
     for ty in range(slot, nty, nslot):
         for tx in range(ntx):
@@ -2090,7 +2116,7 @@ def _list_tile(prog, pparams, blend, img, rect, vw, near, tile, SP, TL, fe, mb):
     """A tile with few texels to shade (SP[_SP_RN]): its pieces shaded texel by texel from a list
     of them (:func:`_texel_list`, :func:`_blend_list`), with the culling, counts and values of
     the row passes (``slot_fn`` of :func:`_make_min_blend_slot`)."""
-    _vp, _T, _ntx, _nty, _near, start, bins, box, edges, zinfo, planes, _normals, _rowbits, sh, tri = fe
+    _vp, _T, _ntx, _nty, _near, start, bins, box, edges, zinfo, planes, _normals, _rowbits, sh, tri, _kind = fe
     _pparams, cattr, _img, _blend, bstats, split, cull_discarded, _tlbuf, _lmax, nz = mb
     W, H, ortho, far, _wl, _wt, _wsx, _wsy = vw
     y0, _y1, x0, _x1 = rect
@@ -2183,10 +2209,10 @@ def _make_min_blend_slot(prog):
     def slot_fn(slot, fe, sc, mb):
         """Slot ``slot`` of a min-blend tile pass (``_MIN_BLEND_KERNELS``), on its own thread
         (``run_slots``)."""
-        vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, _normals, rowbits, sh, tri = fe
+        vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, _normals, rowbits, sh, tri, kind = fe
         zbuf, _tbuf, spbuf, ibuf, lbuf, nslot, _nz = sc
         pparams, cattr, img, blend, bstats, split, cull_discarded, tlbuf, list_max, nz = mb
-        vw = _view_window(vp)
+        vw = _view_window_of(vp, kind)
         W, H, ortho, far, wl, wt, wsx, wsy = vw
         use_mask = rowbits.size > 0
         ntiles = ntx * nty
@@ -2419,6 +2445,9 @@ class FrontEnd(NamedTuple):
     rowbits: np.ndarray  #: (ntiles, T) int64 texel-mask bits per tile row (min-blend), or empty
     shift: int  #: piece slot ct belongs to front-end triangle ct >> shift (1: two slots per triangle)
     tri: np.ndarray  #: (max(U, 1),) int32 the face of each front-end triangle (U of them: the faces kept by setup)
+    kind: (
+        np.ndarray
+    )  #: the view's kind as a type: :data:`PERSPECTIVE` or :data:`ORTHOGRAPHIC` (:func:`_view_window_of`)
 
 
 class _Scratch(NamedTuple):
@@ -2567,7 +2596,9 @@ def _front_end(vp, W, H, verts, fcs, code, near, mask=None, tiny=False, duals=Tr
     bin_offsets(cnt, start)
     bins = np.empty(int(start[-1]), dtype=np.int32)
     run_slots(_bin_fill_slot, nset, NC, box, ntx, chunk, cnt, bins, nset, tile_any, use, sh)
-    fe = FrontEnd(vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, normals, rowbits, sh, tri)
+    fe = FrontEnd(
+        vp, T, ntx, nty, near, start, bins, box, edges, zinfo, planes, normals, rowbits, sh, tri, view_kind(vp)
+    )
     if not want_tiny:
         return fe
     return fe, ((tstart, tface, tlist, vs) if NT else None)
@@ -2641,6 +2672,7 @@ def rasterize_depth(
                 fcs,
                 vs,
                 vp,
+                fe.kind,
                 near,
                 code,
                 tstart,
