@@ -249,6 +249,19 @@ def test_default_ssm_size_depends_on_the_light(light, size):
     assert m.occlusion.shape == (size, size) and m.stats["ssm_size"] == size
 
 
+@pytest.mark.parametrize(("light", "size"), [("rect", ssm.MAP_SIZE_RECT), ("sphere", ssm.MAP_SIZE_SPHERE)])
+def test_default_map_size_depends_on_the_light(light, size):
+    """``map_size=0`` (the default) is 256^2 with a rect light, 208^2 with a sphere light (the same
+    error against ground truth on the built-in scenes: the method's page); the occluder map made
+    has that size, and an explicit size is kept."""
+    sc = ss.load_scene("square", light=light)
+    r = ss.render(sc, "soft-shadow-map", 24, 16, ssm_size=32)
+    assert r.stats["map_size"] == size
+    m = ssm.compute_soft_shadow_map(sc, 0, 32)
+    assert m.occluder_view.width == size and m.stats["map_size"] == size
+    assert ssm.compute_soft_shadow_map(sc, 40, 32).occluder_view.width == 40
+
+
 def test_mesh_of_role_both_does_not_shadow_itself():
     """A 'both' mesh next to proper roles: the square as both occluder and receiver must not be
     darkened by its own micro-patches (no self-shadowing), while the ground around it keeps its
