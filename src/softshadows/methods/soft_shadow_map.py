@@ -1856,6 +1856,20 @@ def fp16_condition(z_o, z_r, hx, ov: View) -> np.ndarray:
     return 1.0 / np.asarray(z_o) < 1.0 / z_r + 64.0 * tan_a / (ov.width * 2.0 * hx)
 
 
+def _size_param(name: str, meaning: str, rect: int, sphere: int) -> Param:
+    """A map resolution whose default, 0, stands for ``rect`` with a rect light and ``sphere`` with a
+    sphere light (``default_map_size``, ``default_ssm_size``); otherwise >= 8. ``meaning``: the
+    description, up to its open parenthesis."""
+    return Param(
+        name,
+        0,
+        f"{meaning}, N >= 8); 0: {rect} with a rect light, {sphere} with a sphere light",
+        min=0,
+        max=4096,
+        check=lambda n: None if n == 0 or n >= 8 else "0 (the light's default) or >= 8",
+    )
+
+
 @register
 class SoftShadowMapMethod(Method):
     name = "soft-shadow-map"
@@ -1865,24 +1879,10 @@ class SoftShadowMapMethod(Method):
     light_view = True  # maps from the light's centre (limits: softshadows.limits)
     receivers_only = True  # only receiver faces are shadowed
     params = (
-        Param(
-            "map_size",
-            0,
-            f"occluder map resolution N (N x N, light's aspect ratio, N >= 8); 0: {MAP_SIZE_RECT} with a rect "
-            f"light, {MAP_SIZE_SPHERE} with a sphere light",
-            min=0,
-            max=4096,
-            check=lambda n: None if n == 0 or n >= 8 else "0 (the light's default) or >= 8",
+        _size_param(
+            "map_size", "occluder map resolution N (N x N, light's aspect ratio", MAP_SIZE_RECT, MAP_SIZE_SPHERE
         ),
-        Param(
-            "ssm_size",
-            0,
-            f"soft shadow map resolution (N x N texels, N >= 8); 0: {SSM_SIZE_RECT} with a rect light, "
-            f"{SSM_SIZE_SPHERE} with a sphere light",
-            min=0,
-            max=4096,
-            check=lambda n: None if n == 0 or n >= 8 else "0 (the light's default) or >= 8",
-        ),
+        _size_param("ssm_size", "soft shadow map resolution (N x N texels", SSM_SIZE_RECT, SSM_SIZE_SPHERE),
         Param("two_pass", False, "front-face and back-face occluder maps, SSMs merged by max (Sec. 3.5)"),
         Param(
             "accumulate",
