@@ -2445,9 +2445,7 @@ class FrontEnd(NamedTuple):
     rowbits: np.ndarray  #: (ntiles, T) int64 texel-mask bits per tile row (min-blend), or empty
     shift: int  #: piece slot ct belongs to front-end triangle ct >> shift (1: two slots per triangle)
     tri: np.ndarray  #: (max(U, 1),) int32 the face of each front-end triangle (U of them: the faces kept by setup)
-    kind: (
-        np.ndarray
-    )  #: the view's kind as a type: :data:`PERSPECTIVE` or :data:`ORTHOGRAPHIC` (:func:`_view_window_of`)
+    kind: np.ndarray  #: the view's kind as a type: PERSPECTIVE or ORTHOGRAPHIC (_view_window_of)
 
 
 class _Scratch(NamedTuple):
