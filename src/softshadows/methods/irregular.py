@@ -2730,8 +2730,10 @@ class SampleBounds:
 #: the statistic ``origin_bound_median`` is the median of every ``_BOUND_MEDIAN_STRIDE``-th sample's
 #: error bound: the median of all of them (one partition of `bunny`'s 227k bounds) cost 0.5-0.8 ms
 #: of a ~37 ms frame (``benchmarks/frame_ab.py``: rect 38.1 -> 37.6 ms subsampled, 36.7 -> 35.9 ms
-#: without the statistic), for a statistic that shows the bound's scale
-_BOUND_MEDIAN_STRIDE = 16
+#: without the statistic), of every 16th 0.15-0.17 ms of a ~22 ms frame (NumPy's partition takes
+#: ~10 ns an element here), of every 64th (3.5k bounds) 0.03 ms; for a statistic that shows the
+#: bound's scale
+_BOUND_MEDIAN_STRIDE = 64
 
 
 def bound_median(bound: np.ndarray) -> float:
