@@ -35,7 +35,7 @@ from ..geometry.silhouette import build_adjacency, facing, facing_from_planes
 from ..raster.rasterizer import bin_offsets, prefetch
 from ..raster.view import VP_B, VP_FORWARD, VP_L, VP_ORIGIN, VP_R, VP_RIGHT, VP_T, VP_UP, View, light_frame, light_view
 from .base import Method, MethodOutput, Param, register
-from .ground_truth import BOUND_SAFETY, hit_point_at
+from .ground_truth import BOUND_SAFETY, _f32, hit_point_at
 
 #: a connected occluder component with at most this fraction of boundary edges is a solid (only its
 #: light-facing triangles are counted); otherwise a sheet (both sides counted)
@@ -2606,9 +2606,10 @@ def _error_bound_samples_slot(
     (its triangle, barycentrics, and position and normal for the side toward the ``eye``, turned as
     ``gather_points`` turns them, the same arithmetic: no per-sample arrays of its own).
     By blocks of points: the triangles' vertices and the points' inputs gathered into contiguous
-    scratch first (a point on the previous point's triangle copies its corners from the previous
-    column: neighbouring pixels mostly share a triangle, and the chain of dependent loads to a
-    triangle's vertices was a third of the kernel's time), then ``hit_point_at`` in a loop without gathers or branches (it vectorizes), its
+    scratch first (a point on the previous point's triangle stores the corners it holds in
+    registers: neighbouring pixels mostly share a triangle, and the chain of dependent loads to a
+    triangle's vertices was a third of the kernel's time), then ``hit_point_at`` in a loop without
+    gathers or branches (it vectorizes), its
     outputs stored contiguous and copied to the rows of ``out`` last: the same arithmetic, the same
     bits as ``hit_point`` point by point. Also each block's row of ``part`` (``_extent_slot``'s:
     the block's box and its smallest and largest distance to the light centre ``lc``), for
@@ -2629,20 +2630,24 @@ def _error_bound_samples_slot(
         k0 = blk * _EB_BLOCK
         m = min(n, k0 + _EB_BLOCK) - k0
         tp = -1
+        # the current triangle's corners, kept in registers: copied from the previous column they
+        # made a chain of stores and loads through memory from one sample to the next
+        a0 = a1 = a2 = b0 = b1 = b2 = c0 = c1 = c2 = 0.0
         for i in range(m):
             k = k0 + i
             q = idx[k]
             t = tri_img[q]
-            if t == tp:  # the previous sample's triangle (a neighbouring pixel): its corners again
-                for r in range(9):
-                    g[r, i] = g[r, i - 1]
-            else:  # (the chain triangle -> face -> vertices, each a dependent load)
-                for c in range(3):
-                    vi = faces[t, c]
-                    g[3 * c, i] = np.float64(np.float32(verts[vi, 0]))  # Embree's float32 vertex coordinates
-                    g[3 * c + 1, i] = np.float64(np.float32(verts[vi, 1]))
-                    g[3 * c + 2, i] = np.float64(np.float32(verts[vi, 2]))
+            if t != tp:  # (a neighbouring pixel mostly shares its triangle: its corners again)
+                # the chain triangle -> face -> vertices, each a dependent load (Embree's float32
+                # vertex coordinates, _f32)
+                va, vb, vc = faces[t, 0], faces[t, 1], faces[t, 2]
+                a0, a1, a2 = _f32(verts[va, 0]), _f32(verts[va, 1]), _f32(verts[va, 2])
+                b0, b1, b2 = _f32(verts[vb, 0]), _f32(verts[vb, 1]), _f32(verts[vb, 2])
+                c0, c1, c2 = _f32(verts[vc, 0]), _f32(verts[vc, 1]), _f32(verts[vc, 2])
             tp = t
+            g[0, i], g[1, i], g[2, i] = a0, a1, a2
+            g[3, i], g[4, i], g[5, i] = b0, b1, b2
+            g[6, i], g[7, i], g[8, i] = c0, c1, c2
             g[9, i] = np.float64(bary_img[q, 0])
             g[10, i] = np.float64(bary_img[q, 1])
             # the normal turned toward the eye (gather_points' expression, float32 images)
