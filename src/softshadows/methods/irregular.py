@@ -2609,9 +2609,8 @@ def _error_bound_samples_slot(
     scratch first (a point on the previous point's triangle stores the corners it holds in
     registers: neighbouring pixels mostly share a triangle, and the chain of dependent loads to a
     triangle's vertices was a third of the kernel's time), then ``hit_point_at`` in a loop without
-    gathers or branches (it vectorizes), its
-    outputs stored contiguous and copied to the rows of ``out`` last: the same arithmetic, the same
-    bits as ``hit_point`` point by point. Also each block's row of ``part`` (``_extent_slot``'s:
+    gathers or branches (it vectorizes), its outputs stored contiguous and copied to the rows of
+    ``out`` last: the same arithmetic, the same bits as ``hit_point`` point by point. Also each block's row of ``part`` (``_extent_slot``'s:
     the block's box and its smallest and largest distance to the light centre ``lc``), for
     :func:`fold_extent`, and with a ``frame`` (rows right, up, forward: the rectangle's, which does
     not depend on the samples) its columns 8-14 (``_window_of_slot``'s window of the samples with
