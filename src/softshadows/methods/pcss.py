@@ -229,7 +229,7 @@ def _plane_range(vp, nr, nu, nf, npo, sx, sy, ex, ey, z, off, iw, ih):
     the tap's coordinates, so every tap's denominator lies between the corners' extremes, and where
     it keeps its sign away from the ``1e-6`` cut-off the depth ``npo / den`` is monotonic in it too;
     the fallback depth ``z`` is always included. A box where the denominator may reach 0 keeps
-    :func:`_plane_bounds`. No branch (the vectorized set-up of :func:`_search_setup`)."""
+    :func:`_plane_bounds`. No branch (the vectorized set-up of :func:`_points_setup`)."""
     lo, hi = _plane_bounds(z, off)
     xa, ya = _ray_xy(vp, sx - ex, sy - ey, iw, ih)
     xb, yb = _ray_xy(vp, sx + ex, sy + ey, iw, ih)
@@ -239,7 +239,9 @@ def _plane_range(vp, nr, nu, nf, npo, sx, sy, ex, ey, z, off, iw, ih):
     d11 = nr * xb + nu * yb + nf
     dmin = min(min(d00, d01), min(d10, d11))
     dmax = max(max(d00, d01), max(d10, d11))
-    keep = ~((dmin >= 1e-6) | (dmax <= -1e-6))  # (also NaN); without a branch: it vectorizes
+    # the denominator may reach 0 in the box (also NaN): keep the plain bounds; a select, not a
+    # branch: it vectorizes
+    plain = ~((dmin >= 1e-6) | (dmax <= -1e-6))
     qa = npo / dmin
     qb = npo / dmax
     pmin = min(qa, qb)
@@ -248,7 +250,7 @@ def _plane_range(vp, nr, nu, nf, npo, sx, sy, ex, ey, z, off, iw, ih):
     pmax += 1e-12 * abs(pmax)
     pmin = min(max(pmin, 0.5 * z), z)  # depths outside (z/2, 2z) fall back to z
     pmax = max(min(pmax, 2.0 * z), z)
-    return (lo if keep else max(lo, pmin - off)), (hi if keep else min(hi, pmax - off))
+    return (lo if plain else max(lo, pmin - off)), (hi if plain else min(hi, pmax - off))
 
 
 @kernel(inline=True)
