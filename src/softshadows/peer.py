@@ -19,6 +19,12 @@ imported lazily) on a headless EGL context, :class:`GLHard` renders the same com
    same V bit for bit, 1.4-1.6x faster on bunny; deferred ``hard`` was slower);
 3. V read back to the CPU (``glReadPixels`` into NumPy).
 
+With ``shade=True`` the eye pass also shades, as our frame does after V (``shading.shade``: albedo
+x (unshadowed direct light from the light centre x V + ambient), the face's albedo a vertex
+attribute): the colour goes to an RGBA32F target with V in its alpha (one target, one clear, one
+read; V in a target of its own was slower) and :attr:`GLFrame.image` holds it after each frame.
+That frame is the like-for-like peer of our whole frame (``benchmarks/gl_peer.py``).
+
 ``hard``'s test is Williams's (one texel). ``pcss``'s is Fernando's three steps as our
 ``methods/pcss.py`` computes them at its defaults (``docs/methods/pcss.md``), with *our* tap
 patterns (``pcss.sample_pattern``, uploaded as uniforms): a blocker search of the map region the
@@ -77,10 +83,16 @@ VERT_EYE = (
     + """
 in vec3 p; in vec3 nrm;
 out vec3 wp; flat out vec3 fn;
+#ifdef SHADE
+in vec3 alb; flat out vec3 fa;
+#endif
 void main() {
     float z;
     gl_Position = project(p, z);
     wp = p; fn = nrm;
+#ifdef SHADE
+    fa = alb;
+#endif
 }
 """
 )
@@ -89,9 +101,20 @@ void main() {
 _EYE_FORWARD = """
 #version 330
 in vec3 wp; flat in vec3 fn;
-out float vis;
+#ifdef SHADE
+float vis;                                           // (the colour's alpha)
+#else
+layout(location = 0) out float vis;
+#endif
 void shadow();
+#ifdef SHADE
+flat in vec3 fa;
+vec3 albedo() { return fa; }
+void shade();
+void main() { shadow(); shade(); }
+#else
 void main() { shadow(); }
+#endif
 """
 #: ... or from the G-buffer (deferred: a full-screen pass shades each pixel once; a pixel without
 #: a surface has w = 0 and gets the marker -1)
@@ -99,24 +122,70 @@ _EYE_DEFERRED = """
 #version 330
 uniform sampler2D gpos; uniform sampler2D gnrm;
 vec3 wp; vec3 fn;
-out float vis;
+#ifdef SHADE
+float vis;                                           // (the colour's alpha)
+#else
+layout(location = 0) out float vis;
+#endif
 void shadow();
+#ifdef SHADE
+uniform sampler2D galb;
+vec3 albedo() { return texelFetch(galb, ivec2(gl_FragCoord.xy), 0).rgb; }
+void shade();
+void no_surface();
+#endif
 void main() {
     ivec2 c = ivec2(gl_FragCoord.xy);
     vec4 g = texelFetch(gpos, c, 0);
-    if (g.w == 0.0) { vis = -1.0; return; }
+    if (g.w == 0.0) {
+        vis = -1.0;
+#ifdef SHADE
+        no_surface();
+#endif
+        return;
+    }
     wp = g.xyz;
     fn = texelFetch(gnrm, c, 0).xyz;
     shadow();
+#ifdef SHADE
+    shade();
+#endif
 }
 """
-#: the G-buffer of the deferred eye pass (with VERT_EYE): world position, face normal
+#: the G-buffer of the deferred eye pass (with VERT_EYE): world position, face normal (and with
+#: SHADE the albedo)
 FRAG_GBUFFER = """
 #version 330
 in vec3 wp; flat in vec3 fn;
 layout(location = 0) out vec4 gpos;
 layout(location = 1) out vec4 gnrm;
-void main() { gpos = vec4(wp, 1.0); gnrm = vec4(fn, 0.0); }
+#ifdef SHADE
+flat in vec3 fa;
+layout(location = 2) out vec4 galb;
+#endif
+void main() {
+    gpos = vec4(wp, 1.0); gnrm = vec4(fn, 0.0);
+#ifdef SHADE
+    galb = vec4(fa, 0.0);
+#endif
+}
+"""
+#: the shaded frame's colour (``shade=True``), after the shadow test: ``shading.shade``'s image,
+#: albedo x (unshadowed direct light from the light centre x V + ambient), the same expression
+_FRAG_SHADE = """
+#ifdef SHADE
+uniform vec3 lc; uniform vec3 ln; uniform float rect; uniform float scale; uniform float ambient;
+layout(location = 0) out vec4 color;                  // RGB, and V in alpha
+void shade() {
+    vec3 n = eye_normal();
+    vec3 d = lc - wp;
+    float r2 = dot(d, d), r = sqrt(r2);
+    float cp = max(dot(n, d) / r, 0.0);
+    if (rect > 0.5) cp *= max(-dot(ln, d) / r, 0.0);
+    color = vec4(albedo() * (scale * cp / r2 * vis + ambient), vis);
+}
+void no_surface() { color = vec4(0.0, 0.0, 0.0, -1.0); }  // black, as ours
+#endif
 """
 #: what every eye pass's shadow test has: the light's map and view, the bias, helpers (after a head)
 _FRAG_EYE_COMMON = """
@@ -306,45 +375,69 @@ class GLFrame:
     #: GLSL ``#define`` lines for ``frag_eye``
     defines = ""
 
-    def __init__(self, scene, width: int, height: int, map_size: int, bias: float, slope_bias: float):
+    def __init__(
+        self, scene, width: int, height: int, map_size: int, bias: float, slope_bias: float, shade: bool = False
+    ):
         import moderngl
 
         self.ctx = _context(moderngl)
         self.renderer = self.ctx.info.get("GL_RENDERER", "?")
         flat = scene.flat
         ctx = self.ctx
+        self.shade = bool(shade)
+        #: the shaded frame's image (H,W,3) float32 after each :meth:`frame` (``shade=True``)
+        self.image = None
+        defines = self.defines + ("#define SHADE\n" if self.shade else "")
+
+        def head(src):
+            return src.replace("#version 330\n", "#version 330\n" + defines, 1)
+
         self.view = eye_view(scene, width, height)
         self.lview = fit_light_view(scene, map_size)
         tri = flat.vertices[flat.faces]  # (F,3,3) non-indexed: a flat face normal per vertex
         fn = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
         fn /= np.maximum(np.linalg.norm(fn, axis=1, keepdims=True), 1e-300)
         occ = tri[flat.occluder]
-        head = (_EYE_DEFERRED if self.deferred else _EYE_FORWARD).replace(
-            "#version 330\n", "#version 330\n" + self.defines, 1
-        )
+        frag = head(_EYE_DEFERRED if self.deferred else _EYE_FORWARD) + self.frag_eye + _FRAG_SHADE
         self.p_depth = ctx.program(vertex_shader=VERT_DEPTH, fragment_shader=FRAG_DEPTH)
         vbo_occ = ctx.buffer(occ.astype("f4").tobytes())
         self.vao_depth = ctx.vertex_array(self.p_depth, [(vbo_occ, "3f", "p")])
-        inter = np.concatenate([tri, np.repeat(fn[:, None, :], 3, axis=1)], axis=2).astype("f4")
-        self.vbo_eye = ctx.buffer(inter.tobytes())
+        cols = [tri, np.repeat(fn[:, None, :], 3, axis=1)]
+        attrs = ("3f 3f", "p", "nrm")
+        if self.shade:  # the face's albedo at its corners (its mesh's, as shading.shade)
+            alb = np.asarray(flat.albedo, np.float64)[flat.mesh_id]
+            cols.append(np.repeat(alb[:, None, :], 3, axis=1))
+            attrs = ("3f 3f 3f", "p", "nrm", "alb")
+        self.vbo_eye = ctx.buffer(np.concatenate(cols, axis=2).astype("f4").tobytes())
         if self.deferred:
-            self.p_eye = ctx.program(vertex_shader=VERT_FULL, fragment_shader=head + self.frag_eye)
+            self.p_eye = ctx.program(vertex_shader=VERT_FULL, fragment_shader=frag)
             self.vao_eye = ctx.vertex_array(self.p_eye, [])
-            p_tri = self.p_gbuf = ctx.program(vertex_shader=VERT_EYE, fragment_shader=FRAG_GBUFFER)
-            self.vao_gbuf = ctx.vertex_array(self.p_gbuf, [(self.vbo_eye, "3f 3f", "p", "nrm")])
-            self.tex_g = [ctx.texture((width, height), 4, dtype="f4") for _ in range(2)]
+            p_tri = self.p_gbuf = ctx.program(vertex_shader=head(VERT_EYE), fragment_shader=head(FRAG_GBUFFER))
+            self.vao_gbuf = ctx.vertex_array(self.p_gbuf, [(self.vbo_eye, *attrs)])
+            self.tex_g = [ctx.texture((width, height), 4, dtype="f4") for _ in range(3 if self.shade else 2)]
             for t in self.tex_g:
                 t.filter = (moderngl.NEAREST, moderngl.NEAREST)
             self.fbo_gbuf = ctx.framebuffer(self.tex_g, ctx.depth_renderbuffer((width, height)))
-            self.p_eye["gpos"].value = 2
-            self.p_eye["gnrm"].value = 3
+            for k, name in enumerate(("gpos", "gnrm", "galb")[: len(self.tex_g)]):
+                self.p_eye[name].value = 2 + k
         else:
-            p_tri = self.p_eye = ctx.program(vertex_shader=VERT_EYE, fragment_shader=head + self.frag_eye)
-            self.vao_eye = ctx.vertex_array(self.p_eye, [(self.vbo_eye, "3f 3f", "p", "nrm")])
+            p_tri = self.p_eye = ctx.program(vertex_shader=head(VERT_EYE), fragment_shader=frag)
+            self.vao_eye = ctx.vertex_array(self.p_eye, [(self.vbo_eye, *attrs)])
         self.tex_map = ctx.texture((map_size, map_size), 1, dtype="f4")
         self.tex_map.filter = (moderngl.NEAREST, moderngl.NEAREST)
         self.fbo_map = ctx.framebuffer([self.tex_map], ctx.depth_renderbuffer((map_size, map_size)))
-        self.rb_v = ctx.renderbuffer((width, height), 1, dtype="f4")
+        # V (R32F), or shaded the colour with V in alpha (RGBA32F: one target, one clear, one read)
+        self.rb_v = ctx.renderbuffer((width, height), 4 if self.shade else 1, dtype="f4")
+        if self.shade:
+            from .shading import AMBIENT, exposure
+
+            light = scene.light
+            self.p_eye["lc"].value = tuple(map(float, light.center))
+            rect = light.shape == "rect"
+            self.p_eye["ln"].value = tuple(map(float, light.normal)) if rect else (0.0, 0.0, 0.0)
+            self.p_eye["rect"].value = 1.0 if rect else 0.0
+            self.p_eye["scale"].value = float(light.intensity * exposure(scene))
+            self.p_eye["ambient"].value = float(AMBIENT)
         self.fbo_eye = ctx.framebuffer([self.rb_v], ctx.depth_renderbuffer((width, height)))
         lv, ev = self.lview, self.view
         _uniforms(self.p_depth, lv)
@@ -387,16 +480,21 @@ class GLFrame:
             ctx.disable(mgl.DEPTH_TEST)
             self.fbo_eye.use()
             self.tex_map.use(0)
-            self.tex_g[0].use(2)
-            self.tex_g[1].use(3)
+            for k, t in enumerate(self.tex_g):  # position, normal (and albedo)
+                t.use(2 + k)
             self.vao_eye.render(mgl.TRIANGLES, vertices=3)  # every pixel
         else:
             self.fbo_eye.use()
-            self.fbo_eye.clear(-1.0, 0.0, 0.0, 0.0, depth=1.0)
+            # no surface: V -1 (the marker), black
+            self.fbo_eye.clear(*((0.0, 0.0, 0.0, -1.0) if self.shade else (-1.0, 0.0, 0.0, 0.0)), depth=1.0)
             self.tex_map.use(0)
             self.vao_eye.render(mgl.TRIANGLES)
-        raw = self.fbo_eye.read(components=1, dtype="f4")
-        v = np.frombuffer(raw, np.float32).reshape(self.height, self.width)[::-1]  # GL rows from the bottom
+        k = 4 if self.shade else 1
+        raw = self.fbo_eye.read(components=k, dtype="f4")
+        px = np.frombuffer(raw, np.float32).reshape(self.height, self.width, k)[::-1]  # GL rows from the bottom
+        v = px[:, :, k - 1]
+        if self.shade:
+            self.image = px[:, :, :3]
         return np.where(v < 0.0, np.float32(np.nan), v)
 
 
@@ -428,6 +526,7 @@ class GLPCSS(GLFrame):
         search_samples: int = 16,
         filter_samples: int = 16,
         pattern: str = "poisson",
+        shade: bool = False,
     ):
         from .methods.pcss import light_extent, sample_pattern
 
@@ -435,7 +534,7 @@ class GLPCSS(GLFrame):
         self.search_pat = sample_pattern(search_samples, pattern, disk)
         self.filter_pat = sample_pattern(filter_samples, pattern, disk)
         self.defines = f"#define NS {len(self.search_pat)}\n#define NF {len(self.filter_pat)}\n"
-        super().__init__(scene, width, height, map_size, bias, slope_bias)
+        super().__init__(scene, width, height, map_size, bias, slope_bias, shade)
         ctx, mgl, p = self.ctx, self.moderngl, self.p_eye
         ext = light_extent(scene.light)
         p["light_w"].value = tuple(map(float, ext))
@@ -541,6 +640,29 @@ def agreement(v_ours: np.ndarray, v_gl: np.ndarray, tol: float = 0.0) -> tuple[f
     disagree = float(np.mean(np.abs(v_ours[both] - v_gl[both]) > tol)) if n else float("nan")
     cover = float(np.mean(np.isnan(v_ours) != np.isnan(v_gl)))
     return disagree, cover, n
+
+
+#: relative colour difference within which a pixel of a shaded GL frame counts as shaded as ours
+#: (float32 GLSL against our float64 arithmetic on float32 inputs: ~1e-6)
+SHADE_RTOL = 1e-4
+
+
+def shading_agreement(scene, v_gl: np.ndarray, img_gl: np.ndarray) -> tuple[float, int]:
+    """(fraction of the pixels a shaded GL frame covers where its colour differs from our
+    ``shading.shade`` of its own V by more than ``SHADE_RTOL``, relative; the number of those
+    pixels). Our side shades with our eye G-buffer: a pixel where the two rasterizers keep a
+    different nearest triangle (a crease or silhouette tie) gets another normal and differs."""
+    from .raster import rasterize
+    from .shading import shade
+
+    h, w = v_gl.shape
+    flat = scene.flat
+    g = rasterize(eye_view(scene, w, h), flat.vertices, flat.faces, cull="none")
+    cov = g.mask & ~np.isnan(v_gl)
+    ours = shade(scene, g, np.where(cov, v_gl, np.float32(np.nan)))
+    d = np.abs(ours - img_gl).max(axis=2) / np.maximum(np.abs(ours).max(axis=2), 1e-3)
+    n = int(cov.sum())
+    return (float(np.mean(d[cov] > SHADE_RTOL)) if n else float("nan")), n
 
 
 def dv_stats(v_ours: np.ndarray, v_gl: np.ndarray) -> tuple[float, float]:
