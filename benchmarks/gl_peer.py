@@ -24,13 +24,14 @@ otherwise run. Each GL frame is the same computation as ours at the method's def
 Both sides run in this one process, interleaved, after warm-up (JIT compile and the GL shader
 compile excluded; geometry is uploaded to the GL once, as our scene keeps its flattened arrays).
 Our frame is ``softshadows.render(scene, method)``'s total, which also shades the image; the GL
-frame above does not. So the table has three ratios: that GL frame against our whole frame (the
-issue's comparison), against our frame without its shading phase (V only, like for like), and a
-second GL frame that also shades (``peer.GLFrame(shade=True)``: our ``shading.shade`` in GLSL, the
-float32 colour read back with V) against our whole frame (like for like). The script checks the
-two V, checks that the shaded GL frame has the same V and our shading of it
-(``peer.shading_agreement``: within ``SHADE_RTOL`` on all but 0.5 % of the pixels), and prints
-the frame times and ratios:
+frame above does not. So the table has four ratios: that GL frame against our whole frame (the
+issue's comparison), against our frame without its shading phase (V only, like for like), and two
+GL frames that also shade (``peer.GLFrame(shade=...)``: our ``shading.shade`` in GLSL) against our
+whole frame (like for like): one reads back an 8-bit colour (clamped to [0, 1]: what a display
+takes, less than our float32 image keeps; llvmpipe's faster target), one our float32 colour. The
+script checks the two V, checks that each shaded GL frame has the same V and our shading of it
+(``peer.shading_agreement``: on all but 0.5 % of the pixels), and prints the frame times and
+ratios:
 
 * ``hard``: V agrees on all but a fraction of a percent of the pixels both cover (they differ only
   where a float32 depth comparison falls the other way);
@@ -59,6 +60,7 @@ import softshadows as ss
 from softshadows.peer import (
     AGREEMENT_TOL,
     SHADE_RTOL,
+    SHADES,
     agreement,
     dv_stats,
     make_peer,
@@ -89,23 +91,25 @@ def main(argv=None) -> int:
         return 2
     scene = icosphere(a.icosphere, a.light) if a.icosphere is not None else ss.load_scene(a.scene, a.light)
     methods = ("hard", "pcss") if a.method == "both" else (a.method,)
-    gls, shaded = {}, {}
+    gls = {}  # per method: the V-only frame, then the shaded ones (SHADES order)
     for m in methods:
         p = method_defaults(m)
-        for peers, shade in ((gls, False), (shaded, True)):
-            peers[m], why = make_peer(
+        gls[m] = []
+        for shade in SHADES:
+            g, why = make_peer(
                 scene, a.size, a.size, a.map, p["bias"], p["slope_bias"], method=m, shade=shade, **peer_params(m)
             )
-            if peers[m] is None:
+            if g is None:
                 print(f"gl_peer: {why}", file=sys.stderr)
                 return 2
+            gls[m].append(g)
     ntri = len(scene.flat.faces)
-    renderer = gls[methods[0]].renderer
+    renderer = gls[methods[0]][0].renderer
     print(f"{scene.name} ({a.light} light), {ntri} triangles, eye {a.size}^2, map {a.map}^2; GL: {renderer}")
     checks, shades = {}, {}
     for m in methods:  # warm-up (JIT and shader compile) and the V check
         ours = ss.render(scene, m, a.size, a.size, map_size=a.map)
-        v_gl = gls[m].frame()
+        v_gl = gls[m][0].frame()
         if m == "hard":
             disagree, cover, nboth = agreement(ours.visibility, v_gl)
             checks[m] = (disagree < 0.005 and cover < 0.005, f"{100 * (1 - disagree):.3f}% equal")
@@ -117,48 +121,52 @@ def main(argv=None) -> int:
                 f"{100 * (1 - disagree):.3f}% within {PCSS_TOL}, mean abs. dV {mean_dv:.1e}, max {max_dv:.2f}",
             )
         checks[m] += (f"{checks[m][1]} on the {nboth} pixels both cover; coverage differs on {100 * cover:.3f}%",)
-        # the shaded frame: the same V, and our shading of that V
-        v_sh = shaded[m].frame()
-        same_v = np.array_equal(v_sh, v_gl, equal_nan=True)
-        off, ncov = shading_agreement(scene, v_sh, shaded[m].image)
-        shades[m] = (same_v and off < 0.005, f"V {'the same' if same_v else 'DIFFERENT'}, colour within "
-                     f"{SHADE_RTOL:g} of ours on {100 * (1 - off):.3f}% of {ncov} pixels")  # fmt: skip
-    t = {m: ([], [], [], []) for m in methods}
+        # the shaded frames: the same V, and our shading of that V
+        shades[m] = []
+        for g in gls[m][1:]:
+            v_sh = g.frame()
+            same_v = np.array_equal(v_sh, v_gl, equal_nan=True)
+            off, ncov = shading_agreement(scene, v_sh, g.image)
+            tol = f"{SHADE_RTOL:g} (relative)" if g.shade == "float" else "1/255 of ours clamped"
+            shades[m].append((same_v and off < 0.005, f"{g.shade}: V {'the same' if same_v else 'DIFFERENT'}, "
+                              f"colour within {tol} on {100 * (1 - off):.3f}% of {ncov} pixels"))  # fmt: skip
+    t = {m: [[] for _ in range(2 + len(SHADES))] for m in methods}
     for _ in range(a.repeats):  # interleaved
         for m in methods:
             r = ss.render(scene, m, a.size, a.size, map_size=a.map)
             t[m][0].append(r.timings["total"])
             t[m][1].append(r.timings["total"] - r.timings.get("shading", 0.0))
-            for k, g in ((2, gls[m]), (3, shaded[m])):
+            for k, g in enumerate(gls[m]):
                 t0 = time.perf_counter()
                 g.frame()
-                t[m][k].append(time.perf_counter() - t0)
+                t[m][2 + k].append(time.perf_counter() - t0)
     print(
-        "| method | ours: full frame, V only (ms) | llvmpipe: V only, shaded (ms) | llvmpipe / ours: V only / full, "
-        "V only / V only, shaded / full | V |"
+        "| method | ours: full frame, V only (ms) | llvmpipe: V only, shaded 8-bit, shaded float (ms) | "
+        "llvmpipe / ours: V only / full, V only / V only, 8-bit / full, float / full | V |"
     )
     print("|---|---|---|---|---|")
     ok = True
     for m in methods:
-        mo, mv, mg, ms = (float(np.median(x)) * 1e3 for x in t[m])
+        mo, mv, mg, m8, mf = (float(np.median(x)) * 1e3 for x in (t[m][0], t[m][1], t[m][2], t[m][4], t[m][3]))
         print(
-            f"| `{m}` | {mo:.1f}, {mv:.1f} | {mg:.1f}, {ms:.1f} | **{mg / mo:.2f}**, {mg / mv:.2f}, {ms / mo:.2f} "
-            f"| {checks[m][1]} |"
+            f"| `{m}` | {mo:.1f}, {mv:.1f} | {mg:.1f}, {m8:.1f}, {mf:.1f} | **{mg / mo:.2f}**, {mg / mv:.2f}, "
+            f"{m8 / mo:.2f}, {mf / mo:.2f} | {checks[m][1]} |"
         )
     print(
         f"medians of {a.repeats} interleaved frames; llvmpipe / ours > 1: ours is faster. The issue's GL frame "
-        "computes V only (first ratio: against our whole frame, which also shades the image); like for like: "
-        "our frame without its shading phase, and the GL frame that also shades (our shading.shade in GLSL, "
-        "the colour into an RGBA32F target with V in alpha, read back)"
+        "computes V only (first ratio: against our whole frame, which also shades the image). Like for like: "
+        "our frame without its shading phase; and GL frames that also shade (our shading.shade in GLSL), "
+        "the colour read back as 8 bits (clamped; less than ours keeps) or as our float32"
     )
     for m in methods:
         print(f"V agreement, {m}: {checks[m][2]}")
-        print(f"shaded GL frame, {m}: {shades[m][1]}")
-        for good, what in ((checks[m][0], "V disagree"), (shades[m][0], "shaded frames disagree")):
+        for _good, what in shades[m]:
+            print(f"shaded GL frame, {m}, {what}")
+        for good, what in ((checks[m][0], "V disagree"), *((s[0], "shaded frames disagree") for s in shades[m])):
             if not good:
                 ok = False
                 print(f"gl_peer: the two {m} {what} beyond the tolerance", file=sys.stderr)
-    for g in (*gls.values(), *shaded.values()):
+    for g in (g for gs in gls.values() for g in gs):
         g.release()
     return 0 if ok else 1
 

@@ -15,7 +15,7 @@ from softshadows.peer import agreement, dv_stats, make_peer, method_defaults, pe
 W, H = 128, 96
 
 
-def _peer(scene, method, shade=False):
+def _peer(scene, method, shade=None):
     p = method_defaults(method)
     gl, why = make_peer(
         scene, W, H, p["map_size"], p["bias"], p["slope_bias"], method=method, shade=shade, **peer_params(method)
@@ -62,16 +62,20 @@ def test_peers_share_a_process():
         pcss.release()
 
 
-@pytest.mark.parametrize("method,light", [("hard", "rect"), ("pcss", "sphere")])
-def test_shaded_gl_frame_is_our_shading_of_its_v(method, light):
-    """The shaded GL frame (forward for ``hard``, deferred for ``pcss``) has the V of the V-only
+@pytest.mark.parametrize(
+    "method,light,shade", [("hard", "rect", "float"), ("hard", "sphere", "rgba8"), ("pcss", "sphere", "float"),
+                           ("pcss", "rect", "rgba8")]
+)  # fmt: skip
+def test_shaded_gl_frame_is_our_shading_of_its_v(method, light, shade):
+    """A shaded GL frame (forward for ``hard``, deferred for ``pcss``) has the V of the V-only
     frame, bit for bit (the same shader code before the colour), and its colour is our
-    ``shading.shade`` of that V: within 1e-4 relative (float32 GLSL against float64 on float32
-    inputs: ~1e-6) on all but 1 % of the pixels (at 128x96, ~0.1 % on bunny: crease and
-    silhouette pixels where the two rasterizers keep a different nearest triangle, so another
-    normal). Black where no surface, as ours."""
+    ``shading.shade`` of that V: float32 within 1e-4 relative (float32 GLSL against float64 on
+    float32 inputs: ~1e-6), 8-bit within one step of ours clamped to [0, 1] (its rounding is half
+    a step), on all but 1 % of the pixels (at 128x96; ~0.1 % on bunny: crease and silhouette
+    pixels where the two rasterizers keep a different nearest triangle, so another normal). Black
+    where no surface, as ours."""
     scene = ss.load_scene("bunny", light)
-    plain, shaded = _peer(scene, method), _peer(scene, method, shade=True)
+    plain, shaded = _peer(scene, method), _peer(scene, method, shade=shade)
     try:
         v = plain.frame()
         v_sh = shaded.frame()
@@ -80,11 +84,17 @@ def test_shaded_gl_frame_is_our_shading_of_its_v(method, light):
         plain.release()
         shaded.release()
     assert np.array_equal(v_sh, v, equal_nan=True)
+    assert img.dtype == (np.float32 if shade == "float" else np.uint8)
     off, n = shading_agreement(scene, v_sh, img)
     assert n > 0.4 * W * H and off < 0.01, off
-    assert img.shape == (H, W, 3) and np.all(img[np.isnan(v_sh)] == 0.0)
-    lit = (v_sh == 1.0) & (img.max(axis=2) > 0.0)
+    assert img.shape == (H, W, 3) and np.all(img[np.isnan(v_sh)] == 0)
+    lit = (v_sh == 1.0) & (img.max(axis=2) > 0)
     assert lit.sum() > 0.2 * W * H  # (the colour is written, not only V)
+
+
+def test_shade_kind_is_checked():
+    with pytest.raises(ValueError, match="shade must be one of"):
+        _peer(ss.load_scene("square", "rect"), "hard", shade="rgb16")
 
 
 def test_peer_params_are_pcss_defaults():

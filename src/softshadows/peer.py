@@ -19,11 +19,13 @@ imported lazily) on a headless EGL context, :class:`GLHard` renders the same com
    same V bit for bit, 1.4-1.6x faster on bunny; deferred ``hard`` was slower);
 3. V read back to the CPU (``glReadPixels`` into NumPy).
 
-With ``shade=True`` the eye pass also shades, as our frame does after V (``shading.shade``: albedo
-x (unshadowed direct light from the light centre x V + ambient), the face's albedo a vertex
-attribute): the colour goes to an RGBA32F target with V in its alpha (one target, one clear, one
-read; V in a target of its own was slower) and :attr:`GLFrame.image` holds it after each frame.
-That frame is the like-for-like peer of our whole frame (``benchmarks/gl_peer.py``).
+With ``shade`` the eye pass also shades, as our frame does after V (``shading.shade``: albedo x
+(unshadowed direct light from the light centre x V + ambient), the face's albedo a vertex
+attribute), and :attr:`GLFrame.image` holds the image after each frame: ``"float"`` writes our
+float32 colour (an RGBA32F target with V in its alpha: one target, one clear, one read; V in a
+target of its own was slower), ``"rgba8"`` an 8-bit colour (clamped to [0, 1]) beside V: what a
+display takes, less than ours keeps, and llvmpipe's faster target. Either is a like-for-like peer
+of our whole frame (``benchmarks/gl_peer.py``).
 
 ``hard``'s test is Williams's (one texel). ``pcss``'s is Fernando's three steps as our
 ``methods/pcss.py`` computes them at its defaults (``docs/methods/pcss.md``), with *our* tap
@@ -101,7 +103,7 @@ void main() {
 _EYE_FORWARD = """
 #version 330
 in vec3 wp; flat in vec3 fn;
-#ifdef SHADE
+#ifdef SHADE_FLOAT
 float vis;                                           // (the colour's alpha)
 #else
 layout(location = 0) out float vis;
@@ -122,7 +124,7 @@ _EYE_DEFERRED = """
 #version 330
 uniform sampler2D gpos; uniform sampler2D gnrm;
 vec3 wp; vec3 fn;
-#ifdef SHADE
+#ifdef SHADE_FLOAT
 float vis;                                           // (the colour's alpha)
 #else
 layout(location = 0) out float vis;
@@ -170,21 +172,28 @@ void main() {
 #endif
 }
 """
-#: the shaded frame's colour (``shade=True``), after the shadow test: ``shading.shade``'s image,
-#: albedo x (unshadowed direct light from the light centre x V + ambient), the same expression
+#: the shaded frame's colour (``shade``), after the shadow test: ``shading.shade``'s image, albedo x
+#: (unshadowed direct light from the light centre x V + ambient), the same expression; "float": an
+#: RGBA32F target with V in alpha, "rgba8": an RGBA8 target (clamped to [0, 1]) beside V's R32F
 _FRAG_SHADE = """
 #ifdef SHADE
 uniform vec3 lc; uniform vec3 ln; uniform float rect; uniform float scale; uniform float ambient;
+#ifdef SHADE_FLOAT
 layout(location = 0) out vec4 color;                  // RGB, and V in alpha
+#define ALPHA vis
+#else
+layout(location = 1) out vec4 color;
+#define ALPHA 1.0
+#endif
 void shade() {
     vec3 n = eye_normal();
     vec3 d = lc - wp;
     float r2 = dot(d, d), r = sqrt(r2);
     float cp = max(dot(n, d) / r, 0.0);
     if (rect > 0.5) cp *= max(-dot(ln, d) / r, 0.0);
-    color = vec4(albedo() * (scale * cp / r2 * vis + ambient), vis);
+    color = vec4(albedo() * (scale * cp / r2 * vis + ambient), ALPHA);
 }
-void no_surface() { color = vec4(0.0, 0.0, 0.0, -1.0); }  // black, as ours
+void no_surface() { color = vec4(0.0, 0.0, 0.0, vis); }  // black, as ours (V: -1, the marker)
 #endif
 """
 #: what every eye pass's shadow test has: the light's map and view, the bias, helpers (after a head)
@@ -333,6 +342,8 @@ void main() {
 """
 #: what the depth map is cleared to: no occluder (ours: +inf)
 EMPTY_DEPTH = 3.0e38
+#: the GL frame's shaded outputs (``GLFrame(shade=...)``): none (V only), our float32 colour, 8-bit
+SHADES = (None, "float", "rgba8")
 
 
 def _uniforms(prog, view, prefix=""):
@@ -376,18 +387,24 @@ class GLFrame:
     defines = ""
 
     def __init__(
-        self, scene, width: int, height: int, map_size: int, bias: float, slope_bias: float, shade: bool = False
+        self, scene, width: int, height: int, map_size: int, bias: float, slope_bias: float, shade: str | None = None
     ):
         import moderngl
 
+        if shade not in SHADES:
+            raise ValueError(f"shade must be one of {', '.join(map(repr, SHADES))}, got {shade!r}")
         self.ctx = _context(moderngl)
         self.renderer = self.ctx.info.get("GL_RENDERER", "?")
         flat = scene.flat
         ctx = self.ctx
-        self.shade = bool(shade)
-        #: the shaded frame's image (H,W,3) float32 after each :meth:`frame` (``shade=True``)
+        self.shade = shade
+        #: the shaded frame's image after each :meth:`frame`: (H,W,3) float32 ("float") or uint8
+        #: ("rgba8", clamped linear); None without ``shade``
         self.image = None
-        defines = self.defines + ("#define SHADE\n" if self.shade else "")
+        defines = (
+            self.defines
+            + {None: "", "float": "#define SHADE\n#define SHADE_FLOAT\n", "rgba8": "#define SHADE\n"}[shade]
+        )
 
         def head(src):
             return src.replace("#version 330\n", "#version 330\n" + defines, 1)
@@ -426,8 +443,13 @@ class GLFrame:
         self.tex_map = ctx.texture((map_size, map_size), 1, dtype="f4")
         self.tex_map.filter = (moderngl.NEAREST, moderngl.NEAREST)
         self.fbo_map = ctx.framebuffer([self.tex_map], ctx.depth_renderbuffer((map_size, map_size)))
-        # V (R32F), or shaded the colour with V in alpha (RGBA32F: one target, one clear, one read)
-        self.rb_v = ctx.renderbuffer((width, height), 4 if self.shade else 1, dtype="f4")
+        # V (R32F); shaded "float": the colour with V in alpha (RGBA32F: one target, one clear, one
+        # read; V in a target of its own was slower), "rgba8": V and the colour (RGBA8)
+        packed = shade == "float"
+        self.rb_v = ctx.renderbuffer((width, height), 4 if packed else 1, dtype="f4")
+        targets = [self.rb_v]
+        if shade == "rgba8":
+            targets.append(ctx.renderbuffer((width, height), 4, dtype="f1"))
         if self.shade:
             from .shading import AMBIENT, exposure
 
@@ -438,7 +460,7 @@ class GLFrame:
             self.p_eye["rect"].value = 1.0 if rect else 0.0
             self.p_eye["scale"].value = float(light.intensity * exposure(scene))
             self.p_eye["ambient"].value = float(AMBIENT)
-        self.fbo_eye = ctx.framebuffer([self.rb_v], ctx.depth_renderbuffer((width, height)))
+        self.fbo_eye = ctx.framebuffer(targets, ctx.depth_renderbuffer((width, height)))
         lv, ev = self.lview, self.view
         _uniforms(self.p_depth, lv)
         self.p_depth["nf"].value = (float(lv.near), float(lv.far))
@@ -485,16 +507,19 @@ class GLFrame:
             self.vao_eye.render(mgl.TRIANGLES, vertices=3)  # every pixel
         else:
             self.fbo_eye.use()
-            # no surface: V -1 (the marker), black
-            self.fbo_eye.clear(*((0.0, 0.0, 0.0, -1.0) if self.shade else (-1.0, 0.0, 0.0, 0.0)), depth=1.0)
+            # no surface: V -1 (the marker), black (an RGBA8 target clamps the -1 to 0)
+            self.fbo_eye.clear(*((0.0, 0.0, 0.0, -1.0) if self.shade == "float" else (-1.0, 0.0, 0.0, 0.0)), depth=1.0)
             self.tex_map.use(0)
             self.vao_eye.render(mgl.TRIANGLES)
-        k = 4 if self.shade else 1
+        k = 4 if self.shade == "float" else 1
         raw = self.fbo_eye.read(components=k, dtype="f4")
         px = np.frombuffer(raw, np.float32).reshape(self.height, self.width, k)[::-1]  # GL rows from the bottom
         v = px[:, :, k - 1]
-        if self.shade:
+        if self.shade == "float":
             self.image = px[:, :, :3]
+        elif self.shade == "rgba8":
+            raw = self.fbo_eye.read(components=4, attachment=1, dtype="f1")
+            self.image = np.frombuffer(raw, np.uint8).reshape(self.height, self.width, 4)[::-1, :, :3]
         return np.where(v < 0.0, np.float32(np.nan), v)
 
 
@@ -526,7 +551,7 @@ class GLPCSS(GLFrame):
         search_samples: int = 16,
         filter_samples: int = 16,
         pattern: str = "poisson",
-        shade: bool = False,
+        shade: str | None = None,
     ):
         from .methods.pcss import light_extent, sample_pattern
 
@@ -589,7 +614,7 @@ def make_peer(
 ):
     """(the GL frame of ``method``, None) or (None, a one-line reason) where moderngl or a GL 3.3
     context is missing. ``params``: the method's other parameters (``GLPCSS``'s tap counts and
-    pattern)."""
+    pattern) and ``shade`` (``GLFrame``'s)."""
     why = unavailable()
     if why is not None:
         return None, why
@@ -642,14 +667,17 @@ def agreement(v_ours: np.ndarray, v_gl: np.ndarray, tol: float = 0.0) -> tuple[f
     return disagree, cover, n
 
 
-#: relative colour difference within which a pixel of a shaded GL frame counts as shaded as ours
-#: (float32 GLSL against our float64 arithmetic on float32 inputs: ~1e-6)
+#: colour difference within which a pixel of a shaded GL frame counts as shaded as ours: float32,
+#: relative (float32 GLSL against our float64 arithmetic on float32 inputs: ~1e-6); 8-bit, the
+#: colour clamped to [0, 1], absolute: one step of 1/255 (the rounding to 8 bits is half of one)
 SHADE_RTOL = 1e-4
+SHADE_ATOL_8BIT = 1.0 / 255.0
 
 
 def shading_agreement(scene, v_gl: np.ndarray, img_gl: np.ndarray) -> tuple[float, int]:
     """(fraction of the pixels a shaded GL frame covers where its colour differs from our
-    ``shading.shade`` of its own V by more than ``SHADE_RTOL``, relative; the number of those
+    ``shading.shade`` of its own V by more than ``SHADE_RTOL``, relative, for a float32 image, or
+    ``SHADE_ATOL_8BIT`` for an 8-bit one against ours clamped to [0, 1]; the number of those
     pixels). Our side shades with our eye G-buffer: a pixel where the two rasterizers keep a
     different nearest triangle (a crease or silhouette tie) gets another normal and differs."""
     from .raster import rasterize
@@ -660,9 +688,14 @@ def shading_agreement(scene, v_gl: np.ndarray, img_gl: np.ndarray) -> tuple[floa
     g = rasterize(eye_view(scene, w, h), flat.vertices, flat.faces, cull="none")
     cov = g.mask & ~np.isnan(v_gl)
     ours = shade(scene, g, np.where(cov, v_gl, np.float32(np.nan)))
-    d = np.abs(ours - img_gl).max(axis=2) / np.maximum(np.abs(ours).max(axis=2), 1e-3)
+    if img_gl.dtype == np.uint8:
+        d = np.abs(np.clip(ours, 0.0, 1.0) - img_gl / np.float32(255.0)).max(axis=2)
+        off = d > SHADE_ATOL_8BIT
+    else:
+        d = np.abs(ours - img_gl).max(axis=2) / np.maximum(np.abs(ours).max(axis=2), 1e-3)
+        off = d > SHADE_RTOL
     n = int(cov.sum())
-    return (float(np.mean(d[cov] > SHADE_RTOL)) if n else float("nan")), n
+    return (float(np.mean(off[cov])) if n else float("nan")), n
 
 
 def dv_stats(v_ours: np.ndarray, v_gl: np.ndarray) -> tuple[float, float]:
