@@ -45,7 +45,7 @@ def main(argv=None) -> int:
             g = rasterize(view, sc.flat.vertices, sc.flat.faces, cull="none")
             ctx = FrameContext(scene=sc, eye=g, eye_view=view, timer=Timer())
             _p, nrm, idx = ctx.points()
-            pts, _bound, _ext = cur.error_bound_samples(ctx.flat, ctx.eye, idx, nrm, 0.0, sc.light)
+            pts, _bound, _ext = cur.error_bound_samples(ctx.flat, ctx.eye, idx, sc.camera.eye, 0.0, sc.light)
             res = {}
             for key, mod in (("tree", cur), ("other", other)):
                 v, _st, umbra, pen = mod.irregular_visibility(sc, pts, nrm, raw=True)
