@@ -147,7 +147,8 @@ def main(argv=None) -> int:
     print("|---|---|---|---|---|")
     ok = True
     for m in methods:
-        mo, mv, mg, m8, mf = (float(np.median(x)) * 1e3 for x in (t[m][0], t[m][1], t[m][2], t[m][4], t[m][3]))
+        col = {shade: 2 + k for k, shade in enumerate(SHADES)}  # t[m]'s column of each GL frame
+        mo, mv, mg, m8, mf = (float(np.median(t[m][c])) * 1e3 for c in (0, 1, col[None], col["rgba8"], col["float"]))
         print(
             f"| `{m}` | {mo:.1f}, {mv:.1f} | {mg:.1f}, {m8:.1f}, {mf:.1f} | **{mg / mo:.2f}**, {mg / mv:.2f}, "
             f"{m8 / mo:.2f}, {mf / mo:.2f} | {checks[m][1]} |"

@@ -236,8 +236,10 @@ def _facing_class(px, py, pz, nx, ny, nz, g, shape, center, u, v, radius):
 
 
 @kernel(inline=True)
-def _f32(x):
-    return np.float64(np.float32(x))  # Embree's float32 vertex coordinate
+def embree_coord(x):
+    """A vertex coordinate as Embree holds it (float32), back in float64: the hit point's inputs
+    (:func:`hit_point`, and ``irregular.error_bound_samples``, which computes the same points)."""
+    return np.float64(np.float32(x))
 
 
 @kernel(inline=True)
@@ -247,9 +249,9 @@ def hit_point(verts, faces, t, b1, b2, m0, m1, m2):
     with the operations in the order the earlier NumPy version used, so the results are the same
     bits."""
     i0, i1, i2 = faces[t, 0], faces[t, 1], faces[t, 2]
-    ax, ay, az = _f32(verts[i0, 0]), _f32(verts[i0, 1]), _f32(verts[i0, 2])
-    bx, by, bz = _f32(verts[i1, 0]), _f32(verts[i1, 1]), _f32(verts[i1, 2])
-    cx, cy, cz = _f32(verts[i2, 0]), _f32(verts[i2, 1]), _f32(verts[i2, 2])
+    ax, ay, az = embree_coord(verts[i0, 0]), embree_coord(verts[i0, 1]), embree_coord(verts[i0, 2])
+    bx, by, bz = embree_coord(verts[i1, 0]), embree_coord(verts[i1, 1]), embree_coord(verts[i1, 2])
+    cx, cy, cz = embree_coord(verts[i2, 0]), embree_coord(verts[i2, 1]), embree_coord(verts[i2, 2])
     return hit_point_at(ax, ay, az, bx, by, bz, cx, cy, cz, b1, b2, m0, m1, m2)
 
 

@@ -35,7 +35,7 @@ from ..geometry.silhouette import build_adjacency, facing, facing_from_planes
 from ..raster.rasterizer import bin_offsets, prefetch
 from ..raster.view import VP_B, VP_FORWARD, VP_L, VP_ORIGIN, VP_R, VP_RIGHT, VP_T, VP_UP, View, light_frame, light_view
 from .base import Method, MethodOutput, Param, register
-from .ground_truth import BOUND_SAFETY, _f32, hit_point_at
+from .ground_truth import BOUND_SAFETY, embree_coord, hit_point_at
 
 #: a connected occluder component with at most this fraction of boundary edges is a solid (only its
 #: light-facing triangles are counted); otherwise a sheet (both sides counted)
@@ -2638,11 +2638,11 @@ def _error_bound_samples_slot(
             t = tri_img[q]
             if t != tp:  # (a neighbouring pixel mostly shares its triangle: its corners again)
                 # the chain triangle -> face -> vertices, each a dependent load (Embree's float32
-                # vertex coordinates, _f32)
+                # vertex coordinates, embree_coord)
                 va, vb, vc = faces[t, 0], faces[t, 1], faces[t, 2]
-                a0, a1, a2 = _f32(verts[va, 0]), _f32(verts[va, 1]), _f32(verts[va, 2])
-                b0, b1, b2 = _f32(verts[vb, 0]), _f32(verts[vb, 1]), _f32(verts[vb, 2])
-                c0, c1, c2 = _f32(verts[vc, 0]), _f32(verts[vc, 1]), _f32(verts[vc, 2])
+                a0, a1, a2 = embree_coord(verts[va, 0]), embree_coord(verts[va, 1]), embree_coord(verts[va, 2])
+                b0, b1, b2 = embree_coord(verts[vb, 0]), embree_coord(verts[vb, 1]), embree_coord(verts[vb, 2])
+                c0, c1, c2 = embree_coord(verts[vc, 0]), embree_coord(verts[vc, 1]), embree_coord(verts[vc, 2])
             tp = t
             g[0, i], g[1, i], g[2, i] = a0, a1, a2
             g[3, i], g[4, i], g[5, i] = b0, b1, b2
