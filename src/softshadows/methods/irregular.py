@@ -25,6 +25,7 @@ from .._jit import (
     compact_indices,
     kernel,
     next_item,
+    row_stride,
     run_slots,
     run_threads,
     start_slots,
@@ -2219,13 +2220,14 @@ def _penumbra_kernel(
     buf = np.zeros((4, 8))  # scratch, once per worker
     cand = np.empty(max_bin + 8, np.int64)  # (compact_indices writes 8 at a time)
     cval = np.empty(max_bin)
-    cp = np.empty((3, max_bin))  # the candidates' positions, contiguous
-    rsc = np.empty((_TERM_ROWS, max_bin))  # the edge terms' scratch
+    ms = row_stride(max_bin)  # (a row length that keeps a column's rows in different cache sets)
+    cp = np.empty((3, ms))  # the candidates' positions, contiguous
+    rsc = np.empty((_TERM_ROWS, ms))  # the edge terms' scratch
     sel = np.empty(max_bin, np.int64)
     keep = np.empty(max_col, np.int8)
-    rw = np.empty((_ROW, max_bin))  # the current bin's sample rows (one row per field) and 1 / distance
+    rw = np.empty((_ROW, ms))  # the current bin's sample rows (one row per field) and 1 / distance
     sinv = np.empty(max_bin)
-    sdir = np.empty((3, max_bin))  # the bin's samples' unit directions from the light centre (sphere)
+    sdir = np.empty((3, ms))  # the bin's samples' unit directions from the light centre (sphere)
     mdir = np.empty((3, B * B))  # the current bin's cells' directions (disk_cell_reach)
     c0, c1, c2 = center[0], center[1], center[2]
     while True:
@@ -2620,7 +2622,7 @@ def _error_bound_samples_slot(
     thread finished ~0.3 ms after the other on `bunny`."""
     n = idx.shape[0]
     nblk = (n + _EB_BLOCK - 1) // _EB_BLOCK
-    g = np.empty((17, _EB_BLOCK))  # inputs (14 rows), then the result (3)
+    g = np.empty((17, row_stride(_EB_BLOCK)))  # inputs (14 rows), then the result (3)
     ex, ey, ez = eye[0], eye[1], eye[2]
     while True:
         blk = next_item(counter)
