@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._jit import kernel, run_threads
+from .._jit import kernel, row_stride, run_threads
 from ..raster import View, rasterize_depth
 from ..raster.kernels import view_project
 from ..raster.view import VP_L, VP_ORIGIN, VP_ORTHO, VP_R, VP_W, light_view
@@ -149,7 +149,7 @@ def shadow_lookup_slot(slot, vp, depth_map, position, normal, mask, bias, slope_
     lit)."""
     Hm, Wm = depth_map.shape
     H, W = mask.shape
-    sc = np.empty((10, W))  # x, y, z, nx, ny, nz, then sx, sy, zt, ok
+    sc = np.empty((10, row_stride(W)))  # x, y, z, nx, ny, nz, then sx, sy, zt, ok (row_stride: 10 rows)
     for i in range(slot, H, nslot):
         biased_light_row(vp, position, normal, mask, i, bias, slope_bias, sc)
         if pcf_radius == 0:
