@@ -114,3 +114,18 @@ def test_shared_work_raises_the_calling_threads_error_after_the_helpers():
         share.run(fn, 2)
     assert helper_done.is_set()
     t.join(timeout=10.0)
+
+
+def test_row_stride_is_the_shortest_odd_number_of_lines_that_holds_the_row():
+    """``row_stride(n)`` (a float64 scratch row's length): at least n, a whole number of 64-byte
+    lines (8 float64), that number odd, and the shortest such length (so that a column's rows fall
+    in different cache sets at the least memory)."""
+    from softshadows._jit import py_callable, row_stride
+
+    rs = py_callable(row_stride)
+    for n in [1, 7, 8, 9, 15, 16, 17, 255, 256, 257, 512, 1000, 1024, 13088]:
+        w = rs(n)
+        assert w >= n and w % 8 == 0 and (w // 8) % 2 == 1, (n, w)
+        shorter = [v for v in range(n, w) if v % 8 == 0 and (v // 8) % 2 == 1]
+        assert not shorter, (n, w, shorter)
+    assert rs(256) == 264 and rs(512) == 520 and rs(8) == 8

@@ -582,9 +582,9 @@ def frozen(a: np.ndarray) -> np.ndarray:
 @kernel(inline=True)
 def row_stride(n):
     """A row length >= ``n`` for a float64 scratch (rows, length) that a loop reads and writes
-    column by column, many rows per column: a whole, odd number of 64-byte lines. With a
-    power-of-two length (e.g. 256) every row of a column falls in the same L1 cache sets: more
-    rows than the cache's 8 ways evict each other (``irregular``'s error-bound pass, 17 rows of 256:
-    its kernel 0.93x the time with 264)."""
+    column by column, many rows per column: the shortest whole, odd number of 64-byte lines. With
+    a power-of-two length (e.g. 256: 2 KiB) a column's rows fall in one or two L1 cache sets, and
+    more rows than the cache's 8 ways evict each other (``irregular``'s error-bound pass, 17 rows
+    of 256: its kernel 0.92-0.94x the time with 264)."""
     lines = (n + 7) // 8
     return 8 * (lines + 1 - lines % 2)
