@@ -639,12 +639,14 @@ def test_visibility_finite_in_unit_interval(name, shape):
 def test_sort_samples_is_the_serial_counting_sort_whatever_the_threads(threads, serial_places, monkeypatch):
     """``sort_samples`` (the grid's counting sort and gather by the threads together; the places
     in one serial pass below ``_SERIAL_PLACES`` keys, else by the threads) gives the serial
-    ``counting_sort``'s start and order (stable, negative keys dropped) and the records in that
-    order, with one thread or two; keys repeat, some bins stay empty."""
+    ``counting_sort``'s start and order (stable, negative keys dropped) and the samples in that
+    order with their image position and distance in the view (the same bits as NumPy's same
+    expressions), with one thread or two; keys repeat, some bins stay empty."""
     import numba
 
     from softshadows.methods import irregular as ir
     from softshadows.methods.irregular import counting_sort, sort_samples
+    from softshadows.raster.view import VP_FORWARD, VP_ORIGIN, VP_RIGHT, VP_UP, View
 
     monkeypatch.setattr(ir, "_SERIAL_PLACES", 1 << 30 if serial_places else 0)
 
@@ -652,18 +654,30 @@ def test_sort_samples_is_the_serial_counting_sort_whatever_the_threads(threads, 
     n, n_keys = 5003, 97
     key = rng.integers(-5, n_keys, size=n).astype(np.int64)
     key[key == 13] = 14  # an empty bin
-    rec = rng.standard_normal((n, 6))
+    pts = rng.standard_normal((n, 3)) + np.array([0.0, 0.0, 10.0])
+    f = np.array([0.1, -0.2, 1.0]) / np.linalg.norm([0.1, -0.2, 1.0])
+    r = np.cross([0.0, 1.0, 0.0], f)
+    r /= np.linalg.norm(r)
+    vp = View(np.array([0.3, -0.1, 0.2]), r, np.cross(f, r), f, (-1, 1, -1, 1), 0.1, 100.0, 8, 8).params()
     old = numba.get_num_threads()
     numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
     try:
-        start, order, sx, sy, sp, sd = sort_samples(key, rec, n_keys)
+        start, order, sx, sy, sp, sd = sort_samples(key, pts, vp, n_keys)
     finally:
         numba.set_num_threads(old)
     s_ref, o_ref = counting_sort(key, n_keys)
     np.testing.assert_array_equal(start, s_ref)
     np.testing.assert_array_equal(order, o_ref)
-    np.testing.assert_array_equal(np.stack([sx, sy, sd], 1), rec[o_ref][:, :3])
-    np.testing.assert_array_equal(sp, rec[o_ref][:, 3:])
+    d = pts[o_ref] - vp[VP_ORIGIN : VP_ORIGIN + 3]
+
+    def dot(a):
+        return d[:, 0] * a[0] + d[:, 1] * a[1] + d[:, 2] * a[2]
+
+    z = dot(vp[VP_FORWARD : VP_FORWARD + 3])
+    np.testing.assert_array_equal(sx, dot(vp[VP_RIGHT : VP_RIGHT + 3]) / z)
+    np.testing.assert_array_equal(sy, dot(vp[VP_UP : VP_UP + 3]) / z)
+    np.testing.assert_array_equal(sd, np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2]))
+    np.testing.assert_array_equal(sp, pts[o_ref])
 
 
 def test_bound_median_is_the_median_of_every_64th_sample():

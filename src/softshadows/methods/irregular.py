@@ -124,10 +124,11 @@ def slice_of(d, sb):
 
 
 @kernel(nogil=True, nrt=False, noalias=True)
-def _sample_keys_slot(slot, pts, vp, gx, gy, rx, ry, slices, sb, near, rec, key, counter, nslot):
-    """Per sample: its grid key (bin, cell in bin, slice; -1 behind the view) and its record
-    ``rec[k]`` = (image x, image y, distance to the light centre, position): one row, so that the
-    counting sort's gather reads one cache line per sample. ``rx[cx] + ry[cy]`` is cell (cx, cy)'s
+def _sample_keys_slot(slot, pts, vp, gx, gy, rx, ry, slices, sb, near, key, counter, nslot):
+    """Per sample: its grid key (bin, cell in bin, slice; -1 behind the view). Its image position
+    and distance are computed again where the sort gathers the sample (:func:`sample_projection`,
+    the same bits): written here as a 48-byte record per sample and gathered, they cost more
+    (frames 0.989-0.994 without them, 2026-12-05). ``rx[cx] + ry[cy]`` is cell (cx, cy)'s
     number, bin-major (:func:`cell_numbers`: tables instead of two integer divisions per sample).
     Run by ``run_slots``: each slot takes the next run of ``_KEY_RUN`` samples (``next_item``)
     until none is left (with fixed halves, one thread finished ~0.15 ms after the other on
@@ -138,7 +139,7 @@ def _sample_keys_slot(slot, pts, vp, gx, gy, rx, ry, slices, sb, near, rec, key,
         q = next_item(counter) * _KEY_RUN
         if q >= n:
             break
-        _sample_keys_run(q, min(q + _KEY_RUN, n), pts, vp, l, r, b, t, gx, gy, rx, ry, slices, sb, near, rec, key)
+        _sample_keys_run(q, min(q + _KEY_RUN, n), pts, vp, l, r, b, t, gx, gy, rx, ry, slices, sb, near, key)
 
 
 #: samples per work item of :func:`_sample_keys_slot`
@@ -146,32 +147,32 @@ _KEY_RUN = 4096
 
 
 @kernel(inline=True)
-def _sample_keys_run(q0, q1, pts, vp, l, r, b, t, gx, gy, rx, ry, slices, sb, near, rec, key):
+def sample_projection(pts, k, vp):
+    """Sample k's (x, y, z) in the grid's view ``vp`` (before the division by z) and its distance
+    to the light centre: the same expressions wherever a sample's image position or distance is
+    needed (its key, :func:`_sample_keys_run`; its sorted record, :func:`_sort_slot`)."""
+    dx = pts[k, 0] - vp[VP_ORIGIN]
+    dy = pts[k, 1] - vp[VP_ORIGIN + 1]
+    dz = pts[k, 2] - vp[VP_ORIGIN + 2]
+    x = dx * vp[VP_RIGHT] + dy * vp[VP_RIGHT + 1] + dz * vp[VP_RIGHT + 2]
+    y = dx * vp[VP_UP] + dy * vp[VP_UP + 1] + dz * vp[VP_UP + 2]
+    z = dx * vp[VP_FORWARD] + dy * vp[VP_FORWARD + 1] + dz * vp[VP_FORWARD + 2]
+    return x, y, z, np.sqrt(dx * dx + dy * dy + dz * dz)
+
+
+@kernel(inline=True)
+def _sample_keys_run(q0, q1, pts, vp, l, r, b, t, gx, gy, rx, ry, slices, sb, near, key):
     """Samples q0 to q1 - 1 of :func:`_sample_keys_slot`."""
     # unsigned indices: no negative-index wrap-around code at every access (a prange's index is
     # unsigned too; with signed ones _compose_slot's scatter ran slower in a micro-benchmark)
     k0, k1 = np.uint64(q0), np.uint64(q1)
     for k in range(k0, k1):
-        dx = pts[k, 0] - vp[VP_ORIGIN]
-        dy = pts[k, 1] - vp[VP_ORIGIN + 1]
-        dz = pts[k, 2] - vp[VP_ORIGIN + 2]
-        x = dx * vp[VP_RIGHT] + dy * vp[VP_RIGHT + 1] + dz * vp[VP_RIGHT + 2]
-        y = dx * vp[VP_UP] + dy * vp[VP_UP + 1] + dz * vp[VP_UP + 2]
-        z = dx * vp[VP_FORWARD] + dy * vp[VP_FORWARD + 1] + dz * vp[VP_FORWARD + 2]
-        d = np.sqrt(dx * dx + dy * dy + dz * dz)
-        rec[k, 2] = d
-        rec[k, 3] = pts[k, 0]
-        rec[k, 4] = pts[k, 1]
-        rec[k, 5] = pts[k, 2]
+        x, y, z, d = sample_projection(pts, k, vp)
         if not (z > near):
             key[k] = -1
-            rec[k, 0] = 0.0
-            rec[k, 1] = 0.0
             continue
         xx = x / z
         yy = y / z
-        rec[k, 0] = xx
-        rec[k, 1] = yy
         cx = int(min(max(np.floor((xx - l) / (r - l) * gx), 0.0), gx - 1.0))
         cy = int(min(max(np.floor((t - yy) / (t - b) * gy), 0.0), gy - 1.0))
         key[k] = (rx[np.uint64(cx)] + ry[np.uint64(cy)]) * slices + slice_of(d, sb)
@@ -197,18 +198,19 @@ def counting_sort(key, n_keys):
     return cnt, order
 
 
-#: sort_samples' gather prefetches the record this many samples ahead (``prefetch``)
+#: sort_samples' gather prefetches the sample this many samples ahead (``prefetch``)
 _GATHER_AHEAD = 16
 
 
 @kernel(nogil=True, nrt=False)
-def _sort_slot(w, phase, key, rec, hist, tot, start, order, sx, sy, sp, sd):
+def _sort_slot(w, phase, key, pts, vp, hist, tot, start, order, sx, sy, sp, sd):
     """One slot of :func:`sort_samples` (``run_slots``; C = ``hist.shape[0]`` slots), one phase per
     launch: 0, slot w counts the keys of its chunk of the input into ``hist[w]``; 1, the samples of
     its range of keys, all chunks, into ``tot[w + 1]``; 2, from ``tot[w]`` on, each key's first
     place (``start``) and each chunk's next place for it, key-major and chunk-minor (``hist``); 3,
     its chunk's samples scattered to their places in input order (``order``); 4, its range of the
-    sorted samples gathered (their records' rows)."""
+    sorted samples gathered (their positions, and their image positions and distances from them:
+    :func:`sample_projection`)."""
     C = hist.shape[0]
     n = key.shape[0]
     nk = hist.shape[1]
@@ -248,17 +250,18 @@ def _sort_slot(w, phase, key, rec, hist, tot, start, order, sx, sy, sp, sd):
         j1 = (w + 1) * m // C
         z = np.uint64(0)
         for j in range(w * m // C, j1):
-            if j + _GATHER_AHEAD < j1:  # the records are read in cell order: a cache miss each
+            if j + _GATHER_AHEAD < j1:  # the samples are read in cell order: a cache miss each
                 kn = np.uint64(order[j + _GATHER_AHEAD])
-                prefetch(rec, (kn, z))
-                prefetch(rec, (kn, np.uint64(5)))
+                prefetch(pts, (kn, z))
+                prefetch(pts, (kn, np.uint64(2)))
             k = np.uint64(order[j])
-            sx[j] = rec[k, 0]
-            sy[j] = rec[k, 1]
-            sd[j] = rec[k, 2]
-            sp[j, 0] = rec[k, 3]
-            sp[j, 1] = rec[k, 4]
-            sp[j, 2] = rec[k, 5]
+            x, y, zz, d = sample_projection(pts, k, vp)  # (zz > near: the sample has a key)
+            sx[j] = x / zz
+            sy[j] = y / zz
+            sd[j] = d
+            sp[j, 0] = pts[k, 0]
+            sp[j, 1] = pts[k, 1]
+            sp[j, 2] = pts[k, 2]
 
 
 #: grids with fewer keys (cells x slices) than this take phase 2 of :func:`sort_samples` (the
@@ -267,9 +270,10 @@ def _sort_slot(w, phase, key, rec, hist, tot, start, order, sx, sy, sp, sd):
 _SERIAL_PLACES = 1 << 20
 
 
-def sort_samples(key, rec, n_keys: int):
+def sort_samples(key, pts, vp, n_keys: int):
     """(start (n_keys + 1), order, sx, sy, sp, sd): :func:`counting_sort` of the grid keys (the same
-    ``start`` and ``order``: stable, negative keys dropped) and the sorted samples' records gathered,
+    ``start`` and ``order``: stable, negative keys dropped) and the sorted samples ``pts`` gathered
+    with their image positions (x/z, y/z) and distances in the grid's view ``vp`` (sx, sy, sd),
     by the threads together (``_sort_slot``, its five phases; phases 1 and 2 as one serial pass,
     the rasterizer's ``bin_offsets`` (keys for tiles, chunks the same), below ``_SERIAL_PLACES``
     keys): the serial sort's scatter was the
@@ -282,7 +286,7 @@ def sort_samples(key, rec, n_keys: int):
     e0, e1, e2 = np.empty(0, np.int64), np.empty(0), np.empty((0, 3))  # (the outputs, not yet made)
     serial = C == 1 or n_keys < _SERIAL_PLACES
     for phase in (0,) if serial else (0, 1):  # (one range: it starts at 0)
-        run_slots(_sort_slot, C, phase, key, rec, hist, tot, start, e0, e1, e1, e2, e1)
+        run_slots(_sort_slot, C, phase, key, pts, vp, hist, tot, start, e0, e1, e1, e2, e1)
     if serial:
         bin_offsets(hist, start)  # (start[n_keys]: the total)
         m = int(start[n_keys])
@@ -294,7 +298,7 @@ def sort_samples(key, rec, n_keys: int):
     sx, sy, sd = np.empty(m), np.empty(m), np.empty(m)
     sp = np.empty((m, 3))
     for phase in (3, 4) if serial else (2, 3, 4):
-        run_slots(_sort_slot, C, phase, key, rec, hist, tot, start, order, sx, sy, sp, sd)
+        run_slots(_sort_slot, C, phase, key, pts, vp, hist, tot, start, order, sx, sy, sp, sd)
     return start, order, sx, sy, sp, sd
 
 
@@ -511,13 +515,12 @@ def build_sample_grid(light, pts: np.ndarray, grid: int, bins: int, slices: int,
     nbx = nby = -(-grid // bins)
     dlo = max(d0 * (1 - 1e-9), 1e-12)
     dhi = max(d1 * (1 + 1e-9), dlo * (1 + 1e-9))
-    rec = np.empty((n, 6))
     key = np.empty(n, np.int64)
     near = view.near
     sb = slice_bounds(dlo, dhi, slices)
     rx, ry = cell_numbers(grid, grid, bins, nbx)
-    run_threads(_sample_keys_slot, pts, vp, grid, grid, rx, ry, slices, sb, near, rec, key, work_counter())
-    start, order, sx, sy, sp, sd = sort_samples(key, rec, nbx * nby * bins * bins * slices)
+    run_threads(_sample_keys_slot, pts, vp, grid, grid, rx, ry, slices, sb, near, key, work_counter())
+    start, order, sx, sy, sp, sd = sort_samples(key, pts, vp, nbx * nby * bins * bins * slices)
     m = len(order)
     cbox, cmax, occ = _column_boxes(start, sp, sd, slices)
     bmax = cmax.reshape(nbx * nby, bins * bins).max(axis=1)
