@@ -597,30 +597,58 @@ def test_disk_cell_bound_keeps_every_nonzero_term():
     assert rejected > 0.5 * empty_cells
 
 
-def test_rect_halfplanes_area_against_exact_cases():
-    """``rect_halfplanes_area`` (twice the area) on regions of [-1, 1] x [-0.5, 0.5] whose area is
-    known exactly, including first lines that coincide with a side (facing the same way: counted
-    once; facing each other: a region of zero width) and wedges of a quarter and an eighth turn.
-    Tolerance: a few units in the last place of the O(1) sums."""
-    from softshadows.analytic import rect_halfplanes_area
+def test_rect_sector_area_against_exact_cases():
+    """``rect_sector_area``: the area of [-1, 1] x [-0.5, 0.5] swept counter-clockwise from the +x
+    axis, at the axes, the corners and in between (exact in binary: tolerance 0), and the swept
+    area between two directions through opposite corners is half the rectangle."""
+    from softshadows.analytic import rect_sector_area
 
-    def area(a1, b1, c1, a2, b2, a3, b3):
-        return 0.5 * py_callable(rect_halfplanes_area)(1.0, 0.5, a1, b1, c1, a2, b2, a3, b3)
-
-    up = (0.0, 1.0, 0.0, 1.0)  # the wedge y >= 0 (both lines the x axis)
+    g = py_callable(rect_sector_area)
     cases = [
-        ((1.0, 0.0, 5.0, *up), 1.0),  # a line missing the rectangle: its upper half
-        ((1.0, 0.0, -0.5, 1.0, 1.0, 1.0, 1.0), 0.5),  # x >= 0.5 inside x + y >= 0: the strip
-        ((-1.0, 0.0, 1.0, *up), 1.0),  # x <= 1: the right side itself, facing the same way
-        ((0.0, -1.0, 0.5, 1.0, 0.0, 1.0, 0.0), 1.0),  # y <= 0.5: the top side, inside x >= 0
-        ((1.0, 0.0, -1.0, *up), 0.0),  # x >= 1: facing the right side, zero width
-        ((0.0, 1.0, -0.25, *up), 0.5),  # y >= 0.25: a strip along the top
-        ((-1.0, -1.0, 10.0, 1.0, 0.0, 0.0, 1.0), 0.5),  # the quadrant x, y >= 0
-        ((1.0, 1.0, -1.0, 1.0, 0.0, 0.0, 1.0), 0.125),  # the quadrant beyond x + y = 1: width y
-        ((0.0, 1.0, -0.25, -1.0, 1.0, 0.0, 1.0), 0.34375),  # y >= 0.25, y >= x: x in [-1, y], y in [0.25, 0.5]
+        ((1.0, 0.0), 0.0),
+        ((1.0, 0.25), 0.125),  # the triangle (0,0), (1,0), (1,0.25)
+        ((1.0, 0.5), 0.25),  # the first corner: half the quadrant
+        ((0.5, 0.5), 0.375),  # meets the top at x = 0.5: 0.5 - the triangle to (0, 0.5)
+        ((0.0, 3.0), 0.5),  # the +y axis: one quadrant
+        ((-1.0, 0.5), 0.75),
+        ((-2.0, 0.0), 1.0),  # the -x axis: two quadrants
+        ((-1.0, -0.25), 1.125),
+        ((0.0, -1.0), 1.5),
+        ((1.0, -0.5), 1.75),
+        ((4.0, -0.5), 1.9375),  # meets the right side at y = -0.125
+    ]
+    for (x, y), want in cases:
+        assert g(1.0, 0.5, x, y) == want, (x, y)
+    assert g(1.0, 0.5, -1.0, -0.5) - g(1.0, 0.5, 1.0, 0.5) == 1.0
+
+
+def test_rect_beyond_segment_area_against_exact_cases():
+    """``rect_beyond_segment_area`` on [-1, 1] x [-0.5, 0.5]: the part beyond a segment (or ray)
+    P + t V, 0 <= t <= tmax, inside the angle it subtends at the centre, on cases whose area is
+    known exactly: segments across the rectangle, partly inside, missing it with their line
+    crossing it, along a side, and rays. Tolerance: a few units in the last place of the O(1)
+    sector areas it subtracts."""
+    from softshadows.analytic import rect_beyond_segment_area
+
+    def area(px, py, vx, vy, tmax=1.0):
+        return py_callable(rect_beyond_segment_area)(1.0, 0.5, px, py, vx, vy, tmax)
+
+    inf = np.inf
+    cases = [
+        ((-2.0, 0.25, 4.0, 0.0), 0.5),  # y = 0.25 across: the strip above it
+        ((0.5, -1.0, 0.0, 2.0), 0.5),  # x = 0.5 across: the strip right of it
+        ((0.5, -0.25, 0.0, 0.5), 0.375),  # x = 0.5, |y| <= 0.25: x in [0.5, 1], |y| <= x / 2
+        ((0.5, 0.25, 0.0, -0.5), 0.375),  # the same segment the other way round
+        ((0.5, 0.0, 0.0, 1.0, inf), 0.25),  # the ray up x = 0.5 from y = 0: the first quadrant beyond it
+        ((0.5, 0.0, 0.0, -1.0, inf), 0.25),  # the ray down
+        ((1.5, -1.0, 0.0, 2.0), 0.0),  # outside, its line too
+        ((1.5, -0.2, -0.2, 0.1), 0.0),  # x + 2y = 1.1 crosses the rectangle; the segment ends before it
+        ((-1.0, 0.5, 2.0, 0.0), 0.0),  # along the top side: nothing beyond it
+        ((0.5, 0.5, 0.5, -0.5), 0.125),  # from (0.5, 0.5) to (1, 0): the corner triangle beyond it
+        ((0.0, 0.25, 1.0, 0.0, inf), 0.25),  # y = 0.25, x >= 0: [0, 1] x [0.25, 0.5]
     ]
     for args, want in cases:
-        assert area(*args) == pytest.approx(want, abs=1e-15), args
+        assert area(*args) == pytest.approx(want, abs=4e-16), args
 
 
 # ---------------------------------------------------------------------------------------------

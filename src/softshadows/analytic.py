@@ -358,72 +358,63 @@ def disk_polygon_occluder_visibility(points, polygon, light_center, radius):
 
 
 @kernel(inline=True)
-def _interval_clip(lo, hi, a, k, ia):
-    """[lo, hi] clipped to a s + k >= 0, given ia = 1 / a, for a != 0 (a == 0 leaves it as is: the
-    caller decides), as selects (it vectorizes)."""
-    r = -k * ia
-    lo = r if (a > 0.0) & (r > lo) else lo
-    hi = r if (a < 0.0) & (r < hi) else hi
-    return lo, hi
+def rect_sector_area(hu, hv, x, y):
+    """The area of the rectangle [-hu, hu] x [-hv, hv] swept by a ray from its centre turning
+    counter-clockwise from the +x axis to the direction (x, y) != (0, 0): in [0, 4 hu hv). Per
+    quadrant, by the side the ray meets: the triangle to the side x = hu is 0.5 hu^2 tan, the one to
+    y = hv the quadrant's hu hv less 0.5 hv^2 cot (one division); the other quadrants by symmetry.
+    Branch-free (selects)."""
+    ax, ay = abs(x), abs(y)
+    side = ay * hu <= ax * hv  # the ray meets a side x = +-hu
+    r = (ay if side else ax) / (ax if side else ay)
+    q = hu * hv
+    g = 0.5 * hu * hu * r if side else q - 0.5 * hv * hv * r  # from the x axis, in the first quadrant
+    q1 = (x <= 0.0) & (y > 0.0)
+    q2 = (x < 0.0) & (y <= 0.0)
+    q3 = (x >= 0.0) & (y < 0.0)
+    base = 3.0 * q if q3 else 0.0  # (one two-way select per statement: nested ones keep loops scalar)
+    base = 2.0 * q if q2 else base
+    base = q if q1 else base
+    h = q - g
+    return base + (h if q1 | q3 else g)
 
 
 @kernel(inline=True)
-def _side_length(lo, hi, a, k, ia, a2, k2, ia2, a3, k3, ia3):
-    """Length of the part of [lo, hi] where a s + k, a2 s + k2 and a3 s + k3 are all >= 0 (ia = 1 / a
-    and so on; a constraint with a zero slope keeps all or nothing by the sign of its constant)."""
-    lo, hi = _interval_clip(lo, hi, a, k, ia)
-    lo, hi = _interval_clip(lo, hi, a2, k2, ia2)
-    lo, hi = _interval_clip(lo, hi, a3, k3, ia3)
-    dead = ((a == 0.0) & (k < 0.0)) | ((a2 == 0.0) & (k2 < 0.0)) | ((a3 == 0.0) & (k3 < 0.0))
-    ln = hi - lo
-    ln = 0.0 if dead else ln
-    return ln if ln > 0.0 else 0.0
-
-
-@kernel(inline=True)
-def rect_halfplanes_area(hu, hv, a1, b1, c1, a2, b2, a3, b3):
-    """Twice the area of the rectangle [-hu, hu] x [-hv, hv] intersected with the half-planes
-    a1 x + b1 y + c1 >= 0, a2 x + b2 y >= 0 and a3 x + b3 y >= 0 (the last two through the centre;
-    (a1, b1) != (0, 0)), without a branch or a data-dependent loop (it vectorizes; Sutherland-Hodgman
-    clipping does neither).
-
-    The region is convex, so by Green's theorem twice its area is the sum over its boundary's
-    segments (counter-clockwise) of x0 y1 - x1 y0: the part of each of the 7 lines that satisfies the
-    other 6 constraints. A rectangle side at distance h from the centre contributes h times its kept
-    length; a line a x + b y + c = 0 traversed along (b, -a) contributes c (t1 - t0) (so the two
-    lines through the centre contribute nothing and are only clips). A line of the first half-plane
-    that coincides with a rectangle side counts once: where they are parallel the side's own test
-    (the half-plane's value on it) decides for both, so that exactly one of them is kept when they
-    face the same way and both (cancelling) when they face each other. Divisions are shared
-    (reciprocals of the slopes): 9 per call."""
-    ia1, ib1, ia2, ib2, ia3, ib3 = 1.0 / a1, 1.0 / b1, 1.0 / a2, 1.0 / b2, 1.0 / a3, 1.0 / b3
-    # the sides, each clipped by the three half-planes: bottom and top along x, right and left along y
-    kb1, kt1, kr1, kl1 = c1 - b1 * hv, c1 + b1 * hv, c1 + a1 * hu, c1 - a1 * hu
-    s = hv * _side_length(-hu, hu, a1, kb1, ia1, a2, -b2 * hv, ia2, a3, -b3 * hv, ia3)
-    s += hv * _side_length(-hu, hu, a1, kt1, ia1, a2, b2 * hv, ia2, a3, b3 * hv, ia3)
-    s += hu * _side_length(-hv, hv, b1, kr1, ib1, b2, a2 * hu, ib2, b3, a3 * hu, ib3)
-    s += hu * _side_length(-hv, hv, b1, kl1, ib1, b2, -a2 * hu, ib2, b3, -a3 * hu, ib3)
-    # the first half-plane's line: P0 + t (b1, -a1), P0 its point nearest the centre
-    im = 1.0 / (a1 * a1 + b1 * b1)
-    px, py = -c1 * a1 * im, -c1 * b1 * im
-    lo, hi = -np.inf, np.inf
-    lo, hi = _interval_clip(lo, hi, -b1, hu - px, -ib1)  # x <= hu
-    lo, hi = _interval_clip(lo, hi, b1, hu + px, ib1)  # x >= -hu
-    lo, hi = _interval_clip(lo, hi, a1, hv - py, ia1)  # y <= hv
-    lo, hi = _interval_clip(lo, hi, -a1, hv + py, -ia1)  # y >= -hv
-    g2, g3 = a2 * px + b2 * py, a3 * px + b3 * py
-    s2, s3 = a2 * b1 - b2 * a1, a3 * b1 - b3 * a1
-    lo, hi = _interval_clip(lo, hi, s2, g2, 1.0 / s2)
-    lo, hi = _interval_clip(lo, hi, s3, g3, 1.0 / s3)
-    # parallel to a pair of sides (b1 == 0: x = const; a1 == 0: y = const): kept by a side when
-    # the side is not (they face the same way) or when it is too (they face each other)
-    keep_r = kr1 >= 0.0 if a1 > 0.0 else kr1 < 0.0
-    keep_l = kl1 >= 0.0 if a1 < 0.0 else kl1 < 0.0
-    keep_t = kt1 >= 0.0 if b1 > 0.0 else kt1 < 0.0
-    keep_b = kb1 >= 0.0 if b1 < 0.0 else kb1 < 0.0
-    dead = ((b1 == 0.0) & ~(keep_r & keep_l)) | ((a1 == 0.0) & ~(keep_t & keep_b))
-    dead = dead | ((s2 == 0.0) & (g2 < 0.0)) | ((s3 == 0.0) & (g3 < 0.0))
-    ln = hi - lo
-    ln = 0.0 if dead else ln
-    ln = ln if ln > 0.0 else 0.0
-    return s + c1 * ln
+def rect_beyond_segment_area(hu, hv, px, py, vx, vy, tmax):
+    """The area of the rectangle [-hu, hu] x [-hv, hv] beyond the segment (or ray) P + t V,
+    0 <= t <= tmax (tmax = inf: a ray), as seen from the centre: the part of the rectangle inside
+    the angle the segment subtends at the centre (< pi) and on the far side of its line (which must
+    not pass through the centre). With [P', Q'] the segment clipped to the rectangle (Liang-Barsky),
+    that is the sector between P' and Q' (:func:`rect_sector_area`) less the triangle (0, P', Q'):
+    the rays of the angle that meet the line outside the rectangle leave it before, and add
+    nothing. 0 when the clipped segment is empty. No branch (it vectorizes); 4 divisions. Rounding:
+    the sector less the triangle, an absolute error of a few units in the last place of the
+    rectangle's area (``irregular.rect_edge_terms`` took the region's area from its 7 clipped
+    boundary lines before: 9 divisions and ~2.5x the time of this, 2026-12-05)."""
+    inf = np.inf
+    # Liang-Barsky: each slab |P + t V| <= h as an interval of t (all or nothing when V's component is 0)
+    ix = 1.0 / vx
+    iy = 1.0 / vy
+    xa, xb = (-hu - px) * ix, (hu - px) * ix
+    ya, yb = (-hv - py) * iy, (hv - py) * iy
+    inx = abs(px) <= hu
+    iny = abs(py) <= hv
+    nx, ny = -inf if inx else inf, -inf if iny else inf  # (one select per statement, as above)
+    lox = min(xa, xb) if vx != 0.0 else nx
+    hix = max(xa, xb) if vx != 0.0 else -nx
+    loy = min(ya, yb) if vy != 0.0 else ny
+    hiy = max(ya, yb) if vy != 0.0 else -ny
+    t0 = max(max(0.0, lox), loy)
+    t1 = min(min(tmax, hix), hiy)
+    keep = t1 > t0
+    t1 = t1 if keep else t0  # (an empty clip: a finite, unused end)
+    ax, ay = px + t0 * vx, py + t0 * vy
+    bx, by = px + t1 * vx, py + t1 * vy
+    cr = ax * by - ay * bx
+    ga, gb = rect_sector_area(hu, hv, ax, ay), rect_sector_area(hu, hv, bx, by)
+    sector = gb - ga if cr > 0.0 else ga - gb
+    full = 4.0 * hu * hv
+    sector = sector + full if sector < -0.5 * full else sector  # (the angle crosses the +x axis)
+    area = sector - 0.5 * abs(cr)
+    area = area if area > 0.0 else 0.0
+    return area if keep else 0.0

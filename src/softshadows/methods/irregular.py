@@ -31,7 +31,7 @@ from .._jit import (
     start_slots,
     work_counter,
 )
-from ..analytic import atan2_upper, rect_halfplanes_area
+from ..analytic import atan2_upper, rect_beyond_segment_area
 from ..geometry.silhouette import build_adjacency, facing, facing_from_planes
 from ..raster.rasterizer import bin_offsets, prefetch
 from ..raster.view import VP_B, VP_FORWARD, VP_L, VP_ORIGIN, VP_R, VP_RIGHT, VP_T, VP_UP, View, light_frame, light_view
@@ -2014,9 +2014,9 @@ def disk_edge_terms(cp, m, center, radius, e, ea, eb, tv_start, tv, sc, out):
         out[i] = a if sc[_DOK, i] != 0.0 else 0.0
 
 
-#: rows of :func:`rect_edge_terms`' scratch: the first half-plane (beyond the edge's line), the two
-#: through the centre (inside the angle), the term's sign and weight (0: an exact zero)
-_RH1, _RH2, _RH3, _RF, _RSC = 0, 3, 5, 7, 8
+#: rows of :func:`rect_edge_terms`' scratch: the projected edge as P + t V, 0 <= t <= tmax (P, V, tmax;
+#: rows 5-6 free), the term's sign and weight (0: an exact zero)
+_RP0, _RV, _RT, _RF, _RSC = 0, 2, 4, 7, 8
 #: rows of the edge terms' scratch (:func:`disk_edge_terms`' are more)
 _TERM_ROWS = max(_RSC, _DOK + 1)
 
@@ -2028,11 +2028,12 @@ def rect_edge_terms(cp, m, center, nrm_l, lu, lv, hu, hv, e, ea, eb, tv_start, t
     (an early exit gives an exact 0): the twin of
     :func:`disk_edge_terms` (``sample_row``'s rectangle part, every early exit a select, branch-free
     on contiguous data: it vectorizes). ``_rect_term``'s Sutherland-Hodgman clipping (data-dependent
-    vertex counts) is replaced by the same region's area from its boundary
-    (:func:`softshadows.analytic.rect_halfplanes_area`): not the same bits as the scalar path, the
-    same values to rounding (tests/test_irregular.py). In two passes: every exit test and the
-    region's half-planes into the scratch ``sc`` (rows ``_R*``), then the area at every candidate,
-    an exit's discarded by a select. The survivors are not compacted first: ``drop_cancelling`` has
+    vertex counts) is replaced by the same region's area as the sector of the rectangle between
+    the projected edge's ends clipped to it, less the triangle they make with the centre
+    (:func:`softshadows.analytic.rect_beyond_segment_area`): not the same bits as the scalar path,
+    the same values to rounding (tests/test_irregular.py). In two passes: every exit test and the
+    projected edge (a segment, or a ray from its end in front of p) into the scratch ``sc`` (rows
+    ``_R*``), then the area at every candidate, an exit's discarded by a select. The survivors are not compacted first: ``drop_cancelling`` has
     already dropped nearly every early exit (of `bunny`'s 1.10M candidates 568k reach this
     function and 539k survive its exits), and compacting cost more than the few areas it spared
     (the penumbra pass 0.91-0.93 of its time before, 2026-12-04). A function of its own, like
@@ -2047,7 +2048,7 @@ def rect_edge_terms(cp, m, center, nrm_l, lu, lv, hu, hv, e, ea, eb, tv_start, t
     l0, l1, l2 = nrm_l[0], nrm_l[1], nrm_l[2]
     ux, uy, uz, vx, vy, vz = lu[0], lu[1], lu[2], lv[0], lv[1], lv[2]
     mu, mv = hu * (1.0 + _SLACK), hv * (1.0 + _SLACK)
-    norm = 0.5 / (4.0 * hu * hv)
+    norm = 1.0 / (4.0 * hu * hv)
     for i in range(m):
         p0, p1, p2 = cp[0, i], cp[1, i], cp[2, i]
         # sample_row
@@ -2092,28 +2093,30 @@ def rect_edge_terms(cp, m, center, nrm_l, lu, lv, hu, hv, e, ea, eb, tv_start, t
         ok &= ~(pa & pb & (out_u | out_v))
         cr = dax * dby - day * dbx
         ok &= cr != 0.0
-        sw = 1.0 if cr > 0.0 else -1.0
         so = 1.0 if nc > 0.0 else -1.0
-        # beyond the line (n.(c - p) + nu U + nv V against the sign of n.(c - p)) and inside the
-        # angle at the centre
-        sc[_RH1, i], sc[_RH1 + 1, i], sc[_RH1 + 2, i] = -so * nu, -so * nv, -so * nc
-        sc[_RH2, i], sc[_RH2 + 1, i], sc[_RH3, i], sc[_RH3 + 1, i] = -sw * day, sw * dax, sw * dby, -sw * dbx
+        # the projected edge as P + t V, 0 <= t <= tmax: the segment from A to B, or with one end
+        # behind p the ray from the other along the far end's direction (on the edge's line)
+        # (as products with 0 / 1 weights: both ends are finite here, so these are exact; as selects
+        # on pa, LLVM made the loop 4x slower)
+        seg = pa & pb
+        wa = 1.0 if pa else 0.0
+        ws = 1.0 if seg else 0.0
+        px, py = dax * wa + dbx * (1.0 - wa), day * wa + dby * (1.0 - wa)
+        qx, qy = dbx * wa + dax * (1.0 - wa), dby * wa + day * (1.0 - wa)  # the other end
+        sc[_RP0, i] = px
+        sc[_RP0 + 1, i] = py
+        sc[_RV, i] = (qx - px) * ws + qx * (1.0 - ws)
+        sc[_RV + 1, i] = (qy - py) * ws + qy * (1.0 - ws)
+        sc[_RT, i] = 1.0 if seg else np.inf
         f = -so * wsum
         sc[_RF, i] = f if ok else 0.0
     for i in range(m):
-        area = rect_halfplanes_area(
-            hu,
-            hv,
-            sc[_RH1, i],
-            sc[_RH1 + 1, i],
-            sc[_RH1 + 2, i],
-            sc[_RH2, i],
-            sc[_RH2 + 1, i],
-            sc[_RH3, i],
-            sc[_RH3 + 1, i],
-        )
+        # the rectangle beyond the projected edge's line, inside the angle it subtends at the centre
+        area = rect_beyond_segment_area(
+            hu, hv, sc[_RP0, i], sc[_RP0 + 1, i], sc[_RV, i], sc[_RV + 1, i], sc[_RT, i]
+        )  # fmt: skip
         f = sc[_RF, i]
-        out[i] = 0.0 if f == 0.0 else f * (abs(area) * norm)  # (an exit's area may be NaN)
+        out[i] = 0.0 if f == 0.0 else f * (area * norm)  # (an exit's area may be NaN)
 
 
 @kernel(nrt=False)
