@@ -597,6 +597,48 @@ def test_disk_cell_bound_keeps_every_nonzero_term():
     assert rejected > 0.5 * empty_cells
 
 
+def test_disk_cells_reach_is_disk_cell_reach_for_every_cell():
+    """``disk_cells_reach`` (the penumbra pass's per-(edge, bin) test of all the bin's cells at once,
+    branch-free) gives ``disk_cell_reach``'s (applies, entry) bit for bit, cell by cell: random
+    edges and cell directions around a light, cells of three sizes; the three outcomes (the quad
+    decides, no entry, an entry) each occur."""
+    from softshadows.methods.irregular import cell_direction, disk_cell_reach, disk_cells_reach
+    from softshadows.raster.view import VP_FORWARD, VP_RIGHT, VP_SIZE, VP_UP
+
+    rng = np.random.default_rng(13)
+    center, radius = np.array([0.1, 2.5, -0.2]), 0.45
+    f = np.array([0.1, -1.0, 0.05])
+    f /= np.linalg.norm(f)
+    r = np.cross(f, [0.0, 0.0, 1.0])
+    r /= np.linalg.norm(r)
+    u = np.cross(r, f)
+    vp = np.zeros(VP_SIZE)
+    vp[VP_RIGHT : VP_RIGHT + 3], vp[VP_UP : VP_UP + 3], vp[VP_FORWARD : VP_FORWARD + 3] = r, u, f
+    ne = 40
+    ea = rng.uniform(-1, 1, (ne, 3)) * [1.0, 0.4, 1.0] + [0.0, 0.8, 0.0]
+    eb = ea + rng.uniform(-0.3, 0.3, (ne, 3))
+    reach, batch, cdir = py_callable(disk_cell_reach), py_callable(disk_cells_reach), py_callable(cell_direction)
+    seen = set()
+    n = 64
+    for half in (0.005, 0.02, 0.06):
+        hd = np.hypot(half, half) * (1.0 + 1e-12)
+        chd, shd = np.cos(hd), np.sin(hd) * (1.0 + 1e-12)
+        mdir = np.array([cdir(x, y, vp) for x, y in rng.uniform(-0.8, 0.8, (n, 2))]).T.copy()
+        for e in range(ne):
+            ar = _edge_arc(ea, eb, e, center, radius)
+            if ar is None:
+                continue
+            arc, rdm = ar
+            iDb = 1.0 / rng.uniform(2.0, 6.0)
+            app, ent = np.full(n, np.nan), np.full(n, np.nan)
+            batch(mdir, n, chd, shd, arc, rdm, radius, iDb, app, ent)
+            for lc in range(n):
+                ok, entry = reach(mdir[0, lc], mdir[1, lc], mdir[2, lc], chd, shd, arc, rdm, radius, iDb)
+                assert (app[lc] != 0.0) == ok and ent[lc] == entry, (half, e, lc)
+                seen.add("quad" if not ok else ("none" if entry < 0.0 else "entry"))
+    assert seen == {"quad", "none", "entry"}
+
+
 def test_rect_sector_area_against_exact_cases():
     """``rect_sector_area``: the area of [-1, 1] x [-0.5, 0.5] swept counter-clockwise from the +x
     axis, at the axes, the corners and in between (exact in binary: tolerance 0), and the swept

@@ -1275,6 +1275,29 @@ def disk_cell_reach(mx, my, mz, chd, shd, arc, rdm, radius, iDb):
     return True, radius * c1 / (rdm - s1)
 
 
+@kernel(inline=True, nrt=False)
+def disk_cells_reach(mdir, n, chd, shd, arc, rdm, radius, iDb, app, ent):
+    """:func:`disk_cell_reach` of the n cells whose directions are ``mdir[:, :n]`` (a bin's), into
+    ``app`` (1.0 where it applies) and ``ent`` (the entry, -1 where none): the same expressions,
+    every branch a select (one per statement), so that the loop over the cells vectorizes; the
+    penumbra pass visited each cell with a chain of branches and square roots instead."""
+    for lc in range(n):
+        sn, inarc, ca, cb = arc_position(mdir[0, lc], mdir[1, lc], mdir[2, lc], arc)
+        applies = (ca > shd) & (cb > shd)
+        cm = ca if ca > cb else cb
+        q = np.sqrt(max(1.0 - cm * cm, 0.0))
+        s_lo = abs(sn) if inarc else q
+        c_lo = 1.0 - sn * sn if inarc else cm
+        c_hi = 1.0 if inarc else cm
+        s1 = max(s_lo * chd - c_hi * shd, 0.0)
+        c1 = c_lo * chd + s_lo * shd
+        passes = s1 + radius * iDb * c1 <= rdm
+        entry = radius * c1 / (rdm - s1)
+        entry = entry if passes else -1.0
+        ent[lc] = entry if applies else -1.0
+        app[lc] = 1.0 if applies else 0.0
+
+
 @kernel
 def _quad_setup(ea, eb, vp, center, radius, shape, nrm_l, dmax, qd):
     """Per edge: image-plane endpoints, the minimum distance of the edge to the light centre and the
@@ -2235,6 +2258,8 @@ def _penumbra_kernel(
     sinv = np.empty(max_bin)
     sdir = np.empty((3, ms))  # the bin's samples' unit directions from the light centre (sphere)
     mdir = np.empty((3, B * B))  # the current bin's cells' directions (disk_cell_reach)
+    capp = np.empty(B * B)  # per (edge, bin): each cell's disk_cell_reach (disk_cells_reach)
+    cent = np.empty(B * B)
     c0, c1, c2 = center[0], center[1], center[2]
     while True:
         q = next_item(counter)
@@ -2307,6 +2332,8 @@ def _penumbra_kernel(
             rdm = reach_ratio(qd, e, radius) if not rect else 0.0
             iDb = 1.0 / (bin_maxd[bi] if per_bin else dmax)  # (disk_cell_reach) the farthest receivers
             arc = qd[e, _QN:]
+            if shape == 1 and not every:  # the bin's cells' test against this edge, all at once
+                disk_cells_reach(mdir, B * B, chd, shd, arc, rdm, radius, iDb, capp, cent)
             # the bin's cells that can overlap the quad's bounding box (one cell of margin for
             # rounding: every cell outside is one ``axes_overlap_box`` rejects on the box axes)
             cx_lo, cx_hi, cy_lo, cy_hi = bx * B, min(bx * B + B, gx), by * B, min(by * B + B, gy)
@@ -2338,9 +2365,7 @@ def _penumbra_kernel(
                             continue
                     elif not every:
                         lc = (cy - by * B) * B + cx - bx * B
-                        ang, dent = disk_cell_reach(
-                            mdir[0, lc], mdir[1, lc], mdir[2, lc], chd, shd, arc, rdm, radius, iDb
-                        )
+                        ang, dent = capp[lc] != 0.0, cent[lc]
                         if ang:
                             if dent < 0.0:
                                 continue
