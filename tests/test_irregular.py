@@ -533,6 +533,24 @@ def test_disk_bound_keeps_every_nonzero_term(scale):
     assert rejected_zeros > 0.5 * zeros
 
 
+def _sphere_cell_setup(rng, ne):
+    """A sphere light (centre, radius), a view from its centre (vp: right, up, forward) and ne
+    random edges (a, b) around and below it: the cell-column tests' setting."""
+    from softshadows.raster.view import VP_FORWARD, VP_RIGHT, VP_SIZE, VP_UP
+
+    center, radius = np.array([0.1, 2.5, -0.2]), 0.45
+    f = np.array([0.1, -1.0, 0.05])
+    f /= np.linalg.norm(f)
+    r = np.cross(f, [0.0, 0.0, 1.0])
+    r /= np.linalg.norm(r)
+    u = np.cross(r, f)
+    vp = np.zeros(VP_SIZE)
+    vp[VP_RIGHT : VP_RIGHT + 3], vp[VP_UP : VP_UP + 3], vp[VP_FORWARD : VP_FORWARD + 3] = r, u, f
+    ea = rng.uniform(-1, 1, (ne, 3)) * [1.0, 0.4, 1.0] + [0.0, 0.8, 0.0]
+    eb = ea + rng.uniform(-0.3, 0.3, (ne, 3))
+    return center, radius, vp, (r, u, f), ea, eb
+
+
 def test_disk_cell_bound_keeps_every_nonzero_term():
     """The sphere's cell-column test (``disk_cell_reach``: the arc's angle to the cell's centre
     direction less the cell's half diagonal, against r / dmin at the farthest receivers) covers
@@ -546,20 +564,10 @@ def test_disk_cell_bound_keeps_every_nonzero_term():
         cell_direction,
         disk_cell_reach,
     )
-    from softshadows.raster.view import VP_FORWARD, VP_RIGHT, VP_SIZE, VP_UP
 
     rng = np.random.default_rng(12)
-    center, radius = np.array([0.1, 2.5, -0.2]), 0.45
-    f = np.array([0.1, -1.0, 0.05])
-    f /= np.linalg.norm(f)
-    r = np.cross(f, [0.0, 0.0, 1.0])
-    r /= np.linalg.norm(r)
-    u = np.cross(r, f)
-    vp = np.zeros(VP_SIZE)
-    vp[VP_RIGHT : VP_RIGHT + 3], vp[VP_UP : VP_UP + 3], vp[VP_FORWARD : VP_FORWARD + 3] = r, u, f
     ne = 60
-    ea = rng.uniform(-1, 1, (ne, 3)) * [1.0, 0.4, 1.0] + [0.0, 0.8, 0.0]
-    eb = ea + rng.uniform(-0.3, 0.3, (ne, 3))
+    center, radius, vp, (r, u, f), ea, eb = _sphere_cell_setup(rng, ne)
     ntri = rng.integers(1, 3, ne)
     tv_start = np.concatenate([[0], np.cumsum(ntri)])
     tv = rng.uniform(-1, 1, (tv_start[-1], 3))
@@ -603,20 +611,10 @@ def test_disk_cells_reach_is_disk_cell_reach_for_every_cell():
     edges and cell directions around a light, cells of three sizes; the three outcomes (the quad
     decides, no entry, an entry) each occur."""
     from softshadows.methods.irregular import cell_direction, disk_cell_reach, disk_cells_reach
-    from softshadows.raster.view import VP_FORWARD, VP_RIGHT, VP_SIZE, VP_UP
 
     rng = np.random.default_rng(13)
-    center, radius = np.array([0.1, 2.5, -0.2]), 0.45
-    f = np.array([0.1, -1.0, 0.05])
-    f /= np.linalg.norm(f)
-    r = np.cross(f, [0.0, 0.0, 1.0])
-    r /= np.linalg.norm(r)
-    u = np.cross(r, f)
-    vp = np.zeros(VP_SIZE)
-    vp[VP_RIGHT : VP_RIGHT + 3], vp[VP_UP : VP_UP + 3], vp[VP_FORWARD : VP_FORWARD + 3] = r, u, f
     ne = 40
-    ea = rng.uniform(-1, 1, (ne, 3)) * [1.0, 0.4, 1.0] + [0.0, 0.8, 0.0]
-    eb = ea + rng.uniform(-0.3, 0.3, (ne, 3))
+    center, radius, vp, _frame, ea, eb = _sphere_cell_setup(rng, ne)
     reach, batch, cdir = py_callable(disk_cell_reach), py_callable(disk_cells_reach), py_callable(cell_direction)
     seen = set()
     n = 64
