@@ -2119,8 +2119,10 @@ def rect_edge_terms(cp, m, center, nrm_l, lu, lv, hu, hv, e, ea, eb, tv_start, t
         so = 1.0 if nc > 0.0 else -1.0
         # the projected edge as P + t V, 0 <= t <= tmax: the segment from A to B, or with one end
         # behind p the ray from the other along the far end's direction (on the edge's line)
-        # (as products with 0 / 1 weights: both ends are finite here, so these are exact; as selects
-        # on pa, LLVM made the loop 4x slower)
+        # (as products with 0 / 1 weights, exact for finite ends: an end behind p is the far end's
+        # finite direction; one projected from a hair in front of p's plane may overflow, and its
+        # NaN then gives a zero area, rect_beyond_segment_area's comparisons failing. As selects on
+        # pa, LLVM made the loop 4x slower)
         seg = pa & pb
         wa = 1.0 if pa else 0.0
         ws = 1.0 if seg else 0.0
