@@ -483,6 +483,41 @@ def _edge_arc(ea, eb, e, center, radius):
     return np.ascontiguousarray(qd[e, _QN : _QN + 15]), py_callable(reach_ratio)(qd, e, radius)
 
 
+def test_disk_reach_in_arc_from_the_ends_cosines_is_arc_positions():
+    """``disk_reach`` decides "inside the arc's wedge" from the ends' cosines (u . a^, u . b^ and
+    a^ . b^) instead of ``arc_position``'s two wedge-plane products: the same keep as the test
+    written with those products, at random unit directions and distances against random arcs
+    (the two can differ only within rounding of a wedge plane, where both values of the test
+    agree)."""
+    from softshadows.methods.irregular import arc_position, disk_reach
+
+    rng = np.random.default_rng(21)
+    ne = 50
+    center, radius = np.array([0.1, 2.5, -0.2]), 0.45
+    ea = rng.uniform(-1, 1, (ne, 3)) * [1.0, 0.4, 1.0] + [0.0, 0.8, 0.0]
+    eb = ea + rng.uniform(-0.6, 0.6, (ne, 3))
+    pos, reach = py_callable(arc_position), py_callable(disk_reach)
+    u = rng.normal(size=(400, 3))
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    iD = 1.0 / rng.uniform(2.0, 6.0, 400)
+    both, kept = [0, 0], 0
+    for e in range(ne):
+        ar = _edge_arc(ea, eb, e, center, radius)
+        if ar is None:
+            continue
+        arc, rdm = ar
+        for (x, y, z), i_d in zip(u, iD):
+            sn, inarc, ca, cb = pos(x, y, z, arc)  # the test as written before, with the products
+            cm = max(ca, cb)
+            s2 = sn * sn if inarc else 1.0 - cm * cm
+            tt = rdm - radius * i_d * (1.0 - s2)
+            want = (tt >= 0.0 and s2 <= tt * tt) or not (ca > 0.0 and cb > 0.0)
+            assert bool(reach(x, y, z, i_d, radius, rdm, arc)) == want
+            both[bool(inarc)] += 1
+            kept += want
+    assert min(both) > 500 and 0 < kept < sum(both)  # both sides of the wedge; both outcomes
+
+
 @pytest.mark.parametrize("scale", [1e-3, 1.0, 1e3])
 def test_disk_bound_keeps_every_nonzero_term(scale):
     """The sphere light's per-sample test (``disk_reach``: the angle at the light centre between the

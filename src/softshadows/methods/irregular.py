@@ -1230,7 +1230,15 @@ def disk_reach(ux, uy, uz, iD, radius, rdm, arc):
     cos a >= cos^2 a = 1 - sin^2 a (no square root): the sample is kept iff
     sqrt(S2) <= rdm - (r / D)(1 - S2), S2 = sin^2 a. Every sample it drops has an exact zero term
     (a relative margin of 1e-4 on r / dmin); with an end 90 deg or more away it keeps the sample."""
-    sn, inarc, ca, cb = arc_position(ux, uy, uz, arc)
+    sn = ux * arc[0] + uy * arc[1] + uz * arc[2]
+    ca = ux * arc[9] + uy * arc[10] + uz * arc[11]
+    cb = ux * arc[12] + uy * arc[13] + uz * arc[14]
+    # inside the arc's wedge (arc_position's u . (n^ x a^) > 0 and u . (b^ x n^) > 0): as
+    # n^ x a^ = (b^ - (a^ . b^) a^) / |a^ x b^| and b^ x n^ = (a^ - (a^ . b^) b^) / |a^ x b^|, from the
+    # ends' cosines (two dot products fewer per sample; at the wedge's planes both branches of s2
+    # below agree, so a decision flipped by rounding moves s2 by rounding, within the margins)
+    cab = arc[9] * arc[12] + arc[10] * arc[13] + arc[11] * arc[14]
+    inarc = (cb - cab * ca > 0.0) & (ca - cab * cb > 0.0)
     cm = ca if ca > cb else cb
     s2 = sn * sn if inarc else 1.0 - cm * cm
     tt = rdm - radius * iD * (1.0 - s2)
