@@ -33,6 +33,7 @@ from .._jit import (
 )
 from ..analytic import atan2_upper, rect_beyond_segment_area
 from ..geometry.silhouette import build_adjacency, facing, facing_from_planes
+from ..raster.kernels import view_coords
 from ..raster.rasterizer import bin_offsets, prefetch
 from ..raster.view import VP_B, VP_FORWARD, VP_L, VP_ORIGIN, VP_R, VP_RIGHT, VP_T, VP_UP, View, light_frame, light_view
 from .base import Method, MethodOutput, Param, register
@@ -151,12 +152,9 @@ def sample_projection(pts, k, vp):
     """Sample k's (x, y, z) in the grid's view ``vp`` (before the division by z) and its distance
     to the light centre: the same expressions wherever a sample's image position or distance is
     needed (its key, :func:`_sample_keys_run`; its sorted record, :func:`_sort_slot`)."""
-    dx = pts[k, 0] - vp[VP_ORIGIN]
-    dy = pts[k, 1] - vp[VP_ORIGIN + 1]
-    dz = pts[k, 2] - vp[VP_ORIGIN + 2]
-    x = dx * vp[VP_RIGHT] + dy * vp[VP_RIGHT + 1] + dz * vp[VP_RIGHT + 2]
-    y = dx * vp[VP_UP] + dy * vp[VP_UP + 1] + dz * vp[VP_UP + 2]
-    z = dx * vp[VP_FORWARD] + dy * vp[VP_FORWARD + 1] + dz * vp[VP_FORWARD + 2]
+    px, py, pz = pts[k, 0], pts[k, 1], pts[k, 2]
+    x, y, z = view_coords(vp, px, py, pz)
+    dx, dy, dz = px - vp[VP_ORIGIN], py - vp[VP_ORIGIN + 1], pz - vp[VP_ORIGIN + 2]
     return x, y, z, np.sqrt(dx * dx + dy * dy + dz * dz)
 
 
@@ -1270,39 +1268,30 @@ def disk_cell_reach(mx, my, mz, chd, shd, arc, rdm, radius, iDb):
     cell can pass, r cos a_lb / (r/dmin - sin a_lb) (the wedge's entry), or -1 when none up to
     1 / iDb can."""
     sn, inarc, ca, cb = arc_position(mx, my, mz, arc)
-    if not ((ca > shd) and (cb > shd)):
-        return False, -1.0
+    # branch-free, one select per statement, so that a loop of it vectorizes (disk_cells_reach)
+    applies = (ca > shd) & (cb > shd)
     cm = ca if ca > cb else cb
-    s_lo = abs(sn) if inarc else np.sqrt(max(1.0 - cm * cm, 0.0))
+    q = np.sqrt(max(1.0 - cm * cm, 0.0))
+    s_lo = abs(sn) if inarc else q
     c_lo = 1.0 - sn * sn if inarc else cm
     c_hi = 1.0 if inarc else cm
     s1 = max(s_lo * chd - c_hi * shd, 0.0)
     c1 = c_lo * chd + s_lo * shd
-    if not (s1 + radius * iDb * c1 <= rdm):
-        return True, -1.0
-    return True, radius * c1 / (rdm - s1)
+    passes = s1 + radius * iDb * c1 <= rdm
+    entry = radius * c1 / (rdm - s1)
+    entry = entry if passes else -1.0
+    return applies, (entry if applies else -1.0)
 
 
 @kernel(inline=True, nrt=False)
 def disk_cells_reach(mdir, n, chd, shd, arc, rdm, radius, iDb, app, ent):
     """:func:`disk_cell_reach` of the n cells whose directions are ``mdir[:, :n]`` (a bin's), into
-    ``app`` (1.0 where it applies) and ``ent`` (the entry, -1 where none): the same expressions,
-    every branch a select (one per statement), so that the loop over the cells vectorizes; the
-    penumbra pass visited each cell with a chain of branches and square roots instead."""
+    ``app`` (1.0 where it applies) and ``ent`` (the entry, -1 where none), in one loop (it
+    vectorizes: ``disk_cell_reach`` is branch-free); the penumbra pass visited each cell with a
+    chain of branches and square roots instead."""
     for lc in range(n):
-        sn, inarc, ca, cb = arc_position(mdir[0, lc], mdir[1, lc], mdir[2, lc], arc)
-        applies = (ca > shd) & (cb > shd)
-        cm = ca if ca > cb else cb
-        q = np.sqrt(max(1.0 - cm * cm, 0.0))
-        s_lo = abs(sn) if inarc else q
-        c_lo = 1.0 - sn * sn if inarc else cm
-        c_hi = 1.0 if inarc else cm
-        s1 = max(s_lo * chd - c_hi * shd, 0.0)
-        c1 = c_lo * chd + s_lo * shd
-        passes = s1 + radius * iDb * c1 <= rdm
-        entry = radius * c1 / (rdm - s1)
-        entry = entry if passes else -1.0
-        ent[lc] = entry if applies else -1.0
+        applies, entry = disk_cell_reach(mdir[0, lc], mdir[1, lc], mdir[2, lc], chd, shd, arc, rdm, radius, iDb)
+        ent[lc] = entry
         app[lc] = 1.0 if applies else 0.0
 
 
