@@ -577,6 +577,32 @@ def test_ties_go_to_the_smaller_index_when_drawn_front_to_back():
     np.testing.assert_array_equal(d, g.depth)
 
 
+def test_front_to_back_orders_by_depth_then_slot():
+    """A tile's list comes out ordered by (nearest corner depth, piece slot), whether it is ranked by
+    counting (up to ``_RANK_MAX`` pieces) or shell-sorted (longer, or a NaN key), with many ties:
+    the order of np.lexsort; the NaN keys, which have no place in it, stay a permutation."""
+    from softshadows._jit import py_callable
+    from softshadows.raster.rasterizer import _RANK_MAX, Z_MIN, _front_to_back
+
+    front_to_back = py_callable(_front_to_back)
+    rng = np.random.default_rng(3)
+    for n in (0, 1, 2, 7, 18, _RANK_MAX, _RANK_MAX + 1, 300):
+        for nan in (False, True):
+            zinfo = np.zeros((n + 5, Z_MIN + 1))
+            zinfo[:, Z_MIN] = rng.integers(0, max(n // 3, 1), n + 5) * 0.25  # ties
+            if nan and n:
+                zinfo[rng.integers(0, n + 5, 2), Z_MIN] = np.nan
+            slots = rng.permutation(n + 5)[:n].astype(np.int32)
+            bins = np.concatenate([[-7], slots, [-9]]).astype(np.int32)  # its neighbours stay
+            front_to_back(bins, 1, n, zinfo, np.empty((2, max(n, 1))))
+            assert bins[0] == -7 and bins[-1] == -9
+            got = bins[1:-1]
+            assert sorted(got.tolist()) == sorted(slots.tolist())
+            if not np.isnan(zinfo[slots, Z_MIN]).any():
+                want = slots[np.lexsort((slots, zinfo[slots, Z_MIN]))]
+                np.testing.assert_array_equal(got, want)
+
+
 def test_rasterize_depth_matches_rasterize():
     rng = np.random.default_rng(7)
     Vc, Fc = cube((0, 0.5, 0), 0.5)

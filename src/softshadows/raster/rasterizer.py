@@ -1309,16 +1309,37 @@ def _prefetch_piece(ct, sh, box, zinfo, edges, planes):
         prefetch(edges, (c, np.int64(k), np.int64(E_WIDTH - 1)))
 
 
+#: _front_to_back ranks a list of at most this many pieces by counting (branch-free, vectorized);
+#: longer lists are shell-sorted (the count grows as n^2)
+_RANK_MAX = 96
+
+
 @kernel(inline=True)
 def _front_to_back(bins, a, n, zinfo, ks):
     """Sort a tile's pieces ``bins[a:a + n]`` in place by their nearest corner depth
     (``zinfo[ct, Z_MIN]``), then by piece slot (deterministic). The keys and slots are copied to the
-    slot's scratch ``ks`` (2, >= n) first (a comparison then reads no piece data), sorted there by a
-    shell sort (the lists are short: tens of pieces) and written back."""
+    slot's scratch ``ks`` (2, >= n) first (a comparison then reads no piece data). A list of at most
+    ``_RANK_MAX`` pieces (on ``bunny``'s light view 98 % of the (piece, tile) pairs, median 18 a
+    tile) goes straight to its place: its rank, the number of pieces before it in that order,
+    counted without a branch (the shell sort's compares mispredicted: 15 % of the depth pass); a
+    NaN key (which has no rank) or a longer list is shell-sorted there and written back."""
+    kc_nan = False
     for q in range(n):
         c = bins[a + q]
-        ks[0, q] = zinfo[c, Z_MIN]
+        k = zinfo[c, Z_MIN]
+        ks[0, q] = k
         ks[1, q] = c
+        kc_nan |= k != k
+    if n <= _RANK_MAX and not kc_nan:
+        for i in range(n):
+            ki = ks[0, i]
+            ci = ks[1, i]
+            r = 0
+            for j in range(n):
+                kj = ks[0, j]
+                r += (kj < ki) | ((kj == ki) & (ks[1, j] < ci))
+            bins[a + r] = np.int32(ci)
+        return
     h = 1
     while h < n // 3:
         h = 3 * h + 1
