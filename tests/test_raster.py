@@ -603,6 +603,31 @@ def test_front_to_back_orders_by_depth_then_slot():
                 np.testing.assert_array_equal(got, want)
 
 
+def test_copy_tile_row_is_a_slice_assignment():
+    """``copy_tile_row`` stores exactly ``dst[di, dj:dj + TILE] = src[si, :TILE]`` (float64 to
+    float32 rounded as numpy casts, including inf, NaN and values beyond float32) and nothing
+    else."""
+    from softshadows._jit import py_callable
+    from softshadows.raster.rasterizer import TILE, copy_tile_row
+
+    copy = py_callable(copy_tile_row)
+    rng = np.random.default_rng(11)
+    src = rng.normal(size=(5, TILE)) * 10.0 ** rng.integers(-40, 40, size=(5, TILE))
+    src[1, :4] = [np.inf, -np.inf, np.nan, 1e300]
+    for dtype in (np.float32, np.float64):
+        dst = np.full((4, 3 * TILE + 5), 7.0, dtype)
+        want = dst.copy()
+        for di, dj, si in ((0, 0, 0), (3, 2 * TILE + 5, 1), (2, 7, 4)):
+            copy(dst, di, dj, src, si)
+            with np.errstate(over="ignore"):
+                want[di, dj : dj + TILE] = src[si].astype(dtype)
+        np.testing.assert_array_equal(dst, want)
+    ints = rng.integers(-9, 9, size=(2, TILE)).astype(np.int32)
+    dst = np.zeros((2, TILE + 3), np.int32)
+    copy(dst, 1, 3, ints, 1)
+    assert (dst[1, 3:] == ints[1]).all() and (dst[0] == 0).all() and (dst[1, :3] == 0).all()
+
+
 def test_rasterize_depth_matches_rasterize():
     rng = np.random.default_rng(7)
     Vc, Fc = cube((0, 0.5, 0), 0.5)

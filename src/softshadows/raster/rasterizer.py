@@ -1736,6 +1736,42 @@ def prefetch(typingctx, arr, idx):
     return types.void(arr, idx), codegen
 
 
+@intrinsic
+def copy_tile_row(typingctx, dst, di, dj, src, si):
+    """``dst[di, dj:dj + TILE] = src[si, :TILE]`` as one vector load, conversion and store (2-D
+    C-contiguous arrays of one dtype, or float64 to float32, which narrows as a cast does; the
+    indices in range, unchecked). A loop of TILE (16) iterations is
+    fully unrolled into scalar code (Numba runs no SLP vectorizer), and too short for LLVM's loop
+    vectorizer: as a loop, the tile-to-rows copy of a depth pass was ~20 % of its time."""
+    if not (isinstance(dst, types.Array) and isinstance(src, types.Array)):
+        return None
+    if not (dst.ndim == 2 and src.ndim == 2 and dst.layout == "C" and src.layout == "C"):
+        return None
+    if not (isinstance(di, types.Integer) and isinstance(dj, types.Integer) and isinstance(si, types.Integer)):
+        return None
+    same = dst.dtype == src.dtype
+    narrow = src.dtype == types.float64 and dst.dtype == types.float32
+    if not (same or narrow):
+        return None
+
+    def codegen(context, builder, sig, args):
+        dty, _, _, sty, _ = sig.args
+        da = context.make_array(dty)(context, builder, args[0])
+        sa = context.make_array(sty)(context, builder, args[3])
+        zero = context.get_constant(types.intp, 0)
+        dptr = cgutils.get_item_pointer(context, builder, dty, da, [args[1], args[2]], wraparound=False)
+        sptr = cgutils.get_item_pointer(context, builder, sty, sa, [args[4], zero], wraparound=False)
+        svec = ir.VectorType(context.get_data_type(sty.dtype), TILE)
+        dvec = ir.VectorType(context.get_data_type(dty.dtype), TILE)
+        v = builder.load(builder.bitcast(sptr, svec.as_pointer()), align=sty.dtype.bitwidth // 8)
+        if not same:
+            v = builder.fptrunc(v, dvec)
+        builder.store(v, builder.bitcast(dptr, dvec.as_pointer()), align=dty.dtype.bitwidth // 8)
+        return context.get_dummy_value()
+
+    return types.void(dst, di, dj, src, si), codegen
+
+
 @kernel(inline=True)
 def _prefetch_tile(blend, img, rowbits, tile, ntx, T, W, H):
     """Prefetch the rows of tile ``tile`` that hold a texel to shade (``rowbits``) in ``blend`` and
@@ -1842,28 +1878,16 @@ def _tile_to_rows(zb, tb, rz, rt, rect, with_tri):
     scratch ``rz``, ``rt`` (T, W); the triangles only ``with_tri`` (``rasterize_depth(tri=False)``
     does not output them).
 
-    A whole tile (T x T pixels inside the image) is copied four rows at a time along its columns.
-    Row by row, the copy stayed scalar: a loop over the TILE columns is fully unrolled into scalar
-    code (Numba runs no SLP vectorizer), and one over the tile's run-time width (<= TILE) never
-    reached LLVM's vector path (20 or more iterations); either was ~20% of a depth pass over a map
-    that a few large triangles cover. A body of four rows is too large to unroll, and the loop
-    vectorizer takes it (``vcvtpd2ps``). The depths-only copy is a loop of its own: the depths and
-    triangles copied in two loops of four rows (one under ``if with_tri``) made the G-buffer and
-    depth passes 3-5% slower than this one loop of eight stores (``benchmarks/bench_raster.py 2
-    --frame-views``, trees alternating). The image's last row and column of tiles are copied row by
-    row."""
+    A whole tile (T x T pixels inside the image) is copied row by row with :func:`copy_tile_row`
+    (the depths only) or four rows at a time along its columns (with the triangles): a loop over
+    the TILE columns of one row is fully unrolled into scalar code (Numba runs no SLP vectorizer),
+    one over the tile's run-time width (<= TILE) never reaches LLVM's vector path (20 or more
+    iterations), while a body of four rows (eight stores) is too large to unroll and the loop
+    vectorizer takes it. The image's last row and column of tiles are copied row by row."""
     y0, y1, x0, x1 = rect
     if x1 - x0 + 1 == TILE and y1 - y0 + 1 == TILE and not with_tri:
-        for g in range(0, TILE, 4):
-            z0 = rz[g, x0 : x0 + TILE]
-            z1 = rz[g + 1, x0 : x0 + TILE]
-            z2 = rz[g + 2, x0 : x0 + TILE]
-            z3 = rz[g + 3, x0 : x0 + TILE]
-            for k in range(TILE):
-                z0[k] = zb[g, k]
-                z1[k] = zb[g + 1, k]
-                z2[k] = zb[g + 2, k]
-                z3[k] = zb[g + 3, k]
+        for g in range(TILE):
+            copy_tile_row(rz, g, x0, zb, g)
         return
     if x1 - x0 + 1 == TILE and y1 - y0 + 1 == TILE:
         for g in range(0, TILE, 4):
@@ -1936,7 +1960,7 @@ def _tiles_depth_slot(slot, fe, sc, depth_out, tri_out, zt, ft, rz, rt, ks, coun
                 vw, near, tile, rect, start, bins, box, edges, zinfo, planes, zb, tb, SP, sh, tri, face, nz, kss,
                 with_tri,
             )  # fmt: skip
-            if tiny:
+            if tiny and with_tri:
                 for i in range(y0, y1 + 1):
                     # row views: their indices are known non-negative (no wrap-around selects)
                     drow = rzs[i - y0, x0 : x1 + 1]
@@ -1957,8 +1981,17 @@ def _tiles_depth_slot(slot, fe, sc, depth_out, tri_out, zt, ft, rz, rt, ks, coun
         for i in range(ya, min(ya + T, H)):  # the row of tiles to the output, whole rows
             drow = depth_out[i]
             zr = rzs[i - ya]
-            for x in range(W):
-                drow[x] = zr[x]
+            if tiny and not with_tri:
+                # the depths only: merged with the tiny path's here, a whole row at once (the nearer;
+                # in float32 the same as the nearer float64 rounded, rounding being monotonic)
+                zq = zt[i]
+                for x in range(W):
+                    a = zr[x]
+                    b = zq[x]
+                    drow[x] = np.float32(b) if b < a else a
+            else:
+                for x in range(W):
+                    drow[x] = zr[x]
             if with_tri:
                 trow = tri_out[i]
                 fr = rts[i - ya]
