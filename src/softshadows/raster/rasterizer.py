@@ -1382,10 +1382,15 @@ def _depth_pass(
     y0, _y1, x0, _x1 = rect
     cols = (x0, wl, wsx)
     nzi = np.int32(nz)  # 0, unknown to LLVM (see _depth_test_row)
-    for li in range(zb.shape[0]):
-        for k in range(zb.shape[1]):
-            zb[li, k] = np.inf
-            tb[li, k] = -1
+    if keep_tb:
+        for li in range(zb.shape[0]):
+            for k in range(zb.shape[1]):
+                zb[li, k] = np.inf
+                tb[li, k] = -1
+    else:  # (tb neither read nor written)
+        for li in range(zb.shape[0]):
+            for k in range(zb.shape[1]):
+                zb[li, k] = np.inf
     tmax = np.inf
     since = 0
     _front_to_back(bins, start[tile], start[tile + 1] - start[tile], zinfo, ks)
