@@ -469,6 +469,7 @@ def test_zmax_pyramid_levels_and_the_occluder_minimum(shape):
     oh, ow = max(h // 2, 1), max(w // 3, 1)
     occ = rng.uniform(0.5, 3.0, (oh, ow)).astype(np.float32)
     occ[rng.random((oh, ow)) < 0.3] = np.inf
+    occ[rng.random((oh, ow)) < 0.05] = np.nan
     at = (h - oh, w - ow) if h > 1 else (0, 0)
     ref = zp.copy()
     sl = (slice(at[0], at[0] + oh), slice(at[1], at[1] + ow))
