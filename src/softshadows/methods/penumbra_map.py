@@ -1269,8 +1269,8 @@ def start_eye_lookups(
         PH,
         int(pl),
         int(pt),
-        position,
-        normal,
+        np.ascontiguousarray(position),  # (biased_light_row reads a row as a flat view)
+        np.ascontiguousarray(normal),
         mask,
         float(bias),
         float(slope_bias),
