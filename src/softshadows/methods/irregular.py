@@ -125,7 +125,7 @@ def slice_of(d, sb):
 
 
 @kernel(nogil=True, nrt=False, noalias=True)
-def _sample_keys_slot(slot, pts, vp, gx, gy, rx, ry, slices, sb, near, key, counter, nslot):
+def _sample_keys_slot(slot, pts, vp, gx, gy, rx, ry, slices, sb, near, count, key, sc, counter, nslot):
     """Per sample: its grid key (bin, cell in bin, slice; -1 behind the view). Its image position
     and distance are computed again where the sort gathers the sample (:func:`sample_projection`,
     the same bits): written here as a 48-byte record per sample and gathered, they cost more
@@ -133,18 +133,29 @@ def _sample_keys_slot(slot, pts, vp, gx, gy, rx, ry, slices, sb, near, key, coun
     number, bin-major (:func:`cell_numbers`: tables instead of two integer divisions per sample).
     Run by ``run_slots``: each slot takes the next run of ``_KEY_RUN`` samples (``next_item``)
     until none is left (with fixed halves, one thread finished ~0.15 ms after the other on
-    `bunny`)."""
+    `bunny`), ``sc[slot]`` its scratch (:func:`_sample_keys_run`; ``count``: the slices by
+    counting)."""
     n = pts.shape[0]
     l, r, b, t = vp[VP_L], vp[VP_R], vp[VP_B], vp[VP_T]
     while True:
         q = next_item(counter) * _KEY_RUN
         if q >= n:
             break
-        _sample_keys_run(q, min(q + _KEY_RUN, n), pts, vp, l, r, b, t, gx, gy, rx, ry, slices, sb, near, key)
+        _sample_keys_run(
+            q, min(q + _KEY_RUN, n), pts, vp, l, r, b, t, gx, gy, rx, ry, slices, sb, near, count, key, sc[slot]
+        )
 
 
 #: samples per work item of :func:`_sample_keys_slot`
 _KEY_RUN = 4096
+#: :func:`_sample_keys_run` takes its run this many samples at a time (its scratch stays in L1)
+_KEY_CHUNK = 512
+#: slice tables (``slice_bounds``) up to this length - 1 are searched by counting in
+#: :func:`_sample_keys_run` (a compare per entry, vectorized over the run); longer ones per sample
+_COUNT_SLICES_MAX = 33
+#: rows of :func:`_sample_keys_run`'s scratch: cell column and row, distance, slice, in front, then the
+#: samples' coordinates
+_KEY_ROWS = 8
 
 
 @kernel(inline=True)
@@ -152,28 +163,56 @@ def sample_projection(pts, k, vp):
     """Sample k's (x, y, z) in the grid's view ``vp`` (before the division by z) and its distance
     to the light centre: the same expressions wherever a sample's image position or distance is
     needed (its key, :func:`_sample_keys_run`; its sorted record, :func:`_sort_slot`)."""
-    px, py, pz = pts[k, 0], pts[k, 1], pts[k, 2]
+    return point_projection(vp, pts[k, 0], pts[k, 1], pts[k, 2])
+
+
+@kernel(inline=True)
+def point_projection(vp, px, py, pz):
+    """:func:`sample_projection` of the point (px, py, pz)."""
     x, y, z = view_coords(vp, px, py, pz)
     dx, dy, dz = px - vp[VP_ORIGIN], py - vp[VP_ORIGIN + 1], pz - vp[VP_ORIGIN + 2]
     return x, y, z, np.sqrt(dx * dx + dy * dy + dz * dz)
 
 
 @kernel(inline=True)
-def _sample_keys_run(q0, q1, pts, vp, l, r, b, t, gx, gy, rx, ry, slices, sb, near, key):
-    """Samples q0 to q1 - 1 of :func:`_sample_keys_slot`."""
+def _sample_keys_run(q0, q1, pts, vp, l, r, b, t, gx, gy, rx, ry, slices, sb, near, count, key, sc):
+    """Samples q0 to q1 - 1 of :func:`_sample_keys_slot`, in three loops through the scratch ``sc``
+    (``_KEY_ROWS`` rows): every sample's cell column and row (0 behind the view: a select, not a
+    branch), distance and whether it is in front; then its slice; then its key. With ``count``
+    (a table of at most ``_COUNT_SLICES_MAX`` entries without NaN) the slice is the number of
+    entries sb[1:] <= d, a compare per entry for the whole run (``slice_of``'s largest s with
+    sb[s] <= d: the same, the table being non-decreasing), else ``slice_of``. One loop per sample
+    with the binary search's data-dependent branches and its scalar divisions ran ~10 ns a sample;
+    these vectorize. The same keys."""
     # unsigned indices: no negative-index wrap-around code at every access (a prange's index is
     # unsigned too; with signed ones _compose_slot's scatter ran slower in a micro-benchmark)
-    k0, k1 = np.uint64(q0), np.uint64(q1)
-    for k in range(k0, k1):
-        x, y, z, d = sample_projection(pts, k, vp)
-        if not (z > near):
-            key[k] = -1
-            continue
-        xx = x / z
-        yy = y / z
-        cx = int(min(max(np.floor((xx - l) / (r - l) * gx), 0.0), gx - 1.0))
-        cy = int(min(max(np.floor((t - yy) / (t - b) * gy), 0.0), gy - 1.0))
-        key[k] = (rx[np.uint64(cx)] + ry[np.uint64(cy)]) * slices + slice_of(d, sb)
+    for c0 in range(q0, q1, _KEY_CHUNK):
+        k0, m = np.uint64(c0), np.uint64(min(c0 + _KEY_CHUNK, q1) - c0)
+        for i in range(m):  # the coordinates to rows first: read from (n, 3) the next loop ran scalar
+            sc[5, i], sc[6, i], sc[7, i] = pts[k0 + i, 0], pts[k0 + i, 1], pts[k0 + i, 2]
+        for i in range(m):
+            x, y, z, d = point_projection(vp, sc[5, i], sc[6, i], sc[7, i])
+            ok = z > near
+            xx = x / z
+            yy = y / z
+            fx = min(max(np.floor((xx - l) / (r - l) * gx), 0.0), gx - 1.0)
+            fy = min(max(np.floor((t - yy) / (t - b) * gy), 0.0), gy - 1.0)
+            sc[0, i] = fx if ok else 0.0  # (behind the view: any cell, the key is -1)
+            sc[1, i] = fy if ok else 0.0
+            sc[2, i] = d
+            sc[3, i] = 0.0
+            sc[4, i] = 1.0 if ok else 0.0
+        if count:
+            for e in range(1, sb.shape[0] - 1):
+                se = sb[e]
+                for i in range(m):
+                    sc[3, i] += 1.0 if se <= sc[2, i] else 0.0
+        else:
+            for i in range(m):
+                sc[3, i] = slice_of(sc[2, i], sb)
+        for i in range(m):
+            c = (rx[np.uint64(sc[0, i])] + ry[np.uint64(sc[1, i])]) * slices + np.int64(sc[3, i])
+            key[k0 + i] = c if sc[4, i] != 0.0 else -1
 
 
 @kernel
@@ -201,7 +240,7 @@ _GATHER_AHEAD = 16
 
 
 @kernel(nogil=True, nrt=False)
-def _sort_slot(w, phase, key, pts, vp, hist, tot, start, order, sx, sy, sp, sd):
+def _sort_slot(w, phase, key, pts, vp, hist, tot, start, order, sx, sy, sp, sd, sc):
     """One slot of :func:`sort_samples` (``run_slots``; C = ``hist.shape[0]`` slots), one phase per
     launch: 0, slot w counts the keys of its chunk of the input into ``hist[w]``; 1, the samples of
     its range of keys, all chunks, into ``tot[w + 1]``; 2, from ``tot[w]`` on, each key's first
@@ -247,19 +286,28 @@ def _sort_slot(w, phase, key, pts, vp, hist, tot, start, order, sx, sy, sp, sd):
         m = order.shape[0]
         j1 = (w + 1) * m // C
         z = np.uint64(0)
-        for j in range(w * m // C, j1):
-            if j + _GATHER_AHEAD < j1:  # the samples are read in cell order: a cache miss each
-                kn = np.uint64(order[j + _GATHER_AHEAD])
-                prefetch(pts, (kn, z))
-                prefetch(pts, (kn, np.uint64(2)))
-            k = np.uint64(order[j])
-            x, y, zz, d = sample_projection(pts, k, vp)  # (zz > near: the sample has a key)
-            sx[j] = x / zz
-            sy[j] = y / zz
-            sd[j] = d
-            sp[j, 0] = pts[k, 0]
-            sp[j, 1] = pts[k, 1]
-            sp[j, 2] = pts[k, 2]
+        g = sc[w]
+        for c0 in range(w * m // C, j1, _KEY_CHUNK):  # in chunks through the scratch ``sc[w]``
+            c1 = min(c0 + _KEY_CHUNK, j1)
+            for j in range(c0, c1):
+                if j + _GATHER_AHEAD < j1:  # the samples are read in cell order: a cache miss each
+                    kn = np.uint64(order[j + _GATHER_AHEAD])
+                    prefetch(pts, (kn, z))
+                    prefetch(pts, (kn, np.uint64(2)))
+                k = np.uint64(order[j])
+                px, py, pz = pts[k, 0], pts[k, 1], pts[k, 2]
+                sp[j, 0], sp[j, 1], sp[j, 2] = px, py, pz
+                i = np.uint64(j - c0)
+                g[0, i], g[1, i], g[2, i] = px, py, pz
+            # then their image positions and distances from the scratch's rows (the same bits as
+            # sample_projection): this loop vectorizes (in the gather's loop, its divisions and
+            # square root ran scalar)
+            b = np.uint64(c0)
+            for i in range(np.uint64(c1 - c0)):
+                x, y, zz, d = point_projection(vp, g[0, i], g[1, i], g[2, i])  # (zz > near: it has a key)
+                sx[b + i] = x / zz
+                sy[b + i] = y / zz
+                sd[b + i] = d
 
 
 #: grids with fewer keys (cells x slices) than this take phase 2 of :func:`sort_samples` (the
@@ -282,9 +330,10 @@ def sort_samples(key, pts, vp, n_keys: int):
     tot = np.zeros(2 * C + 1, np.int64)  # the key ranges' first places, then the chunks' samples
     start = np.empty(n_keys + 1, np.int64)
     e0, e1, e2 = np.empty(0, np.int64), np.empty(0), np.empty((0, 3))  # (the outputs, not yet made)
+    sc = np.empty((C, 3, _KEY_CHUNK))  # phase 4's scratch
     serial = C == 1 or n_keys < _SERIAL_PLACES
     for phase in (0,) if serial else (0, 1):  # (one range: it starts at 0)
-        run_slots(_sort_slot, C, phase, key, pts, vp, hist, tot, start, e0, e1, e1, e2, e1)
+        run_slots(_sort_slot, C, phase, key, pts, vp, hist, tot, start, e0, e1, e1, e2, e1, sc)
     if serial:
         bin_offsets(hist, start)  # (start[n_keys]: the total)
         m = int(start[n_keys])
@@ -296,7 +345,7 @@ def sort_samples(key, pts, vp, n_keys: int):
     sx, sy, sd = np.empty(m), np.empty(m), np.empty(m)
     sp = np.empty((m, 3))
     for phase in (3, 4) if serial else (2, 3, 4):
-        run_slots(_sort_slot, C, phase, key, pts, vp, hist, tot, start, order, sx, sy, sp, sd)
+        run_slots(_sort_slot, C, phase, key, pts, vp, hist, tot, start, order, sx, sy, sp, sd, sc)
     return start, order, sx, sy, sp, sd
 
 
@@ -517,7 +566,9 @@ def build_sample_grid(light, pts: np.ndarray, grid: int, bins: int, slices: int,
     near = view.near
     sb = slice_bounds(dlo, dhi, slices)
     rx, ry = cell_numbers(grid, grid, bins, nbx)
-    run_threads(_sample_keys_slot, pts, vp, grid, grid, rx, ry, slices, sb, near, key, work_counter())
+    count = len(sb) <= _COUNT_SLICES_MAX and not np.isnan(sb).any()
+    sc = np.empty((numba.get_num_threads(), _KEY_ROWS, _KEY_CHUNK))
+    run_threads(_sample_keys_slot, pts, vp, grid, grid, rx, ry, slices, sb, near, count, key, sc, work_counter())
     start, order, sx, sy, sp, sd = sort_samples(key, pts, vp, nbx * nby * bins * bins * slices)
     m = len(order)
     cbox, cmax, occ = _column_boxes(start, sp, sd, slices)
