@@ -2487,7 +2487,8 @@ def _penumbra_kernel(
             nt_e = tv_start[e + 1] - tv_start[e]
             if nt_e == 1 or nt_e == 2:
                 for i in range(m):  # the candidates' positions, contiguous: the terms' loop vectorizes
-                    cp[0, i], cp[1, i], cp[2, i] = spos[cand[i], 0], spos[cand[i], 1], spos[cand[i], 2]
+                    jc = np.uint64(cand[i])  # (>= 0: unsigned, no wrap-around code)
+                    cp[0, i], cp[1, i], cp[2, i] = spos[jc, 0], spos[jc, 1], spos[jc, 2]
                 if nt_e == 2:  # (both lights: the same first two exits as either terms' loop)
                     m = drop_cancelling(cp, np.int64(m), center, e, ea, eb, tv_start, tv, sel, cand)
                 if shape == 1:
@@ -2521,7 +2522,7 @@ def _penumbra_kernel(
                 c = cval[i]
                 if c != 0.0:
                     nh += 1
-                    pen[cand[i]] += c
+                    pen[np.uint64(cand[i])] += c
         frags[bi] = nf
         tests[bi] = nt
         hits[bi] = nh
@@ -2655,7 +2656,7 @@ def compose_range(j0, j1, order, dest, umbra, pen, out):
     write one place)."""
     for j in range(np.uint64(j0), np.uint64(j1)):  # unsigned: see _sample_keys_slot
         x = 1.0 - (umbra[j] + pen[j])
-        out[dest[order[j]]] = min(max(x, 0.0), 1.0)
+        out[np.uint64(dest[np.uint64(order[j])])] = min(max(x, 0.0), 1.0)  # (indices >= 0: unsigned)
 
 
 @kernel(nogil=True, nrt=False, noalias=True)
