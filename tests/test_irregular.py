@@ -783,6 +783,74 @@ def test_sort_samples_is_the_serial_counting_sort_whatever_the_threads(threads, 
     np.testing.assert_array_equal(sp, pts[o_ref])
 
 
+@pytest.mark.parametrize("slices,nan_table", [(8, False), (3, False), (40, False), (8, True)])
+@pytest.mark.parametrize("threads", [1, 2])
+def test_sample_keys_are_the_cell_and_slice_of_numpys_expressions(slices, nan_table, threads):
+    """The grid keys (``_sample_keys_slot``: cell column and row, then the slice, through a scratch
+    in three loops) are (rx[cx] + ry[cy]) x slices + s with NumPy's same expressions for the cell
+    and ``slice_of``'s slice (the largest s with sb[s] <= d; ``np.searchsorted``'s on a table without
+    NaN), -1 behind the near plane: with the slice counted over the table (8 and 3 slices: tables
+    of 8 and 4 entries), searched per sample (40 slices: a table of 64, past ``_COUNT_SLICES_MAX``;
+    or a table with a NaN), with one thread or two, on more samples than a run (``_KEY_RUN``) with a
+    short last chunk. Some samples lie exactly at a table entry's distance (slice s, not s - 1)."""
+    import numba
+
+    from softshadows.methods import irregular as ir
+    from softshadows.raster.view import VP_B, VP_FORWARD, VP_L, VP_ORIGIN, VP_R, VP_RIGHT, VP_T, VP_UP, View
+
+    rng = np.random.default_rng(11)
+    n = ir._KEY_RUN + 777
+    f = np.array([0.1, -0.2, 1.0]) / np.linalg.norm([0.1, -0.2, 1.0])
+    r = np.cross([0.0, 1.0, 0.0], f)
+    r /= np.linalg.norm(r)
+    o = np.array([0.3, -0.1, 0.2])
+    vp = View(o, r, np.cross(f, r), f, (-0.5, 0.6, -0.4, 0.7), 0.1, 100.0, 8, 8).params()
+    pts = o + rng.standard_normal((n, 3)) * 3.0 + 8.0 * f  # some outside the window: clamped cells
+    pts[:40] = o - rng.random((40, 3)) * f  # behind the light: key -1
+    d = pts - vp[VP_ORIGIN : VP_ORIGIN + 3]
+    dist = np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2])  # the kernel's expression
+    sb = ir.slice_bounds(6.0, 11.0, slices)
+    # the table's entries moved to the distances of some samples in front (still increasing)
+    at = 40 + np.argsort(dist[40:200])[np.linspace(5, 150, slices - 1).astype(int)]
+    sb[1:slices] = dist[at]
+    if nan_table:
+        sb[slices - 2] = np.nan
+    gx, gy, B = 24, 20, 4
+    rx, ry = ir.cell_numbers(gx, gy, B, -(-gx // B))
+    near = 0.1
+    count = len(sb) <= ir._COUNT_SLICES_MAX and not np.isnan(sb).any()
+    assert count == (slices <= 8 and not nan_table)
+    key = np.full(n, -7, np.int64)
+    old = numba.get_num_threads()
+    numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
+    try:
+        sc = np.empty((numba.get_num_threads(), ir._KEY_ROWS, ir._KEY_CHUNK))
+        ir.run_threads(
+            ir._sample_keys_slot, pts, vp, gx, gy, rx, ry, slices, sb, near, count, key, sc, ir.work_counter()
+        )
+    finally:
+        numba.set_num_threads(old)
+
+    def dot(a):
+        return d[:, 0] * a[0] + d[:, 1] * a[1] + d[:, 2] * a[2]
+
+    x, y, z = dot(vp[VP_RIGHT : VP_RIGHT + 3]), dot(vp[VP_UP : VP_UP + 3]), dot(vp[VP_FORWARD : VP_FORWARD + 3])
+    ok = z > near
+    with np.errstate(divide="ignore", invalid="ignore"):
+        l, rr, b, t = vp[VP_L], vp[VP_R], vp[VP_B], vp[VP_T]
+        cx = np.clip(np.floor(((x / z) - l) / (rr - l) * gx), 0.0, gx - 1.0)
+        cy = np.clip(np.floor((t - (y / z)) / (t - b) * gy), 0.0, gy - 1.0)
+    slice_of = py_callable(ir.slice_of)
+    s = np.array([slice_of(float(v), sb) for v in dist])
+    if not nan_table:
+        np.testing.assert_array_equal(s, np.searchsorted(sb[: len(sb) - 1], dist, side="right") - 1)
+        np.testing.assert_array_equal(s[at], np.arange(1, slices))  # d == sb[s]: slice s
+    ref = (rx[np.where(ok, cx, 0).astype(np.int64)] + ry[np.where(ok, cy, 0).astype(np.int64)]) * slices + s
+    ref = np.where(ok, ref, -1)
+    assert ok[at].all() and not ok[:40].any()
+    np.testing.assert_array_equal(key, ref)
+
+
 def test_bound_median_is_the_median_of_every_64th_sample():
     """The statistic ``origin_bound_median`` (``bound_median``): np.median of every 64th bound, in
     sample order, the input untouched; 0 without samples."""
