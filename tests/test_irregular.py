@@ -1071,6 +1071,28 @@ def test_v_composed_in_the_penumbra_pass_is_eq4_of_its_counts(light):
     assert sorted(every) == list(np.flatnonzero(np.diff(g.start[::cells]) > 0))
 
 
+def test_flat_true_is_numpys_flatnonzero():
+    """``FrameContext.pixels()``' ``flat_true`` (the eye mask's flat indices for ``irregular``'s
+    samples, by ``compact_indices``): ``np.flatnonzero``, int64, for empty, short, 2-D and
+    non-contiguous masks of every density; and ``pixels()`` of a rendered frame is it."""
+    from softshadows.methods.base import flat_true
+
+    rng = np.random.default_rng(3)
+    for shape in [(0,), (1,), (7,), (8,), (9,), (33, 17), (512, 512)]:
+        for p in (0.0, 0.3, 0.87, 1.0):
+            m = rng.random(shape) < p
+            got = flat_true(m)
+            assert got.dtype == np.int64
+            np.testing.assert_array_equal(got, np.flatnonzero(m))
+    m = rng.random((40, 30)) < 0.5
+    np.testing.assert_array_equal(flat_true(m[:, ::2]), np.flatnonzero(m[:, ::2]))
+    scene = builtin.build("bunny", "rect")
+    view = eye_view(scene, 64, 48)
+    g = rasterize(view, scene.flat.vertices, scene.flat.faces, cull="none")
+    ctx = FrameContext(scene=scene, eye=g, eye_view=view, timer=Timer())
+    np.testing.assert_array_equal(ctx.pixels(), np.flatnonzero(g.mask))
+
+
 @pytest.mark.parametrize("impl", ["scalar", "avx512"])
 def test_compact_indices_packs_the_flagged_positions_in_order(impl):
     """``compact_indices`` (the penumbra pass's compaction of the reach tests' survivors): out[m:]
