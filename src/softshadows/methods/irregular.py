@@ -1957,7 +1957,7 @@ def _sign(s):
 
 
 @kernel(inline=True)
-def drop_cancelling(cp, m, center, e, ea, eb, tv_start, tv, sel, cand):
+def drop_cancelling(cp, m, center, e, ea, eb, tv_start, tv, sel, cand, flags):
     """For an edge with two counted triangles (a fold candidate): drop the samples ``cand[:m]``
     (positions ``cp[:, :m]``) where the two cancel as seen from p or p lies in the plane through
     the light centre and the edge (the first two exits of ``disk_edge_terms`` and of
@@ -1965,7 +1965,9 @@ def drop_cancelling(cp, m, center, e, ea, eb, tv_start, tv, sel, cand):
     and ``cand`` in place; returns how many are left. A cheap first pass (two cross products' worth,
     branch-free): on ``bunny`` 39% of the disk's candidates are such zeros, which the vectorized
     terms would otherwise evaluate in full (1.15x on the sphere's penumbra pass, 1.18x on the
-    rectangle's)."""
+    rectangle's). The survivors' indices are packed by ``compact_indices`` from the int8 ``flags``
+    (``sel`` and ``flags`` with 8 entries of slack): a scalar loop of ``sel[n] = i; n += keep``
+    waited on n at every candidate."""
     ax, ay, az, bx, by, bz = ea[e, 0], ea[e, 1], ea[e, 2], eb[e, 0], eb[e, 1], eb[e, 2]
     k1 = tv_start[e]
     v1x, v1y, v1z, v2x, v2y, v2z = tv[k1, 0], tv[k1, 1], tv[k1, 2], tv[k1 + 1, 0], tv[k1 + 1, 1], tv[k1 + 1, 2]
@@ -1982,12 +1984,8 @@ def drop_cancelling(cp, m, center, e, ea, eb, tv_start, tv, sel, cand):
         wsum = 0.0 + _sign(nx * (v1x - p0) + ny * (v1y - p1) + nz * (v1z - p2))
         wsum = wsum + w2
         nc = nx * cx + ny * cy + nz * cz
-        sel[i] = (wsum != 0.0) & (nc != 0.0)
-    n = 0
-    for i in range(m):
-        keep = sel[i]
-        sel[np.uint64(n)] = i
-        n += keep
+        flags[i] = np.int8(wsum != 0.0) & np.int8(nc != 0.0)
+    n = compact_indices(flags, m, 0, sel, 0)
     for t in range(n):
         i = sel[t]  # >= t
         cand[t] = cand[i]
@@ -2302,7 +2300,8 @@ def _penumbra_kernel(
     ms = row_stride(max_bin)  # (a row length that keeps a column's rows in different cache sets)
     cp = np.empty((3, ms))  # the candidates' positions, contiguous
     rsc = np.empty((_TERM_ROWS, ms))  # the edge terms' scratch
-    sel = np.empty(max_bin, np.int64)
+    sel = np.empty(max_bin + 8, np.int64)  # (compact_indices writes 8 at a time)
+    dflags = np.empty(max_bin + 8, np.int8)  # drop_cancelling's flags
     keep = np.empty(max_col, np.int8)
     rw = np.empty((_ROW, ms))  # the current bin's sample rows (one row per field) and 1 / distance
     sinv = np.empty(max_bin)
@@ -2490,7 +2489,7 @@ def _penumbra_kernel(
                     jc = np.uint64(cand[i])  # (>= 0: unsigned, no wrap-around code)
                     cp[0, i], cp[1, i], cp[2, i] = spos[jc, 0], spos[jc, 1], spos[jc, 2]
                 if nt_e == 2:  # (both lights: the same first two exits as either terms' loop)
-                    m = drop_cancelling(cp, np.int64(m), center, e, ea, eb, tv_start, tv, sel, cand)
+                    m = drop_cancelling(cp, np.int64(m), center, e, ea, eb, tv_start, tv, sel, cand, dflags)
                 if shape == 1:
                     disk_edge_terms(cp, np.int64(m), center, radius, e, ea, eb, tv_start, tv, rsc, cval)
                 else:
