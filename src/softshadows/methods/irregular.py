@@ -2517,11 +2517,11 @@ def _penumbra_kernel(
                     buf,
                     cval,
                 )
-            for i in range(m):
+            for i in range(m):  # branch-free (about half the terms are zero): adding a zero, of
+                # either sign, leaves a sum that is never -0.0 the same bits
                 c = cval[i]
-                if c != 0.0:
-                    nh += 1
-                    pen[np.uint64(cand[i])] += c
+                nh += c != 0.0
+                pen[np.uint64(cand[i])] += c
         frags[bi] = nf
         tests[bi] = nt
         hits[bi] = nh
