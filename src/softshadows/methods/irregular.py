@@ -889,13 +889,11 @@ def _umbra_kernel(
                         k2 = (e2 > 0.0) | ((e2 == 0.0) & t2)
                         keep[w, np.uint64(i)] = np.int8(k0) & np.int8(k1) & np.int8(k2)
                     m = compact_indices(keep_w, j1 - j0, j0, cand_w, m)
-            for i in range(m):
-                j = cand[w, i]
+            for i in range(m):  # branch-free (den == 0: th is inf or NaN, and the test fails)
+                j = np.uint64(cand[w, i])
                 den = nx * (sp[j, 0] - center[0]) + ny * (sp[j, 1] - center[1]) + nz * (sp[j, 2] - center[2])
-                if den != 0.0:
-                    th = num / den  # the triangle's plane along centre -> p, 1 at p
-                    if th > 0.0 and th < 1.0:
-                        umbra[j] += 1
+                th = num / den  # the triangle's plane along centre -> p, 1 at p
+                umbra[j] += np.int32((den != 0.0) & (th > 0.0) & (th < 1.0))
         tests[bi] = ntest
 
 
