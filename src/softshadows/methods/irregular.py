@@ -150,8 +150,9 @@ def _sample_keys_slot(slot, pts, vp, gx, gy, rx, ry, slices, sb, near, count, ke
 _KEY_RUN = 4096
 #: :func:`_sample_keys_run` takes its run this many samples at a time (its scratch stays in L1)
 _KEY_CHUNK = 512
-#: slice tables (``slice_bounds``) up to this length - 1 are searched by counting in
-#: :func:`_sample_keys_run` (a compare per entry, vectorized over the run); longer ones per sample
+#: slice tables (``slice_bounds``: a power of two plus one entries) of at most this many entries
+#: are searched by counting in :func:`_sample_keys_run` (a compare per entry, vectorized over the
+#: chunk); longer ones by ``slice_of`` per sample
 _COUNT_SLICES_MAX = 33
 #: rows of :func:`_sample_keys_run`'s scratch: cell column and row, distance, slice, in front, then the
 #: samples' coordinates
