@@ -16,9 +16,8 @@ from typing import Any
 
 import numpy as np
 
-from .._jit import compact_indices, kernel
 from ..errors import SoftShadowsError
-from ..raster.gbuffer import gather_points
+from ..raster.gbuffer import flat_true, gather_points
 
 
 @dataclass(frozen=True)
@@ -101,20 +100,6 @@ class Timer:
             yield
         finally:
             self.times[name] = self.times.get(name, 0.0) + time.perf_counter() - t0
-
-
-@kernel
-def _flat_true_kernel(keep, out):
-    return compact_indices(keep, keep.shape[0], 0, out, 0)
-
-
-def flat_true(mask: np.ndarray) -> np.ndarray:
-    """``np.flatnonzero(mask)`` (int64) of a C-contiguous bool array, by ``compact_indices`` (on
-    `bunny`'s 512^2 eye mask 44 microseconds against NumPy's 123: the frame's only serial pass over
-    the image in ``irregular``)."""
-    keep = np.ascontiguousarray(mask).reshape(-1).view(np.int8)
-    out = np.empty(int(np.count_nonzero(keep)) + 8, np.int64)  # (compact_indices writes 8 at a time)
-    return out[: _flat_true_kernel(keep, out)]
 
 
 @dataclass

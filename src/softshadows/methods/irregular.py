@@ -160,16 +160,11 @@ _KEY_ROWS = 8
 
 
 @kernel(inline=True)
-def sample_projection(pts, k, vp):
-    """Sample k's (x, y, z) in the grid's view ``vp`` (before the division by z) and its distance
-    to the light centre: the same expressions wherever a sample's image position or distance is
-    needed (its key, :func:`_sample_keys_run`; its sorted record, :func:`_sort_slot`)."""
-    return point_projection(vp, pts[k, 0], pts[k, 1], pts[k, 2])
-
-
-@kernel(inline=True)
-def point_projection(vp, px, py, pz):
-    """:func:`sample_projection` of the point (px, py, pz)."""
+def sample_projection(vp, px, py, pz):
+    """A sample's (x, y, z) in the grid's view ``vp`` (before the division by z) and its distance
+    to the light centre, from its position (px, py, pz): the same expressions wherever a sample's
+    image position or distance is needed (its key, :func:`_sample_keys_run`; its sorted record,
+    :func:`_sort_slot`)."""
     x, y, z = view_coords(vp, px, py, pz)
     dx, dy, dz = px - vp[VP_ORIGIN], py - vp[VP_ORIGIN + 1], pz - vp[VP_ORIGIN + 2]
     return x, y, z, np.sqrt(dx * dx + dy * dy + dz * dz)
@@ -192,7 +187,7 @@ def _sample_keys_run(q0, q1, pts, vp, l, r, b, t, gx, gy, rx, ry, slices, sb, ne
         for i in range(m):  # the coordinates to rows first: read from (n, 3) the next loop ran scalar
             sc[5, i], sc[6, i], sc[7, i] = pts[k0 + i, 0], pts[k0 + i, 1], pts[k0 + i, 2]
         for i in range(m):
-            x, y, z, d = point_projection(vp, sc[5, i], sc[6, i], sc[7, i])
+            x, y, z, d = sample_projection(vp, sc[5, i], sc[6, i], sc[7, i])
             ok = z > near
             xx = x / z
             yy = y / z
@@ -305,7 +300,7 @@ def _sort_slot(w, phase, key, pts, vp, hist, tot, start, order, sx, sy, sp, sd, 
             # square root ran scalar)
             b = np.uint64(c0)
             for i in range(np.uint64(c1 - c0)):
-                x, y, zz, d = point_projection(vp, g[0, i], g[1, i], g[2, i])  # (zz > near: it has a key)
+                x, y, zz, d = sample_projection(vp, g[0, i], g[1, i], g[2, i])  # (zz > near: it has a key)
                 sx[b + i] = x / zz
                 sy[b + i] = y / zz
                 sd[b + i] = d

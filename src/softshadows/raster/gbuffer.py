@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._jit import kernel, next_item, run_threads, work_counter
+from .._jit import compact_indices, kernel, next_item, run_threads, work_counter
 
 
 @dataclass
@@ -106,6 +106,20 @@ def _gather_rows(i0, i1, position, normal, mask, ex, ey, ez, offs, pts, nrm, idx
                 nrm[k, 2] = nz
                 idx[k] = i * W + j
                 k += 1
+
+
+@kernel
+def _flat_true_kernel(keep, out):
+    return compact_indices(keep, keep.shape[0], 0, out, 0)
+
+
+def flat_true(mask: np.ndarray) -> np.ndarray:
+    """``np.flatnonzero(mask)`` (int64) of a bool array, by ``compact_indices``: the flat indices
+    of a G-buffer's surface pixels (:func:`gather_points`' third array) without gathering their
+    positions and normals (on `bunny`'s 512^2 eye mask 44 microseconds against NumPy's 123)."""
+    keep = np.ascontiguousarray(mask).reshape(-1).view(np.int8)
+    out = np.empty(int(np.count_nonzero(keep)) + 8, np.int64)  # (compact_indices writes 8 at a time)
+    return out[: _flat_true_kernel(keep, out)]
 
 
 def gather_points(position, normal, mask, eye):
