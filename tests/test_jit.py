@@ -71,11 +71,10 @@ def test_shared_work_runs_every_item_once_with_a_helper():
 
 
 def test_shared_work_without_a_helper_or_after_it_closed():
-    """With no slot thread helping, the calling thread computes every item; a ``help`` before the
-    offer or after ``run`` has returned runs nothing (a launch that ends early or late changes
-    only the time, never the result)."""
+    """With no slot thread helping, the calling thread computes every item; a ``help`` after
+    ``close`` runs nothing and returns (a launch that ends early or late changes only the time,
+    never the result)."""
     share = SharedWork()
-    share.help(1)  # before any offer: nothing to do, returns at once
     started = threading.Event()
     started.set()  # slot 0 does not wait for a helper
     fn = _claiming_work(started, [])
@@ -83,10 +82,67 @@ def test_shared_work_without_a_helper_or_after_it_closed():
     who = [-1] * N_ITEMS
     share.run(fn, 2, done, who)
     assert done == [1] * N_ITEMS and set(who) == {0}
+    share.close()
     calls = []
-    share._task = (lambda *a: calls.append(a), (), 2)  # even a task still set: closed after run
+    share._task = (lambda *a: calls.append(a), (), 2)  # even a task still set: closed
+    share._offers += 1
     share.help(1)
     assert calls == []
+
+
+def test_shared_work_helper_waits_for_every_offer_until_closed():
+    """A slot thread that comes to ``help`` before any offer waits for it, serves each offer made
+    while it waits (items claimed from each offer's own counter), and leaves at ``close``: every
+    item of every offer computed exactly once."""
+    share = SharedWork()
+    arrived = threading.Event()
+    left = threading.Event()
+
+    def helper():
+        arrived.set()
+        share.help(1)
+        left.set()
+
+    t = threading.Thread(target=helper)
+    t.start()
+    assert arrived.wait(timeout=10.0)
+    time.sleep(0.01)  # (the helper waits in help, no offer open yet)
+    assert not left.is_set()
+    for _ in range(2):  # two offers, one after the other: the helper serves both
+        started = threading.Event()
+        fn = _claiming_work(started, [])
+        done = [0] * N_ITEMS
+        who = [-1] * N_ITEMS
+        share.run(fn, 2, done, who)
+        assert done == [1] * N_ITEMS
+        assert 0 in who and 1 in who
+        assert not left.is_set()  # still waiting for the next offer
+    share.close()
+    t.join(timeout=10.0)
+    assert left.is_set() and not t.is_alive()
+
+
+def test_slot_launch_on_finish_releases_a_waiting_helper():
+    """``start_slots(..., on_finish=share.close)``: a slot thread that waits in ``help`` when the
+    calling thread joins the launch is let go first (no deadlock), and ``finish`` returns."""
+    from softshadows._jit import start_slots
+
+    share = SharedWork()
+    ran = []
+
+    def fn(slot):
+        ran.append(slot)
+        if slot:
+            share.help(slot)
+
+    launch = start_slots(fn, 2, on_finish=share.close)
+    time.sleep(0.01)
+    out = []
+    t = threading.Thread(target=lambda: out.append(launch.finish()))
+    t.start()
+    t.join(timeout=10.0)
+    assert not t.is_alive(), "finish() deadlocked on a helper waiting for an offer"
+    assert sorted(ran) == [0, 1]
 
 
 def test_shared_work_raises_the_calling_threads_error_after_the_helpers():

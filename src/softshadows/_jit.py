@@ -335,8 +335,9 @@ class SlotLaunch:
     calling thread joins late and takes whatever items are left. ``result``: what ``finish()``
     returns (a function of no arguments, called once the slots are done)."""
 
-    def __init__(self, fn, nslot: int, args: tuple, wait_start: bool = True, result=None):
+    def __init__(self, fn, nslot: int, args: tuple, wait_start: bool = True, result=None, on_finish=None):
         self._fn, self._args, self._result, self._finished = fn, args, result, False
+        self._on_finish = on_finish
         if nslot <= 1:
             self._futs = []
             return
@@ -366,6 +367,8 @@ class SlotLaunch:
         if not self._finished:
             self._finished = True
             try:
+                if self._on_finish is not None:
+                    self._on_finish()
                 self._fn(0, *self._args)
             finally:
                 for f in self._futs:
@@ -375,63 +378,81 @@ class SlotLaunch:
         return self._result() if self._result is not None else None
 
 
-def start_slots(fn, nslot: int, *args, result=None) -> SlotLaunch:
+def start_slots(fn, nslot: int, *args, result=None, on_finish=None) -> SlotLaunch:
     """Start ``fn(slot, *args)`` for slots 1 to nslot-1 on the slot threads and return the launch;
     its ``finish()`` runs slot 0 on the calling thread, waits and returns ``result()``
     (:class:`SlotLaunch`). Until then, the slot threads are busy: the calling thread must not
     launch other slot kernels on them (it runs them alone, :func:`calling_thread_only`), or they
-    would wait for this one."""
-    return SlotLaunch(fn, int(nslot), args, result=result)
+    would wait for this one. ``on_finish``: called first in ``finish()`` (e.g. :meth:`SharedWork.close`,
+    which lets slot threads that wait in it go)."""
+    return SlotLaunch(fn, int(nslot), args, result=result, on_finish=on_finish)
 
 
 class SharedWork:
     """Work that the calling thread offers to the slot threads of a :func:`start_slots` launch that
     finish theirs early: a slot thread calls :meth:`help` after its own part (the launch's slot
-    function wraps the kernel, see ``penumbra_map.start_eye_lookups``); the calling thread calls
-    :meth:`run` with a kernel whose items are claimed from a shared counter (:func:`next_item`).
-    ``run`` runs the kernel on the calling thread and on every slot thread that has come to
-    ``help`` since the offer, and returns once all of them are done: the same items computed,
-    whoever computes them. A slot thread that finishes its own part before the offer, or after the
-    calling thread's kernel has run out of items, leaves at once (the calling thread does the rest
-    alone), so that the outcome never depends on the timing, only the time it takes. Made for the
-    calling thread's serial work that overlaps a launch (:func:`calling_thread_only`) when the
-    launch ends first: `penumbra-map`'s eye lookups end ~1 ms before its cones' rejection."""
+    function wraps the kernel, see ``penumbra_map.start_eye_lookups``) and waits there for offers;
+    the calling thread calls :meth:`run` with a kernel whose items are claimed from a shared
+    counter (:func:`next_item`), as often as it has such work, and :meth:`close` once it has no
+    more (before it joins the launch: the launch's ``on_finish``). ``run`` runs the kernel on the
+    calling thread and on every slot thread that is waiting in ``help`` or comes to it while the
+    kernel runs, and returns once all of them are done: the same items computed, whoever computes
+    them, so that the outcome never depends on the timing, only the time it takes. A slot thread
+    that comes after the calling thread's part has run out of items waits for the next offer.
+    Made for the calling thread's serial work that overlaps a launch (:func:`calling_thread_only`)
+    when the launch ends first: `penumbra-map`'s eye lookups end ~2 ms before its sheets' and
+    cones' rejection do (a helper that left when it found no offer open left a core idle for them,
+    2026-12-05)."""
 
     def __init__(self):
         self._cond = threading.Condition()
         self._task = None
+        self._offers = 0  # offers made so far (a helper serves each at most once)
         self._closed = False
         self._helpers = 0
 
     def help(self, slot: int) -> None:
-        """From slot thread ``slot`` (>= 1) of the launch: run the offered kernel (if any is still
-        open) with this slot, then leave."""
-        with self._cond:
-            if self._task is None or self._closed:
-                return
-            self._helpers += 1
-            fn, args, nslot = self._task
-        try:
-            fn(slot, *args, nslot)
-        finally:
+        """From slot thread ``slot`` (>= 1) of the launch: run each kernel offered from now on with
+        this slot, until :meth:`close`."""
+        served = 0
+        while True:
             with self._cond:
-                self._helpers -= 1
-                self._cond.notify_all()
+                while not self._closed and (self._task is None or self._offers == served):
+                    self._cond.wait()
+                if self._closed:
+                    return  # (the calling thread closes once its offers are done)
+                served = self._offers
+                self._helpers += 1
+                fn, args, nslot = self._task
+            try:
+                fn(slot, *args, nslot)
+            finally:
+                with self._cond:
+                    self._helpers -= 1
+                    self._cond.notify_all()
 
     def run(self, fn, nslot: int, *args) -> None:
         """Offer ``fn(slot, *args, nslot)`` (its items claimed from a counter in ``args``) and run
         it as slot 0 on the calling thread; return when every slot thread that joined is done.
-        Offered once: a second call runs on the calling thread alone."""
+        After :meth:`close`, it runs on the calling thread alone."""
         with self._cond:
-            if self._task is None and not self._closed:
+            if not self._closed:
                 self._task = (fn, args, int(nslot))
+                self._offers += 1
+                self._cond.notify_all()
         try:
             fn(0, *args, int(nslot))
         finally:
             with self._cond:
-                self._closed = True
+                self._task = None
                 while self._helpers:
                     self._cond.wait()
+
+    def close(self) -> None:
+        """No more offers: every waiting helper leaves (idempotent)."""
+        with self._cond:
+            self._closed = True
+            self._cond.notify_all()
 
 
 @contextlib.contextmanager

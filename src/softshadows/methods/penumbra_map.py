@@ -305,6 +305,7 @@ def build_sheets(
     tolerance: float,
     max_subdiv: int,
     zmax_pyramid=None,
+    share=None,
 ) -> Primitives:
     """Pass 2c: per silhouette edge (v_0, v_1) a sheet from the edge to the outer common tangent of
     the two cones' base circles (far plane), tangent to both cones, on the side away from the
@@ -313,7 +314,9 @@ def build_sheets(
     (F_1 - v_1 = F_0 - v_0); otherwise both the surface (non-planar) and the rasterizer's linear
     interpolation of ``Z_v`` across the rulings are off, so the quad is split into
     ``k = ceil(q / tolerance)`` strips (at most ``max_subdiv``), ``q = |(F_1 - v_1) - (F_0 - v_0)| /
-    length``. Corner attribute: the ``Z_v`` of the silhouette point the ruling starts from."""
+    length``. Corner attribute: the ``Z_v`` of the silhouette point the ruling starts from. With
+    ``zmax_pyramid`` (early rejection) each sheet is cut where it can carry no kept fragment
+    (``share``: see :func:`_reject_sheets`)."""
     S = sil.n_edges
     if S == 0:
         return Primitives.empty()
@@ -334,7 +337,7 @@ def build_sheets(
     n_objects = len(V0)
     keep = np.ones(n_objects, bool)
     if zmax_pyramid is not None and n_objects:
-        ucut = _reject_sheets(view, V0, V1, F0, F1, zz0, zz1, z_far, zmax_pyramid)
+        ucut = _reject_sheets(view, V0, V1, F0, F1, zz0, zz1, z_far, zmax_pyramid, share)
         keep = ucut > 0.0
         # the sub-sheet u in [0, ucut] of every ruling: the same ruled surface, shorter
         F0 = V0 + (F0 - V0) * ucut[:, None]
@@ -833,7 +836,7 @@ def _reject_cones(view, q, zv, bx, by, z_far, pyr, share=None):
 
 
 @kernel(nogil=True, nrt=False)
-def _sheet_reject_slot(slot, sx, sy, zc, z_far, iters, pieces, eps, data, offs, ws, hs, ucut, nslot):
+def _sheet_reject_slot(slot, sx, sy, zc, z_far, iters, pieces, eps, data, offs, ws, hs, ucut, counter, nslot):
     """Per sheet: the fraction ``ucut`` of every ruling (from the edge, u = 0, to the far line,
     u = 1) that can carry kept fragments; 0 drops the sheet. ``sx, sy`` (n, 4) pixel coordinates of
     the corners v0, v1, F1, F0; ``zc`` (n, 2) depths of v0, v1 (F0, F1 lie at ``z_far``).
@@ -842,10 +845,14 @@ def _sheet_reject_slot(slot, sx, sy, zc, z_far, iters, pieces, eps, data, offs, 
     its footprint between fractions ua < ub lies in the hull of the four ruling points there. As
     for the cones: bound the whole sheet ``iters`` times, then cut it in ``pieces`` slices and end
     after the last slice whose max Z_P lies behind its nearest depth (and not behind that max).
-    Run by ``run_slots``: slot ``slot`` of ``nslot`` takes every ``nslot``-th sheet (each sheet's
-    result is its own: the same whatever the slots)."""
+    Run by ``run_slots`` or :class:`SharedWork`: each slot takes the next sheet from ``counter``
+    (``next_item``) until none is left (each sheet's result is its own: the same whoever computes
+    it)."""
     n = sx.shape[0]
-    for i in range(slot, n, nslot):
+    while True:
+        i = next_item(counter)
+        if i >= n:
+            break
         zmin = min(zc[i, 0], zc[i, 1])
         u = 1.0
         for _ in range(iters):
@@ -894,13 +901,16 @@ def _sheet_zmax(sx, sy, zc, i, z_far, ua, ub, data, offs, ws, hs):
     return _zmax_bbox(data, offs, ws, hs, xa, ya, xb, yb)
 
 
-def _reject_sheets(view, V0, V1, F0, F1, z0, z1, z_far, pyr):
-    """(n,) fraction of each sheet's rulings that can carry kept fragments (0: drop the sheet)."""
+def _reject_sheets(view, V0, V1, F0, F1, z0, z1, z_far, pyr, share=None):
+    """(n,) fraction of each sheet's rulings that can carry kept fragments (0: drop the sheet);
+    with ``share`` (:class:`SharedWork`) the slot threads of a running launch that finish theirs
+    help (as in :func:`_reject_cones`)."""
     data, offs, ws, hs = pyr
     pts = np.stack([V0, V1, F1, F0], axis=1).reshape(-1, 3)
     sx, sy, _ = view.project(pts)
     ucut = np.ones(len(V0))
-    run_threads(
+    launch = run_threads if share is None else (lambda fn, *a: share.run(fn, numba.get_num_threads(), *a))
+    launch(
         _sheet_reject_slot,
         np.ascontiguousarray(sx.reshape(-1, 4)),
         np.ascontiguousarray(sy.reshape(-1, 4)),
@@ -914,6 +924,7 @@ def _reject_sheets(view, V0, V1, F0, F1, z0, z1, z_far, pyr):
         ws,
         hs,
         ucut,
+        work_counter(),
     )
     return ucut
 
@@ -1036,8 +1047,8 @@ def render_penumbra_map(
     also be a function that returns it, called just before the fragment program: until then this
     runs on the calling thread alone (``calling_thread_only``) while the slot threads do the work
     the function waits for (:meth:`PenumbraMapMethod.run`: the eye lookups); ``share``
-    (:class:`SharedWork`): those slot threads, once done, help with the cones' rejection, which
-    is therefore built last (the sheets first: they are independent of the cones)."""
+    (:class:`SharedWork`): those slot threads, once done, help with the sheets' and the cones'
+    rejection."""
     phase = timer.phase if timer is not None else (lambda name: nullcontext())
     view = smp.view
     flat = scene.flat
@@ -1056,7 +1067,7 @@ def render_penumbra_map(
                 pyr = None
             faces = flat.faces if flat.occluder.all() else flat.faces_where(flat.occluder)  # once per geometry
             sheets = build_sheets(
-                view, flat.vertices, faces, sil, light_radius, z_far, sheet_tolerance, sheet_max_subdiv, pyr
+                view, flat.vertices, faces, sil, light_radius, z_far, sheet_tolerance, sheet_max_subdiv, pyr, share
             )
             cones = build_cones(view, flat.vertices[sil.vertices], light_radius, z_far, cone_segments, pyr, share)
             nv = len(cones.vertices)
@@ -1245,7 +1256,7 @@ def start_eye_lookups(
     the calling thread is free for other work (:meth:`PenumbraMapMethod.run`: pass 2's
     silhouettes, cones and sheets) until it calls the launch's ``finish()``, which returns the
     :class:`EyeLookups`. ``share`` (:class:`SharedWork`): a slot thread that runs out of rows then
-    helps with the work the calling thread offers there."""
+    helps with the work the calling thread offers there, until ``finish()`` closes the offers."""
     H, W = mask.shape
     code = np.empty((H, W), np.int32)
     PH, PW = smp.view.height, smp.view.width
@@ -1280,6 +1291,7 @@ def start_eye_lookups(
         np.empty((nslot, 10, W)),
         work_counter(),
         result=lambda: EyeLookups(code, needed if mark else None),
+        on_finish=None if share is None else share.close,  # (the helpers waiting for offers go)
     )
 
 
@@ -1415,7 +1427,7 @@ class PenumbraMapMethod(Method):
             smp = shadow_map_pass(scene, map_size, lr)
         with ctx.timer.phase("eye_pass"):  # its lookups first: the texels it will read
             g = ctx.eye
-            share = SharedWork()  # the lookups' slot threads, once done, help with the cones
+            share = SharedWork()  # the lookups' slot threads, once done, help with sheets and cones
             lookups = start_eye_lookups(
                 smp, g.position, g.normal, g.mask, bias, slope_bias, mark=texels == "read", share=share
             )
