@@ -653,7 +653,7 @@ def pyramid_max(pyr) -> float:
     return float(data[offs[-1]]) if len(offs) > 1 else 0.0
 
 
-@kernel(nrt=False)
+@kernel(inline=True, nrt=False)
 def _zmax_rect(data, offs, ws, hs, x0, y0, x1, y1):
     """Max of level-0 texels [x0..x1] x [y0..y1] (inclusive, clamped) through the pyramid (an upper
     bound: read at a level >= 1 whose cells cover the rectangle in at most ~9 x 9)."""
@@ -670,15 +670,16 @@ def _zmax_rect(data, offs, ws, hs, x0, y0, x1, y1):
     while span > (1 << (L + 3)) and len(offs) > L + 1:
         L += 1
     m = np.float32(0.0)  # the levels hold values >= 0 (no NaN): a branch-free max
-    w = ws[L]
-    for yy in range(y0 >> L, (y1 >> L) + 1):
-        base = offs[L] + yy * w
-        for xx in range(x0 >> L, (x1 >> L) + 1):
+    w = np.uint64(ws[L])
+    # unsigned indices (clamped to the map above: >= 0): no negative-index wrap-around code
+    for yy in range(np.uint64(y0 >> L), np.uint64((y1 >> L) + 1)):
+        base = np.uint64(offs[L]) + yy * w
+        for xx in range(np.uint64(x0 >> L), np.uint64((x1 >> L) + 1)):
             m = max(m, data[base + xx])
     return float(m)
 
 
-@kernel(nrt=False)
+@kernel(inline=True, nrt=False)
 def _zmax_bbox(data, offs, ws, hs, xa, ya, xb, yb):
     """Max Z_P under the pixel-coordinate box [xa, xb] x [ya, yb], grown by a texel on every side,
     with a relative margin (a safe upper bound for the early rejection)."""
@@ -694,7 +695,7 @@ def _zmax_bbox(data, offs, ws, hs, xa, ya, xb, yb):
     ) * (1.0 + 1e-6)
 
 
-@kernel(nrt=False)
+@kernel(inline=True, nrt=False)
 def _wedge_zmax(wl, wt, sxs, sys_, tx, ty, ux0, uy0, ux1, uy1, fa, fb, data, offs, ws, hs):
     """Max Z_P under the part of a cone wedge between ruling fractions fa < fb (window-space
     fractions from the tip (tx, ty) to the base vertices (ux0, uy0), (ux1, uy1))."""
@@ -876,7 +877,7 @@ def _sheet_reject_slot(slot, sx, sy, zc, z_far, iters, pieces, eps, data, offs, 
         ucut[i] = u if u > eps else 0.0
 
 
-@kernel(nrt=False)
+@kernel(inline=True, nrt=False)
 def _sheet_zmax(sx, sy, zc, i, z_far, ua, ub, data, offs, ws, hs):
     """Max Z_P under the part ua <= u <= ub of sheet ``i``: the hull of the four ruling points there
     (corners v0, v1, F1, F0 in pixels ``sx[i], sy[i]``, ``zc[i]`` the depths of v0, v1; F0, F1 at
