@@ -869,6 +869,31 @@ def test_depth_only_is_the_same_depth(tiny, monkeypatch):
         np.testing.assert_array_equal(d0, d1)
 
 
+@pytest.mark.parametrize("ortho", [True, False])
+def test_depth_only_tile_drawn_by_one_piece_is_the_same_depth(ortho):
+    """A depths-only tile that one piece alone draws (``_sole_cover``: the other pieces binned to it
+    cover none of its pixel centres) takes its depths straight from that piece's plane
+    (``_depth_one_piece``): the same bits as the full depth pass of ``rasterize_depth(tri=True)``.
+    A tilted quad larger than the image (its two triangles binned to every tile by their boxes, the
+    diagonal crossing some tiles), small triangles in front of it in one corner, the image's partial
+    last row and column of tiles; perspective and orthographic; the far plane cutting the quad."""
+    rng = np.random.default_rng(11)
+    W, H, n = 99, 77, 60
+    quad = np.array([[[-5, -4], [W + 6, -3], [W + 4, H + 5]], [[-5, -4], [W + 4, H + 5], [-6, H + 3]]], float)
+    zq = np.array([[1.1, 1.9, 2.9], [1.1, 2.9, 2.2]])  # tilted: every pixel's depth its own
+    c = rng.uniform(0, 40, size=(n, 1, 2))
+    xy = np.concatenate([quad, c + rng.uniform(-3.0, 3.0, size=(n, 3, 2))]).reshape(-1, 2)
+    z = np.concatenate([zq, rng.uniform(0.7, 1.05, size=(n, 3))]).reshape(-1)
+    V, view, F = _screen_scene(xy, z, W, H, ortho, 0.5, 2.6)  # far 2.6: the quad's far corner beyond it
+    for cull in ("none", "back"):
+        d1, _t1 = rasterize_depth(view, V, F, cull)
+        d0, _t0 = rasterize_depth(view, V, F, cull, tri=False)
+        np.testing.assert_array_equal(d0, d1)
+        if cull == "none":
+            assert np.isfinite(d1[:, :32]).all() and np.isinf(d1).any()  # the quad, cut by the far plane
+            assert len(np.unique(d1[48:64, 48:64])) > 200  # a tile's own depths (no constant)
+
+
 @pytest.mark.parametrize("kind", ["grid", "axis", "sliver", "huge", "random"])
 @pytest.mark.parametrize("ortho", [True, False])
 def test_min_blend_texel_lists_equal_row_passes(kind, ortho, monkeypatch):

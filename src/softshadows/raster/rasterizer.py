@@ -1382,6 +1382,11 @@ def _depth_pass(
     y0, _y1, x0, _x1 = rect
     cols = (x0, wl, wsx)
     nzi = np.int32(nz)  # 0, unknown to LLVM (see _depth_test_row)
+    if not keep_tb and start[tile + 1] - start[tile] <= _SOLE_MAX:
+        ct = _sole_cover(vw, rect, start, bins, box, edges, tile)
+        if ct >= 0:
+            _depth_one_piece(vw, near, rect, ct, sh, zinfo, planes, zb)
+            return
     if keep_tb:
         for li in range(zb.shape[0]):
             for k in range(zb.shape[1]):
@@ -1436,6 +1441,59 @@ def _depth_pass(
                 else:
                     _depth_test_row(zb, tb, tv, span, cols, pl, zrow, zr, False, nz, nzi, False)
                 lo, hi = _next_span(scan, hi, j1, e0, e1, e2, r0, r1, r2)
+
+
+#: tiles with at most this many pieces are tested for one piece that covers them whole
+#: (:func:`_sole_cover`)
+_SOLE_MAX = 4
+
+
+@kernel(inline=True)
+def _sole_cover(vw, rect, start, bins, box, edges, tile):
+    """The piece that alone draws the whole tile (T x T pixels inside the image), or -1: its box
+    holds the tile and its edges pass :func:`_rect_edge_test`'s ``full`` (the test
+    :func:`_piece_rows` makes, which then gives every row the span [x0, x1]), and every other piece
+    of the tile covers none of its pixel centres (an empty box, or the test's ``reject``). A big
+    triangle's pieces are binned by their boxes: where the ground covers a map each tile holds both
+    triangles of its ground quad, one of which covers it."""
+    W, H = vw[0], vw[1]
+    y0, y1, x0, x1 = rect
+    if y1 - y0 + 1 != TILE or x1 - x0 + 1 != TILE:
+        return -1
+    found = -1
+    for bi in range(start[tile], start[tile + 1]):
+        ct = bins[bi]
+        i0, i1, j0, j1 = _piece_rect(box, ct, rect)
+        if i0 > i1 or j0 > j1:
+            continue
+        reject, full = _rect_edge_test(edges, ct, i0, i1, j0, j1, W + 0.0, H + 0.0)
+        if reject:
+            continue
+        if found < 0 and full and i0 == y0 and i1 == y1 and j0 == x0 and j1 == x1:
+            found = ct
+            continue
+        return -1  # another piece may draw a pixel: the whole depth pass
+    return found
+
+
+@kernel(inline=True)
+def _depth_one_piece(vw, near, rect, ct, sh, zinfo, planes, zb):
+    """:func:`_depth_pass` without triangles for a tile that one piece ``ct`` alone draws
+    (:func:`_sole_cover`): its depths straight into ``zb``, the same expressions as
+    :func:`_depth_test_row` against the empty tile (+inf), so the same bits; without the tile's
+    clear, its pieces' order, spans and tests. Where the ground covers a map (``penumbra-map``'s
+    receivers, ``Z_P``) most tiles are such tiles."""
+    _W, _H, ortho, far, wl, wt, wsx, wsy = vw
+    y0, _y1, x0, _x1 = rect
+    pl = _plane(planes, ct >> sh)
+    zlo, zhi = _depth_bounds(zinfo, ct, ortho, near)
+    for li in range(TILE):
+        zrow = _row_depth(ortho, pl, wt - ((li + y0) + 0.5) * wsy)
+        for k in range(TILE):
+            xw = wl + ((x0 + k) + 0.5) * wsx
+            z = _clamp_depth(_frag_depth(ortho, pl, zrow, xw), zlo, zhi)
+            take = (not (z > far)) & (z < np.inf)
+            zb[li, k] = z if take else np.inf
 
 
 @kernel(inline=True)
